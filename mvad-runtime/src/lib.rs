@@ -1,0 +1,21 @@
+//! # mvad-runtime
+//!
+//! Simulates hybrid models, locates their events, carries forward sensitivities
+//! S = ∂x/∂θ through every jump and returns the parameter derivative of a trajectory
+//! as a measure — a density on the smooth segments plus Dirac atoms at the events —
+//! and reduced to dC/dθ for the model's cost. Knows nothing of parsing: models come in
+//! through the [`HybridModel`] trait.
+
+pub mod fixtures;
+pub mod model;
+
+pub use model::{Direction, EventInfo, HybridModel, ModelAlloc, ModelInfo, Switches, MAX_SWITCHES};
+
+pub mod event;
+pub mod fd;
+pub mod integrate;
+pub mod measure;
+pub mod reduce;
+pub mod sens;
+pub mod solution;
+pub mod solve;

@@ -1,0 +1,348 @@
+//! The model trait: the one seam between the `.hyb` front end and the numerics.
+//!
+//! A hybrid model has a state x ∈ Rⁿ, parameters θ ∈ Rᵖ, a discrete mode m and,
+//! per mode, a flow ẋ = f_m(t, x, θ). Events k have a guard g_k(t, x, θ) that fires
+//! when it crosses zero in its armed direction, a reset x⁺ = R_k(t, x⁻, θ) and an
+//! optional target mode. Observables y = h(t, x, θ) and the cost
+//! C = ∫₀ᵀ ℓ dt + Σ_k φ_k(t_k, x(t_k⁺), θ) + Φ(T, x(T), θ) complete the model.
+//!
+//! Both doors implement [`HybridModel`]: the `hybrid!` macro with static sizes
+//! (`Const<N>`, `Const<P>`) and the run-time loader with dynamic sizes (`Dyn`), so the
+//! integrators, the event code and the sensitivities are written once.
+//!
+//! ## Non-smooth flows and switches
+//! `abs`, `min`, `max`, `sign` and `if` inside a flow or the running cost ℓ are
+//! evaluated with *frozen branches*: the model exposes each such kink as a switching
+//! function σ_j(t, x, θ), and the flow reads the branch from bit j of a [`Switches`]
+//! word instead of from the sign of σ_j. The runtime keeps the bits constant over a
+//! step, locates zero crossings of σ_j like events (identity reset, no mode change) and
+//! flips the bit there, so no step straddles a kink and the saltation update
+//! S⁺ = S⁻ + (f⁻ − f⁺) t' stays exact. Bit j is set iff the branch for σ_j > 0 is
+//! active. Outside flows and ℓ (guards, resets, observables, event and final costs)
+//! these functions are evaluated pointwise and need no bits.
+//!
+//! ## Conventions
+//! - All evaluation methods write into caller-provided buffers and never allocate.
+//! - Matrices are nalgebra matrices; for observables, whose count is not a type-level
+//!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
+//! - Gradient methods *overwrite* every entry of their outputs (zeros included).
+
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
+
+/// Bound alias for the allocators a model's dimensions need (one line in every where-clause).
+pub trait ModelAlloc<N: Dim, P: Dim>:
+    Allocator<N> + Allocator<P> + Allocator<N, N> + Allocator<N, P> + Allocator<P, N>
+{
+}
+
+impl<N: Dim, P: Dim, A> ModelAlloc<N, P> for A where
+    A: Allocator<N> + Allocator<P> + Allocator<N, N> + Allocator<N, P> + Allocator<P, N>
+{
+}
+
+/// Frozen branches of the switching functions: bit j set iff σ_j's positive branch is active.
+pub type Switches = u64;
+
+/// The most switching functions a model may have (bits of [`Switches`]).
+pub const MAX_SWITCHES: usize = 64;
+
+/// The direction in which a guard g = LHS − RHS fires.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Direction {
+    /// `LHS <= RHS` or `LHS < RHS`: g crosses zero from above (g goes + → −).
+    Down,
+    /// `LHS >= RHS` or `LHS > RHS`: g crosses zero from below (g goes − → +).
+    Up,
+}
+
+impl Direction {
+    /// +1 for [`Direction::Up`], −1 for [`Direction::Down`]: the sign of ġ at a genuine crossing.
+    pub fn sign(self) -> f64 {
+        match self {
+            Direction::Up => 1.0,
+            Direction::Down => -1.0,
+        }
+    }
+}
+
+/// Static description of one event.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventInfo {
+    /// The declared name, or `event_K` (K its index) for an unnamed event.
+    pub name: String,
+    /// Direction in which the guard fires.
+    pub direction: Direction,
+    /// `None`: declared at the top level, armed in every mode; `Some(m)`: armed only in mode m.
+    pub mode: Option<usize>,
+    /// Mode switched to after the reset (`-> MODE`), if any.
+    pub target: Option<usize>,
+    /// Whether the event has a reset block (false for `;`: the reset is the identity).
+    pub has_reset: bool,
+    /// Whether the cost has `sum(EVENT, ..)` terms for this event.
+    pub has_cost: bool,
+}
+
+impl EventInfo {
+    /// Whether this event is armed in mode `mode`.
+    pub fn armed_in(&self, mode: usize) -> bool {
+        self.mode.is_none_or(|m| m == mode)
+    }
+}
+
+/// Static description of a model: names, defaults and which parts exist.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelInfo {
+    /// Model name (`model NAME { .. }`).
+    pub name: String,
+    /// State names, in declaration order (the order of x).
+    pub states: Vec<String>,
+    /// Parameter names, in declaration order (the order of θ).
+    pub params: Vec<String>,
+    /// Declared parameter values.
+    pub param_defaults: Vec<f64>,
+    /// Mode names; a single-mode model has one mode named `main`.
+    pub modes: Vec<String>,
+    /// Index of the initial mode.
+    pub initial_mode: usize,
+    /// Events, in declaration order (top-level and in-mode events share one index space).
+    pub events: Vec<EventInfo>,
+    /// Observable names, in declaration order.
+    pub observables: Vec<String>,
+    /// Number of switching functions σ_j (kinks of flows and ℓ), at most [`MAX_SWITCHES`].
+    pub switches: usize,
+    /// Whether the cost has `integral(..)` terms (ℓ ≢ 0).
+    pub has_running_cost: bool,
+    /// Whether the cost has `final(..)` terms (Φ ≢ 0).
+    pub has_final_cost: bool,
+    /// Whether the model declares a `horizon`.
+    pub has_horizon: bool,
+    /// Per mode, the structurally non-zero entries (row, col) of ∂f/∂x.
+    pub jacobian_sparsity: Vec<Vec<(usize, usize)>>,
+}
+
+impl ModelInfo {
+    /// Number of observables.
+    pub fn nobservables(&self) -> usize {
+        self.observables.len()
+    }
+    /// Index of the parameter called `name`.
+    pub fn param_index(&self, name: &str) -> Option<usize> {
+        self.params.iter().position(|p| p == name)
+    }
+    /// Index of the state called `name`.
+    pub fn state_index(&self, name: &str) -> Option<usize> {
+        self.states.iter().position(|p| p == name)
+    }
+    /// Index of the observable called `name`.
+    pub fn observable_index(&self, name: &str) -> Option<usize> {
+        self.observables.iter().position(|p| p == name)
+    }
+    /// Index of the event called `name`.
+    pub fn event_index(&self, name: &str) -> Option<usize> {
+        self.events.iter().position(|e| e.name == name)
+    }
+}
+
+/// A hybrid model with symbolic first derivatives, generic over its dimensions.
+///
+/// `N` is the state dimension, `P` the parameter dimension: `Const<_>` for models
+/// compiled by `hybrid!`, `Dyn` for models loaded at run time.
+pub trait HybridModel
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// State dimension n.
+    type N: Dim;
+    /// Parameter dimension p.
+    type P: Dim;
+
+    /// Names, defaults and structure.
+    fn info(&self) -> &ModelInfo;
+    /// n as a dimension value (`Const::<n>` or `Dyn(n)`).
+    fn nstates(&self) -> Self::N;
+    /// p as a dimension value.
+    fn nparams(&self) -> Self::P;
+
+    // ---- initial state and horizon --------------------------------------------------
+
+    /// x₀(θ).
+    fn initial_state(&self, p: &OVector<f64, Self::P>, x0: &mut OVector<f64, Self::N>);
+    /// ∂x₀/∂θ (n×p).
+    fn initial_state_jac(&self, p: &OVector<f64, Self::P>, dx0: &mut OMatrix<f64, Self::N, Self::P>);
+    /// T(θ), or `None` when the model declares no horizon.
+    fn horizon(&self, p: &OVector<f64, Self::P>) -> Option<f64>;
+    /// dT/dθ (zeros when there is no horizon or it is constant).
+    fn horizon_grad(&self, p: &OVector<f64, Self::P>, dt: &mut OVector<f64, Self::P>);
+
+    // ---- flow -------------------------------------------------------------------------
+
+    /// f_m(t, x, θ) with the frozen branches `sw`.
+    fn rhs(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        f: &mut OVector<f64, Self::N>,
+    );
+    /// ∂f_m/∂x (n×n).
+    fn rhs_jac_x(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        fx: &mut OMatrix<f64, Self::N, Self::N>,
+    );
+    /// ∂f_m/∂θ (n×p).
+    fn rhs_jac_p(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        fp: &mut OMatrix<f64, Self::N, Self::P>,
+    );
+    /// ∂f_m/∂t (zeros for an autonomous flow).
+    fn rhs_dt(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        ft: &mut OVector<f64, Self::N>,
+    );
+    /// Whether f_m depends on t explicitly.
+    fn rhs_depends_on_t(&self, mode: usize) -> bool;
+
+    /// The forward-sensitivity right-hand side: f and Ṡ = f_x S + f_θ.
+    ///
+    /// Generated models override this with sparse straight-line code; the default
+    /// goes through the dense Jacobians and allocates scratch (dynamic sizes only).
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_sens(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        f: &mut OVector<f64, Self::N>,
+        ds: &mut OMatrix<f64, Self::N, Self::P>,
+    ) {
+        let n = self.nstates();
+        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
+        self.rhs(mode, sw, t, x, p, f);
+        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
+        self.rhs_jac_p(mode, sw, t, x, p, ds);
+        ds.gemm(1.0, &fx, s, 1.0);
+    }
+
+    // ---- events -----------------------------------------------------------------------
+
+    /// g_k(t, x, θ) = LHS − RHS of event k's guard.
+    fn guard(&self, event: usize, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    /// ∇ₓg_k into `gx`, ∂θg_k into `gp`; returns ∂ₜg_k.
+    fn guard_grad(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        gx: &mut OVector<f64, Self::N>,
+        gp: &mut OVector<f64, Self::P>,
+    ) -> f64;
+    /// x⁺ = R_k(t, x⁻, θ) (the identity for states the reset block does not assign).
+    fn reset(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        xplus: &mut OVector<f64, Self::N>,
+    );
+    /// ∂R_k/∂x into `rx`, ∂R_k/∂θ into `rp`, ∂R_k/∂t into `rt`.
+    #[allow(clippy::too_many_arguments)]
+    fn reset_jac(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        rx: &mut OMatrix<f64, Self::N, Self::N>,
+        rp: &mut OMatrix<f64, Self::N, Self::P>,
+        rt: &mut OVector<f64, Self::N>,
+    );
+
+    // ---- switching functions ----------------------------------------------------------
+
+    /// σ_j(t, x, θ).
+    fn switch_value(&self, j: usize, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    /// ∇ₓσ_j into `gx`, ∂θσ_j into `gp`; returns ∂ₜσ_j.
+    fn switch_grad(
+        &self,
+        j: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        gx: &mut OVector<f64, Self::N>,
+        gp: &mut OVector<f64, Self::P>,
+    ) -> f64;
+
+    // ---- observables ------------------------------------------------------------------
+
+    /// y = h(t, x, θ), one entry per observable.
+    fn observe(&self, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>, y: &mut [f64]);
+    /// ∂h/∂x (row-major nobs×n) and ∂h/∂θ (row-major nobs×p).
+    fn observe_jac(
+        &self,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        yx: &mut [f64],
+        yp: &mut [f64],
+    );
+
+    // ---- cost -------------------------------------------------------------------------
+
+    /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors).
+    fn running_cost(&self, sw: Switches, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    /// ℓ_x into `lx`, ℓ_θ into `lp`; returns ℓ.
+    fn running_cost_grad(
+        &self,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        lx: &mut OVector<f64, Self::N>,
+        lp: &mut OVector<f64, Self::P>,
+    ) -> f64;
+    /// φ_k(t, x⁺, θ): the `sum(EVENT, ..)` terms of event k, evaluated after its reset.
+    fn event_cost(&self, event: usize, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    /// φ_x into `cx`, φ_θ into `cp`; returns φ_t.
+    fn event_cost_grad(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        cx: &mut OVector<f64, Self::N>,
+        cp: &mut OVector<f64, Self::P>,
+    ) -> f64;
+    /// Φ(T, x(T), θ): the `final(..)` terms.
+    fn final_cost(&self, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    /// Φ_x into `cx`, Φ_θ into `cp`; returns Φ_t.
+    fn final_cost_grad(
+        &self,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        cx: &mut OVector<f64, Self::N>,
+        cp: &mut OVector<f64, Self::P>,
+    ) -> f64;
+}
