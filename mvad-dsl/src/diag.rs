@@ -1,1 +1,317 @@
-//! (in progress)
+//! Located errors: [`Diagnostic`], the renaming of pest rules to phrases, the text
+//! renderer (`FILE:LINE:COL: error: MESSAGE`, the quoted line, carets) and
+//! [`to_syn_error`] for the macro.
+
+use crate::span::Span;
+
+/// A located error in a model.
+///
+/// Messages are lowercase, without a trailing period, and quote names with backticks:
+/// "undefined name `vv`".
+#[derive(Clone, Debug, PartialEq)]
+pub struct Diagnostic {
+    /// The offending text (the caret goes under it).
+    pub span: Span,
+    /// The main message.
+    pub message: String,
+    /// Secondary locations with a note each ("first declared here").
+    pub labels: Vec<(Span, String)>,
+    /// An optional hint ("add `der(v) = ...;`").
+    pub help: Option<String>,
+}
+
+impl Diagnostic {
+    /// An error at `span` with `message`, no labels, no help.
+    pub fn new(span: Span, message: impl Into<String>) -> Diagnostic {
+        Diagnostic {
+            span,
+            message: message.into(),
+            labels: Vec::new(),
+            help: None,
+        }
+    }
+
+    /// Adds a secondary location with a note.
+    pub fn with_label(mut self, span: Span, note: impl Into<String>) -> Diagnostic {
+        self.labels.push((span, note.into()));
+        self
+    }
+
+    /// Adds a hint.
+    pub fn with_help(mut self, help: impl Into<String>) -> Diagnostic {
+        self.help = Some(help.into());
+        self
+    }
+}
+
+impl std::fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for Diagnostic {}
+
+use crate::parse::Rule;
+
+/// The phrase used for `rule` in "expected ..." lists.
+pub fn rule_phrase(rule: Rule) -> &'static str {
+    match rule {
+        Rule::EOI => "end of input",
+        Rule::WHITESPACE | Rule::COMMENT => "a blank",
+        Rule::ident | Rule::structural_keyword => "an identifier",
+        Rule::number => "a number",
+        Rule::expr | Rule::paren | Rule::call | Rule::if_expr => "an expression",
+        Rule::condition => "a comparison",
+        Rule::kw_model | Rule::model | Rule::file => "`model`",
+        Rule::kw_param | Rule::param_decl => "`param`",
+        Rule::kw_const | Rule::const_decl => "`const`",
+        Rule::kw_state | Rule::state_decl => "`state`",
+        Rule::kw_flow | Rule::flow_block => "`flow`",
+        Rule::kw_mode | Rule::mode_block => "`mode`",
+        Rule::kw_initial | Rule::initial_decl => "`initial`",
+        Rule::kw_event | Rule::event_decl => "`event`",
+        Rule::kw_when => "`when`",
+        Rule::kw_observe | Rule::observe_decl => "`observe`",
+        Rule::kw_cost | Rule::cost_decl => "`cost`",
+        Rule::kw_horizon | Rule::horizon_decl => "`horizon`",
+        Rule::kw_der | Rule::der_eq => "`der`",
+        Rule::kw_integral | Rule::integral_term => "`integral`",
+        Rule::kw_sum | Rule::sum_term => "`sum`",
+        Rule::kw_final | Rule::final_term => "`final`",
+        Rule::cost_term => "a cost term (`integral`, `sum` or `final`)",
+        Rule::kw_if => "`if`",
+        Rule::kw_then => "`then`",
+        Rule::kw_else => "`else`",
+        Rule::semicolon => "`;`",
+        Rule::comma => "`,`",
+        Rule::lbrace | Rule::reset_block => "`{`",
+        Rule::rbrace => "`}`",
+        Rule::lparen => "`(`",
+        Rule::rparen => "`)`",
+        Rule::assign => "`=`",
+        Rule::arrow | Rule::target => "`->`",
+        Rule::add => "`+`",
+        Rule::sub | Rule::neg => "`-`",
+        Rule::mul => "`*`",
+        Rule::div => "`/`",
+        Rule::pow => "`^`",
+        Rule::le => "`<=`",
+        Rule::lt => "`<`",
+        Rule::ge => "`>=`",
+        Rule::gt => "`>`",
+        Rule::reset => "an assignment",
+        Rule::ident_char => "an identifier character",
+        Rule::digits => "a digit",
+        Rule::cmp_op => "a comparison operator",
+        Rule::infix => "an operator",
+        Rule::primary => "an expression",
+        Rule::item => "a declaration",
+    }
+}
+
+/// Describes the text at byte `pos` of `src` for "unexpected ..." messages: a whole word,
+/// number or operator in backticks, a control character by code point, or "end of input".
+pub fn describe_at(src: &str, pos: usize) -> String {
+    let mut pos = pos.min(src.len());
+    while !src.is_char_boundary(pos) {
+        pos -= 1;
+    }
+    let rest = &src[pos..];
+    let Some(c) = rest.chars().next() else {
+        return "end of input".to_string();
+    };
+    if c.is_alphanumeric() || c == '_' {
+        let word: String = rest
+            .chars()
+            .take_while(|&c| c.is_alphanumeric() || c == '_' || c == '.')
+            .take(40)
+            .collect();
+        return format!("`{word}`");
+    }
+    for op in ["<=", ">=", "->", "==", "!=", "&&", "||", "::"] {
+        if rest.starts_with(op) {
+            return format!("`{op}`");
+        }
+    }
+    if c.is_control() || c == '`' || c == '\u{FFFD}' {
+        return format!("character U+{:04X}", c as u32);
+    }
+    format!("`{c}`")
+}
+
+/// Joins phrases as "A", "A or B", "A, B, or C".
+fn one_of(items: &[&str]) -> String {
+    match items {
+        [] => String::new(),
+        [a] => a.to_string(),
+        [a, b] => format!("{a} or {b}"),
+        [init @ .., last] => format!("{}, or {last}", init.join(", ")),
+    }
+}
+
+/// Converts a pest error into a [`Diagnostic`]: "unexpected X; expected A, B, or C", with
+/// pest's rule names renamed to phrases ([`rule_phrase`]).
+pub fn from_pest(err: &pest::error::Error<Rule>, src: &str) -> Diagnostic {
+    use pest::error::{ErrorVariant, InputLocation};
+    let (start, end) = match err.location {
+        InputLocation::Pos(p) => (p, p),
+        InputLocation::Span((a, b)) => (a, b),
+    };
+    let unexpected = describe_at(src, start);
+    let message = match &err.variant {
+        _ if src.get(start..).is_some_and(|r| r.starts_with("/*")) => {
+            "unterminated block comment".to_string()
+        }
+        ErrorVariant::ParsingError { positives, .. } => {
+            // Where an operand may start, pest lists every way to start one: say "an
+            // expression" instead.
+            let operand_start = positives.contains(&Rule::number);
+            let mut phrases: Vec<&str> = Vec::new();
+            for r in positives {
+                let p = match r {
+                    Rule::ident
+                    | Rule::number
+                    | Rule::kw_if
+                    | Rule::lparen
+                    | Rule::neg
+                    | Rule::if_expr
+                    | Rule::call
+                    | Rule::paren
+                        if operand_start =>
+                    {
+                        "an expression"
+                    }
+                    _ => rule_phrase(*r),
+                };
+                if !phrases.contains(&p) {
+                    phrases.push(p);
+                }
+            }
+            if phrases.is_empty() {
+                format!("unexpected {unexpected}")
+            } else {
+                format!("unexpected {unexpected}; expected {}", one_of(&phrases))
+            }
+        }
+        ErrorVariant::CustomError { message } => message.clone(),
+    };
+    // Point at the whole offending token (at least one character), not an empty range.
+    let token_len = token_len_at(src, start);
+    let span = Span::new(start, end.max(start + token_len));
+    Diagnostic::new(span, message)
+}
+
+/// Byte length of the token starting at `pos` (a word, a two-character operator or one
+/// character; 0 at the end of input).
+fn token_len_at(src: &str, pos: usize) -> usize {
+    if pos >= src.len() || !src.is_char_boundary(pos) {
+        return 0;
+    }
+    let rest = &src[pos..];
+    let number = rest.starts_with(|c: char| c.is_ascii_digit());
+    let word: usize = rest
+        .char_indices()
+        .take_while(|&(_, c)| c.is_alphanumeric() || c == '_' || (number && c == '.'))
+        .map(|(i, c)| i + c.len_utf8())
+        .last()
+        .unwrap_or(0);
+    if word > 0 {
+        return word;
+    }
+    for op in ["<=", ">=", "->", "==", "!="] {
+        if rest.starts_with(op) {
+            return 2;
+        }
+    }
+    rest.chars().next().map_or(0, char::len_utf8)
+}
+
+/// Renders `diags` for a terminal: for each, the line `FILE:LINE:COL: error: MESSAGE`
+/// (1-based line and column of the span's start), the offending source line quoted with
+/// `^` carets under the span, each label's line with `-` under its span and the note, and
+/// `= help: ...` if there is a hint. Diagnostics are separated by a blank line.
+pub fn render(file_name: &str, src: &str, diags: &[Diagnostic]) -> String {
+    let starts = crate::span::line_starts(src);
+    let mut out = String::new();
+    for (k, d) in diags.iter().enumerate() {
+        if k > 0 {
+            out.push('\n');
+        }
+        let (line, col) = crate::span::line_col(src, d.span.start);
+        out.push_str(&format!("{file_name}:{line}:{col}: error: {}\n", d.message));
+        // The primary snippet first, then each label in order.
+        let mut snippets: Vec<(Span, char, Option<&str>)> = vec![(d.span, '^', None)];
+        snippets.extend(d.labels.iter().map(|(s, n)| (*s, '-', Some(n.as_str()))));
+        let width = snippets
+            .iter()
+            .map(|(s, _, _)| crate::span::line_col(src, s.start).0.to_string().len())
+            .max()
+            .unwrap_or(1);
+        let gutter = " ".repeat(width);
+        out.push_str(&format!("{gutter} |\n"));
+        let mut previous_line = 0;
+        for (span, mark, note) in snippets {
+            let (l, c) = crate::span::line_col(src, span.start);
+            // Control characters would garble the terminal: show them as U+FFFD.
+            let text: String = line_text(src, &starts, l)
+                .chars()
+                .map(|ch| if ch.is_control() && ch != '\t' { '\u{FFFD}' } else { ch })
+                .collect();
+            if l != previous_line {
+                out.push_str(&format!("{l:>width$} | {text}\n"));
+                previous_line = l;
+            }
+            // Prefix up to the column (tabs kept so carets align), then the marks.
+            let prefix: String = text
+                .chars()
+                .take(c - 1)
+                .map(|ch| if ch == '\t' { '\t' } else { ' ' })
+                .collect();
+            let (end_line, end_col) = crate::span::line_col(src, span.end);
+            let len = if end_line == l {
+                end_col.saturating_sub(c)
+            } else {
+                text.chars().count().saturating_sub(c - 1)
+            };
+            let marks = mark.to_string().repeat(len.max(1));
+            match note {
+                Some(n) => out.push_str(&format!("{gutter} | {prefix}{marks} {n}\n")),
+                None => out.push_str(&format!("{gutter} | {prefix}{marks}\n")),
+            }
+        }
+        if let Some(h) = &d.help {
+            out.push_str(&format!("{gutter} = help: {h}\n"));
+        }
+    }
+    out
+}
+
+fn line_text<'a>(src: &'a str, starts: &[usize], line: usize) -> &'a str {
+    let Some(&start) = starts.get(line - 1) else {
+        return "";
+    };
+    let end = starts.get(line).map_or(src.len(), |&e| e - 1);
+    src[start..end].trim_end_matches('\r')
+}
+
+/// Converts `d` into a `syn::Error` spanning the user's tokens that produced `d.span`
+/// (first to last token, via `map`), so rustc underlines them. The help, if any, follows
+/// the message on its own line. Secondary labels are dropped (a macro error has one span).
+pub fn to_syn_error(d: &Diagnostic, map: &crate::tokens::SourceMap) -> syn::Error {
+    let message = match &d.help {
+        Some(h) => format!("{}\n\nhelp: {h}", d.message),
+        None => d.message.clone(),
+    };
+    match map.lookup(d.span) {
+        Some((first, last)) => {
+            let mut tokens = proc_macro2::TokenStream::new();
+            tokens.extend([
+                proc_macro2::TokenTree::Ident(proc_macro2::Ident::new("first", first)),
+                proc_macro2::TokenTree::Ident(proc_macro2::Ident::new("last", last)),
+            ]);
+            syn::Error::new_spanned(tokens, message)
+        }
+        None => syn::Error::new(proc_macro2::Span::call_site(), message),
+    }
+}

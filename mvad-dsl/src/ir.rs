@@ -1,1 +1,460 @@
-//! (in progress)
+//! The intermediate representation: a hash-consed expression DAG and the resolved model.
+//!
+//! Expressions live in an [`ExprArena`]: a vector of [`Node`]s whose children are
+//! [`ExprId`]s of *earlier* nodes (egg's `RecExpr`), so the arena is always in
+//! topological order and every pass is a loop over indices, never a recursion. Nodes are
+//! interned: building the same node twice returns the same id, which makes common
+//! subexpressions shared for free (CSE). The smart constructors that fold constants and
+//! normalise operands live in `simplify.rs`; the derivative rules in `diff.rs`.
+//!
+//! A [`Program`] is a checked model with every name resolved: states, params, modes with
+//! their flows, events with guards and resets, observables, the cost terms, the horizon
+//! and the switching functions σ_j of the non-smooth flows.
+
+use std::collections::HashMap;
+
+/// Index of a node in an [`ExprArena`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ExprId(pub u32);
+
+impl ExprId {
+    /// The index as `usize`.
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// Unary elementary functions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Func {
+    /// sin
+    Sin,
+    /// cos
+    Cos,
+    /// tan
+    Tan,
+    /// asin
+    Asin,
+    /// acos
+    Acos,
+    /// atan
+    Atan,
+    /// exp
+    Exp,
+    /// natural log
+    Log,
+    /// square root
+    Sqrt,
+    /// sinh
+    Sinh,
+    /// cosh
+    Cosh,
+    /// tanh
+    Tanh,
+    /// |u|, evaluated pointwise
+    Abs,
+    /// sign(u) ∈ {−1, 0, 1} (0 at 0), evaluated pointwise; its derivative is 0
+    Sign,
+}
+
+impl Func {
+    /// All functions, for tests and tables.
+    pub const ALL: [Func; 14] = [
+        Func::Sin,
+        Func::Cos,
+        Func::Tan,
+        Func::Asin,
+        Func::Acos,
+        Func::Atan,
+        Func::Exp,
+        Func::Log,
+        Func::Sqrt,
+        Func::Sinh,
+        Func::Cosh,
+        Func::Tanh,
+        Func::Abs,
+        Func::Sign,
+    ];
+
+    /// The function of a one-argument call by its `.hyb` name.
+    pub fn from_name(name: &str) -> Option<Func> {
+        Some(match name {
+            "sin" => Func::Sin,
+            "cos" => Func::Cos,
+            "tan" => Func::Tan,
+            "asin" => Func::Asin,
+            "acos" => Func::Acos,
+            "atan" => Func::Atan,
+            "exp" => Func::Exp,
+            "log" => Func::Log,
+            "sqrt" => Func::Sqrt,
+            "sinh" => Func::Sinh,
+            "cosh" => Func::Cosh,
+            "tanh" => Func::Tanh,
+            "abs" => Func::Abs,
+            "sign" => Func::Sign,
+            _ => return None,
+        })
+    }
+
+    /// The name of the `f64` method computing the function (`sign` is `__private::sign`).
+    pub fn method_name(self) -> &'static str {
+        match self {
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Asin => "asin",
+            Func::Acos => "acos",
+            Func::Atan => "atan",
+            Func::Exp => "exp",
+            Func::Log => "ln",
+            Func::Sqrt => "sqrt",
+            Func::Sinh => "sinh",
+            Func::Cosh => "cosh",
+            Func::Tanh => "tanh",
+            Func::Abs => "abs",
+            Func::Sign => "sign",
+        }
+    }
+
+    /// Evaluates the function (the one definition shared by folding, the tape and codegen).
+    pub fn apply(self, x: f64) -> f64 {
+        match self {
+            Func::Sin => x.sin(),
+            Func::Cos => x.cos(),
+            Func::Tan => x.tan(),
+            Func::Asin => x.asin(),
+            Func::Acos => x.acos(),
+            Func::Atan => x.atan(),
+            Func::Exp => x.exp(),
+            Func::Log => x.ln(),
+            Func::Sqrt => x.sqrt(),
+            Func::Sinh => x.sinh(),
+            Func::Cosh => x.cosh(),
+            Func::Tanh => x.tanh(),
+            Func::Abs => x.abs(),
+            Func::Sign => sign(x),
+        }
+    }
+}
+
+/// sign(x): 1 for x > 0, −1 for x < 0, 0 for ±0, NaN for NaN.
+pub fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        x * 0.0
+    }
+}
+
+/// A comparison of a value against zero, used by pointwise [`Node::Select`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Cmp {
+    /// c > 0
+    Gt,
+    /// c ≥ 0
+    Ge,
+    /// c < 0
+    Lt,
+    /// c ≤ 0
+    Le,
+}
+
+impl Cmp {
+    /// Whether `c cmp 0` holds (false for NaN).
+    pub fn test(self, c: f64) -> bool {
+        match self {
+            Cmp::Gt => c > 0.0,
+            Cmp::Ge => c >= 0.0,
+            Cmp::Lt => c < 0.0,
+            Cmp::Le => c <= 0.0,
+        }
+    }
+}
+
+/// One node of the expression DAG. Children are ids of earlier nodes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Node {
+    /// A constant, stored as its `f64` bits so nodes can be hashed.
+    Const(u64),
+    /// The time t.
+    Time,
+    /// State x_i.
+    State(u32),
+    /// Parameter θ_i.
+    Param(u32),
+    /// a + b (operands sorted by id).
+    Add(ExprId, ExprId),
+    /// a · b (operands sorted by id).
+    Mul(ExprId, ExprId),
+    /// −a.
+    Neg(ExprId),
+    /// a / b.
+    Div(ExprId, ExprId),
+    /// aⁿ for an integer n.
+    Powi(ExprId, i32),
+    /// a^b = exp(b ln a) for real b.
+    Pow(ExprId, ExprId),
+    /// f(a) for an elementary function.
+    Call(Func, ExprId),
+    /// Pointwise choice: `if c cmp 0 then a else b`; its derivative is that of the side taken.
+    Select(Cmp, ExprId, ExprId, ExprId),
+    /// Frozen choice: `if bit j of sw then a else b` (the branch for σ_j > 0 is `a`).
+    Switch(u32, ExprId, ExprId),
+}
+
+impl Node {
+    /// The children of the node, in order (at most three).
+    pub fn children(&self) -> impl Iterator<Item = ExprId> {
+        let (a, b, c) = match *self {
+            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) => (None, None, None),
+            Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => (Some(a), None, None),
+            Node::Add(a, b) | Node::Mul(a, b) | Node::Div(a, b) | Node::Pow(a, b) | Node::Switch(_, a, b) => {
+                (Some(a), Some(b), None)
+            }
+            Node::Select(_, c, a, b) => (Some(c), Some(a), Some(b)),
+        };
+        a.into_iter().chain(b).chain(c)
+    }
+
+    /// Whether the node is a leaf (constant, time, state or parameter).
+    pub fn is_leaf(&self) -> bool {
+        matches!(self, Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_))
+    }
+}
+
+/// Inputs of a pointwise evaluation.
+#[derive(Clone, Copy, Debug)]
+pub struct Point<'a> {
+    /// Time t.
+    pub t: f64,
+    /// States x.
+    pub x: &'a [f64],
+    /// Parameters θ.
+    pub p: &'a [f64],
+    /// Frozen branches.
+    pub sw: u64,
+}
+
+/// Evaluates one node given the values of its children (`v` indexed by node id).
+/// The single definition of every node's value: folding, the tape and codegen agree with it.
+pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
+    let g = |id: ExprId| v[id.index()];
+    match *node {
+        Node::Const(bits) => f64::from_bits(bits),
+        Node::Time => at.t,
+        Node::State(i) => at.x.get(i as usize).copied().unwrap_or(f64::NAN),
+        Node::Param(i) => at.p.get(i as usize).copied().unwrap_or(f64::NAN),
+        Node::Add(a, b) => g(a) + g(b),
+        Node::Mul(a, b) => g(a) * g(b),
+        Node::Neg(a) => -g(a),
+        Node::Div(a, b) => g(a) / g(b),
+        Node::Powi(a, n) => g(a).powi(n),
+        Node::Pow(a, b) => g(a).powf(g(b)),
+        Node::Call(f, a) => f.apply(g(a)),
+        Node::Select(c, cond, a, b) => {
+            if c.test(g(cond)) {
+                g(a)
+            } else {
+                g(b)
+            }
+        }
+        Node::Switch(j, a, b) => {
+            if j < 64 && at.sw & (1u64 << j) != 0 {
+                g(a)
+            } else {
+                g(b)
+            }
+        }
+    }
+}
+
+/// A hash-consed expression DAG in topological order.
+#[derive(Clone, Debug, Default)]
+pub struct ExprArena {
+    nodes: Vec<Node>,
+    map: HashMap<Node, ExprId>,
+}
+
+impl ExprArena {
+    /// An empty arena.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Whether the arena is empty.
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    /// The node with id `id`.
+    pub fn node(&self, id: ExprId) -> Node {
+        self.nodes[id.index()]
+    }
+
+    /// All nodes in topological order.
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    /// Interns `node` as is (no simplification): the same node always gets the same id.
+    /// Children must already be in the arena.
+    pub fn intern(&mut self, node: Node) -> ExprId {
+        if let Some(&id) = self.map.get(&node) {
+            return id;
+        }
+        debug_assert!(node.children().all(|c| c.index() < self.nodes.len()));
+        let id = ExprId(self.nodes.len() as u32);
+        self.nodes.push(node);
+        self.map.insert(node, id);
+        id
+    }
+
+    /// The value of `id` if it is a constant.
+    pub fn as_const(&self, id: ExprId) -> Option<f64> {
+        match self.node(id) {
+            Node::Const(bits) => Some(f64::from_bits(bits)),
+            _ => None,
+        }
+    }
+
+    /// Whether `id` is the constant `v` (0.0 and −0.0 both count as zero).
+    pub fn is_const(&self, id: ExprId, v: f64) -> bool {
+        self.as_const(id) == Some(v)
+    }
+
+    /// Whether `id` is structurally zero.
+    pub fn is_zero(&self, id: ExprId) -> bool {
+        self.is_const(id, 0.0)
+    }
+
+    /// Marks the nodes reachable from `roots` (iteratively, no recursion).
+    pub fn live(&self, roots: &[ExprId]) -> Vec<bool> {
+        let mut live = vec![false; self.nodes.len()];
+        let top = match roots.iter().max() {
+            Some(m) => m.index(),
+            None => return live,
+        };
+        for r in roots {
+            live[r.index()] = true;
+        }
+        for i in (0..=top).rev() {
+            if live[i] {
+                for c in self.nodes[i].children() {
+                    live[c.index()] = true;
+                }
+            }
+        }
+        live
+    }
+
+    /// Whether the expression `id` reads the node kind selected by `pred` (e.g. the time).
+    pub fn depends_on(&self, id: ExprId, pred: impl Fn(&Node) -> bool) -> bool {
+        let live = self.live(&[id]);
+        live.iter().zip(&self.nodes).any(|(&l, n)| l && pred(n))
+    }
+
+    /// Evaluates the expressions `roots` at a point by a dense sweep (reference evaluator
+    /// for tests and constant folding of whole expressions; allocates).
+    pub fn eval(&self, roots: &[ExprId], at: &Point<'_>) -> Vec<f64> {
+        let top = roots.iter().max().map_or(0, |m| m.index() + 1);
+        let live = self.live(roots);
+        let mut v = vec![0.0; top];
+        for i in 0..top {
+            if live[i] {
+                v[i] = apply_node(&self.nodes[i], &v, at);
+            }
+        }
+        roots.iter().map(|r| v[r.index()]).collect()
+    }
+}
+
+/// Direction in which a guard fires.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Direction {
+    /// `<=`, `<`: g goes from + to −.
+    Down,
+    /// `>=`, `>`: g goes from − to +.
+    Up,
+}
+
+/// One mode: its name and flow ẋ = f_m(t, x, θ) (one expression per state, frozen branches).
+#[derive(Clone, Debug)]
+pub struct Mode {
+    /// Mode name (`main` for a single-mode model).
+    pub name: String,
+    /// f_m, one expression per state.
+    pub flow: Vec<ExprId>,
+}
+
+/// One event: guard, reset, target and its event cost.
+#[derive(Clone, Debug)]
+pub struct Event {
+    /// Declared name or `event_K`.
+    pub name: String,
+    /// Firing direction.
+    pub direction: Direction,
+    /// `None`: armed in every mode; `Some(m)`: only in mode m.
+    pub mode: Option<usize>,
+    /// Mode switched to after the reset.
+    pub target: Option<usize>,
+    /// g = LHS − RHS.
+    pub guard: ExprId,
+    /// x⁺ = R(t, x⁻, θ), one expression per state (x_i itself when not assigned).
+    pub reset: Vec<ExprId>,
+    /// Whether the event has a reset block.
+    pub has_reset: bool,
+    /// φ_k = Σ factor · `sum(EVENT, expr)` terms, evaluated after the reset, if any.
+    pub cost: Option<ExprId>,
+}
+
+/// A checked model with all names resolved.
+#[derive(Clone, Debug)]
+pub struct Program {
+    /// The shared expression arena.
+    pub arena: ExprArena,
+    /// Model name.
+    pub name: String,
+    /// State names.
+    pub states: Vec<String>,
+    /// Parameter names.
+    pub params: Vec<String>,
+    /// Declared parameter values (consts folded).
+    pub param_defaults: Vec<f64>,
+    /// x₀(θ), one expression per state.
+    pub x0: Vec<ExprId>,
+    /// Modes with their flows.
+    pub modes: Vec<Mode>,
+    /// Index of the initial mode.
+    pub initial_mode: usize,
+    /// Events in declaration order.
+    pub events: Vec<Event>,
+    /// Observables (name, pointwise expression).
+    pub observables: Vec<(String, ExprId)>,
+    /// ℓ (frozen branches), if the cost has `integral` terms.
+    pub running_cost: Option<ExprId>,
+    /// Φ, if the cost has `final` terms.
+    pub final_cost: Option<ExprId>,
+    /// T(θ), if declared.
+    pub horizon: Option<ExprId>,
+    /// Switching functions σ_j (pointwise expressions), at most 64.
+    pub switches: Vec<ExprId>,
+}
+
+impl Program {
+    /// Number of states.
+    pub fn nstates(&self) -> usize {
+        self.states.len()
+    }
+    /// Number of parameters.
+    pub fn nparams(&self) -> usize {
+        self.params.len()
+    }
+}

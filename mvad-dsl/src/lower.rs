@@ -1,1 +1,498 @@
-//! (in progress)
+//! AST → IR: resolve names, fold consts, inline observables, expose kinks as switches.
+//!
+//! Names resolve in the order state, param, const, observable; consts are folded to
+//! numbers and observables used inside other expressions are inlined. Expressions of a
+//! flow or of the running cost ℓ are lowered *frozen*: each `abs`, `min`, `max`, `sign`
+//! and `if` becomes a [`Node::Switch`](crate::ir::Node::Switch) on bit j of the switch
+//! word, with its switching function σ_j recorded (lowered pointwise, deduplicated by
+//! hash-consing):
+//!
+//! | kink | σ | branch for σ > 0 | else |
+//! |---|---|---|---|
+//! | abs(u) | u | u | −u |
+//! | max(a, b) | a − b | a | b |
+//! | min(a, b) | a − b | b | a |
+//! | sign(u) | u | 1 | −1 |
+//! | if L >(=) R then A else B | L − R | A | B |
+//! | if L <(=) R then A else B | L − R | B | A |
+//!
+//! Everywhere else (guards, resets, observables, x₀, horizon, event and final costs) the
+//! same functions are lowered pointwise ([`Node::Select`](crate::ir::Node::Select) and
+//! `abs`/`sign` calls), with the derivative of the side actually taken.
+
+use std::collections::HashMap;
+
+use crate::ast::{self, BinOp, CmpOp, CostKind, ExprKind};
+use crate::diag::Diagnostic;
+use crate::ir::{Cmp, Direction, Event, ExprArena, ExprId, Func, Mode, Node, Program};
+use crate::span::Span;
+
+/// Deepest nesting of expressions, observables included, that lowering accepts.
+const MAX_LOWER_DEPTH: usize = 1024;
+
+/// The most switching functions a model may have (bits of the switch word).
+pub const MAX_SWITCHES: usize = 64;
+
+/// Lowers a checked model to a [`Program`]; every problem found is reported.
+pub fn lower(model: &ast::Model) -> Result<Program, Vec<Diagnostic>> {
+    let mut lw = Lowerer::new(model);
+    let program = lw.program(model);
+    if lw.diags.is_empty() {
+        Ok(program)
+    } else {
+        Err(lw.diags)
+    }
+}
+
+/// Whether kinks become frozen switches (flows, ℓ) or pointwise choices (elsewhere).
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+enum Ctx {
+    Frozen,
+    Pointwise,
+}
+
+/// What a name stands for.
+#[derive(Clone, Copy)]
+enum Sym<'a> {
+    State(usize),
+    Param(usize),
+    Const(f64),
+    Observable(&'a ast::Expr),
+}
+
+struct Lowerer<'a> {
+    ar: ExprArena,
+    names: HashMap<&'a str, Sym<'a>>,
+    switches: Vec<ExprId>,
+    switch_of: HashMap<ExprId, u32>,
+    /// Lowered expressions, keyed by AST node address and context (observables shared).
+    memo: HashMap<(*const ast::Expr, Ctx), ExprId>,
+    /// Observables being inlined (cycle detection).
+    inlining: Vec<*const ast::Expr>,
+    /// Whether params/states/time may be read (false in const and param defaults).
+    consts_only: bool,
+    depth: usize,
+    diags: Vec<Diagnostic>,
+}
+
+impl<'a> Lowerer<'a> {
+    fn new(model: &'a ast::Model) -> Self {
+        let mut names = HashMap::new();
+        for o in model.observes() {
+            names.insert(o.name.name.as_str(), Sym::Observable(&o.value));
+        }
+        for (i, p) in model.params().enumerate() {
+            names.insert(p.name.name.as_str(), Sym::Param(i));
+        }
+        for (i, s) in model.states().enumerate() {
+            names.insert(s.name.name.as_str(), Sym::State(i));
+        }
+        Lowerer {
+            ar: ExprArena::new(),
+            names,
+            switches: Vec::new(),
+            switch_of: HashMap::new(),
+            memo: HashMap::new(),
+            inlining: Vec::new(),
+            consts_only: false,
+            depth: 0,
+            diags: Vec::new(),
+        }
+    }
+
+    fn error(&mut self, span: Span, msg: impl Into<String>) {
+        self.diags.push(Diagnostic::new(span, msg));
+    }
+
+    /// Evaluates a constant expression (numbers and earlier consts).
+    fn constant(&mut self, e: &'a ast::Expr, what: &str) -> f64 {
+        self.consts_only = true;
+        let id = self.expr(e, Ctx::Pointwise);
+        self.consts_only = false;
+        match self.ar.as_const(id) {
+            Some(v) => v,
+            None => {
+                self.error(e.span, format!("{what} must be a constant expression"));
+                f64::NAN
+            }
+        }
+    }
+
+    fn program(&mut self, model: &'a ast::Model) -> Program {
+        // Consts, in order (each may use earlier ones).
+        for c in model.consts() {
+            let v = self.constant(&c.value, &format!("the value of const `{}`", c.name.name));
+            self.names.insert(c.name.name.as_str(), Sym::Const(v));
+        }
+        let params: Vec<String> = model.params().map(|p| p.name.name.clone()).collect();
+        let param_defaults: Vec<f64> = model
+            .params()
+            .map(|p| self.constant(&p.value, &format!("the default of param `{}`", p.name.name)))
+            .collect();
+        let states: Vec<String> = model.states().map(|s| s.name.name.clone()).collect();
+        let n = states.len();
+        let x0: Vec<ExprId> = model
+            .states()
+            .map(|s| {
+                let id = self.expr(&s.init, Ctx::Pointwise);
+                self.no_state_or_time(id, s.init.span, &format!("the initial value of `{}`", s.name.name));
+                id
+            })
+            .collect();
+
+        // Modes.
+        let mut modes = Vec::new();
+        let mut mode_index: HashMap<&str, usize> = HashMap::new();
+        if let Some(flow) = model.flow() {
+            let f = self.flow(&flow.ders, n, flow.span, "main");
+            modes.push(Mode { name: "main".into(), flow: f });
+            mode_index.insert("main", 0);
+        }
+        for m in model.modes() {
+            let f = self.flow(&m.ders, n, m.span, &m.name.name);
+            mode_index.insert(m.name.name.as_str(), modes.len());
+            modes.push(Mode { name: m.name.name.clone(), flow: f });
+        }
+        if modes.is_empty() {
+            self.error(model.name.span, format!("model `{}` has no `flow` and no `mode`", model.name.name));
+        }
+        let initial_mode = match model.initial_mode() {
+            Some(im) => match mode_index.get(im.mode.name.as_str()) {
+                Some(&i) => i,
+                None => {
+                    self.error(im.mode.span, format!("unknown mode `{}`", im.mode.name));
+                    0
+                }
+            },
+            None => 0,
+        };
+
+        // Events.
+        let mut events = Vec::new();
+        let all = model.all_events();
+        let mut event_index: HashMap<String, usize> = HashMap::new();
+        for (k, (mode, ev)) in all.iter().enumerate() {
+            let name = ev.name.as_ref().map_or_else(|| format!("event_{k}"), |i| i.name.clone());
+            event_index.insert(name.clone(), k);
+            let Some(cmp) = ev.comparison() else {
+                self.error(ev.guard.span(), "the guard of an event must be a comparison");
+                continue;
+            };
+            let l = self.expr(&cmp.lhs, Ctx::Pointwise);
+            let r = self.expr(&cmp.rhs, Ctx::Pointwise);
+            let guard = self.ar.sub(l, r);
+            let direction = match cmp.op {
+                CmpOp::Le | CmpOp::Lt => Direction::Down,
+                CmpOp::Ge | CmpOp::Gt => Direction::Up,
+            };
+            let mode = mode.and_then(|m| mode_index.get(m.name.name.as_str()).copied());
+            let target = match &ev.target {
+                Some(t) => match mode_index.get(t.name.as_str()) {
+                    Some(&i) => Some(i),
+                    None => {
+                        self.error(t.span, format!("unknown mode `{}`", t.name));
+                        None
+                    }
+                },
+                None => None,
+            };
+            let mut reset: Vec<ExprId> = (0..n).map(|i| self.ar.state(i)).collect();
+            if let Some(resets) = &ev.resets {
+                for a in resets {
+                    match self.names.get(a.state.name.as_str()) {
+                        Some(&Sym::State(i)) => reset[i] = self.expr(&a.value, Ctx::Pointwise),
+                        _ => self.error(a.state.span, format!("reset of `{}`, which is not a state", a.state.name)),
+                    }
+                }
+            }
+            events.push(Event {
+                name,
+                direction,
+                mode,
+                target,
+                guard,
+                reset,
+                has_reset: ev.resets.is_some(),
+                cost: None,
+            });
+        }
+
+        // Observables.
+        let observables: Vec<(String, ExprId)> = model
+            .observes()
+            .map(|o| {
+                self.inlining.push(&o.value as *const ast::Expr);
+                let id = self.expr(&o.value, Ctx::Pointwise);
+                self.inlining.pop();
+                (o.name.name.clone(), id)
+            })
+            .collect();
+
+        // Cost.
+        let mut running: Option<ExprId> = None;
+        let mut fin: Option<ExprId> = None;
+        let mut per_event: Vec<Option<ExprId>> = vec![None; all.len()];
+        if let Some(cost) = model.cost() {
+            for term in &cost.terms {
+                let (target, e) = match &term.kind {
+                    CostKind::Integral(e) => (&mut running, self.expr(e, Ctx::Frozen)),
+                    CostKind::Final(e) => (&mut fin, self.expr(e, Ctx::Pointwise)),
+                    CostKind::Sum { event, value } => {
+                        let v = self.expr(value, Ctx::Pointwise);
+                        match event_index.get(event.name.as_str()) {
+                            Some(&k) => (&mut per_event[k], v),
+                            None => {
+                                self.error(event.span, format!("unknown event `{}`", event.name));
+                                continue;
+                            }
+                        }
+                    }
+                };
+                let c = self.ar.constant(term.factor);
+                let scaled = self.ar.mul(c, e);
+                *target = Some(match *target {
+                    Some(prev) => self.ar.add(prev, scaled),
+                    None => scaled,
+                });
+            }
+        }
+        for (ev, c) in events.iter_mut().zip(per_event.iter()) {
+            ev.cost = *c;
+        }
+
+        let horizon = model.horizon().map(|h| {
+            let id = self.expr(&h.value, Ctx::Pointwise);
+            self.no_state_or_time(id, h.value.span, "the horizon");
+            id
+        });
+
+        Program {
+            arena: std::mem::take(&mut self.ar),
+            name: model.name.name.clone(),
+            states,
+            params,
+            param_defaults,
+            x0,
+            modes,
+            initial_mode,
+            events,
+            observables,
+            running_cost: running,
+            final_cost: fin,
+            horizon,
+            switches: std::mem::take(&mut self.switches),
+        }
+    }
+
+    fn no_state_or_time(&mut self, id: ExprId, span: Span, what: &str) {
+        if self.ar.depends_on(id, |n| matches!(n, Node::State(_) | Node::Time)) {
+            self.error(span, format!("{what} may use only params and consts"));
+        }
+    }
+
+    fn flow(&mut self, ders: &'a [ast::Der], n: usize, span: Span, mode: &str) -> Vec<ExprId> {
+        let mut f: Vec<Option<ExprId>> = vec![None; n];
+        for d in ders {
+            match self.names.get(d.state.name.as_str()) {
+                Some(&Sym::State(i)) => f[i] = Some(self.expr(&d.value, Ctx::Frozen)),
+                _ => self.error(d.state.span, format!("`der` of `{}`, which is not a state", d.state.name)),
+            }
+        }
+        f.into_iter()
+            .enumerate()
+            .map(|(i, e)| {
+                e.unwrap_or_else(|| {
+                    self.error(span, format!("state number {} has no `der` in mode `{mode}`", i + 1));
+                    self.ar.constant(0.0)
+                })
+            })
+            .collect()
+    }
+
+    /// Lowers one expression (memoised per AST node and context).
+    fn expr(&mut self, e: &'a ast::Expr, ctx: Ctx) -> ExprId {
+        let key = (e as *const ast::Expr, ctx);
+        if let Some(&id) = self.memo.get(&key) {
+            return id;
+        }
+        if self.depth >= MAX_LOWER_DEPTH {
+            self.error(e.span, "expression nested too deeply");
+            return self.ar.constant(f64::NAN);
+        }
+        self.depth += 1;
+        let id = self.expr_inner(e, ctx);
+        self.depth -= 1;
+        if !self.consts_only {
+            self.memo.insert(key, id);
+        }
+        id
+    }
+
+    fn expr_inner(&mut self, e: &'a ast::Expr, ctx: Ctx) -> ExprId {
+        match &e.kind {
+            ExprKind::Number(v) => self.ar.constant(*v),
+            ExprKind::Time => {
+                if self.consts_only {
+                    self.error(e.span, "`t` cannot be used in a constant expression");
+                }
+                self.ar.time()
+            }
+            ExprKind::Name(id) => self.name(id, ctx),
+            ExprKind::Neg(a) => {
+                let a = self.expr(a, ctx);
+                self.ar.neg(a)
+            }
+            ExprKind::Binary { op, lhs, rhs, .. } => {
+                let a = self.expr(lhs, ctx);
+                let b = self.expr(rhs, ctx);
+                match op {
+                    BinOp::Add => self.ar.add(a, b),
+                    BinOp::Sub => self.ar.sub(a, b),
+                    BinOp::Mul => self.ar.mul(a, b),
+                    BinOp::Div => self.ar.div(a, b),
+                    BinOp::Pow => self.ar.pow(a, b),
+                }
+            }
+            ExprKind::Call { func, args } => self.call(e, func, args, ctx),
+            ExprKind::If { cond, then, els } => {
+                let Some(cmp) = cond.comparison() else {
+                    self.error(cond.span(), "the condition of `if` must be a comparison");
+                    return self.ar.constant(f64::NAN);
+                };
+                let a = self.expr(then, ctx);
+                let b = self.expr(els, ctx);
+                let (pos, neg) = match cmp.op {
+                    CmpOp::Gt | CmpOp::Ge => (a, b),
+                    CmpOp::Lt | CmpOp::Le => (b, a),
+                };
+                match ctx {
+                    Ctx::Pointwise => {
+                        let l = self.expr(&cmp.lhs, ctx);
+                        let r = self.expr(&cmp.rhs, ctx);
+                        let c = self.ar.sub(l, r);
+                        let op = match cmp.op {
+                            CmpOp::Gt => Cmp::Gt,
+                            CmpOp::Ge => Cmp::Ge,
+                            CmpOp::Lt => Cmp::Lt,
+                            CmpOp::Le => Cmp::Le,
+                        };
+                        self.ar.select(op, c, a, b)
+                    }
+                    Ctx::Frozen => {
+                        let lp = self.expr(&cmp.lhs, Ctx::Pointwise);
+                        let rp = self.expr(&cmp.rhs, Ctx::Pointwise);
+                        let sigma = self.ar.sub(lp, rp);
+                        self.kink(sigma, pos, neg, e.span)
+                    }
+                }
+            }
+        }
+    }
+
+    fn name(&mut self, id: &'a ast::Ident, ctx: Ctx) -> ExprId {
+        let sym = self.names.get(id.name.as_str()).copied();
+        match sym {
+            Some(Sym::Const(v)) => self.ar.constant(v),
+            Some(_) if self.consts_only => {
+                self.error(id.span, format!("`{}` is not a const; a constant expression may use only numbers and consts", id.name));
+                self.ar.constant(f64::NAN)
+            }
+            Some(Sym::State(i)) => self.ar.state(i),
+            Some(Sym::Param(i)) => self.ar.param(i),
+            Some(Sym::Observable(e)) => {
+                let key = e as *const ast::Expr;
+                if self.inlining.contains(&key) {
+                    self.error(id.span, format!("observable `{}` refers to itself", id.name));
+                    return self.ar.constant(f64::NAN);
+                }
+                self.inlining.push(key);
+                let r = self.expr(e, ctx);
+                self.inlining.pop();
+                r
+            }
+            None => {
+                self.error(id.span, format!("undefined name `{}`", id.name));
+                self.ar.constant(f64::NAN)
+            }
+        }
+    }
+
+    fn call(&mut self, e: &'a ast::Expr, func: &'a ast::Ident, args: &'a [ast::Expr], ctx: Ctx) -> ExprId {
+        let name = func.name.as_str();
+        let want = match name {
+            "min" | "max" | "pow" => 2,
+            _ => 1,
+        };
+        if Func::from_name(name).is_none() && want == 1 {
+            self.error(func.span, format!("unknown function `{name}`"));
+            return self.ar.constant(f64::NAN);
+        }
+        if args.len() != want {
+            self.error(
+                func.span,
+                format!("`{name}` takes {want} argument{}, found {}", if want == 1 { "" } else { "s" }, args.len()),
+            );
+            return self.ar.constant(f64::NAN);
+        }
+        let a = self.expr(&args[0], ctx);
+        let b = if want == 2 { Some(self.expr(&args[1], ctx)) } else { None };
+        let b = b.unwrap_or(a);
+        match (name, ctx) {
+            ("pow", _) => self.ar.pow(a, b),
+            ("min" | "max", Ctx::Pointwise) => {
+                let c = self.ar.sub(a, b);
+                if name == "max" {
+                    self.ar.select(Cmp::Gt, c, a, b)
+                } else {
+                    self.ar.select(Cmp::Gt, c, b, a)
+                }
+            }
+            ("min" | "max", Ctx::Frozen) => {
+                let ap = self.expr(&args[0], Ctx::Pointwise);
+                let bp = self.expr(&args[1], Ctx::Pointwise);
+                let sigma = self.ar.sub(ap, bp);
+                if name == "max" {
+                    self.kink(sigma, a, b, e.span)
+                } else {
+                    self.kink(sigma, b, a, e.span)
+                }
+            }
+            ("abs" | "sign", Ctx::Frozen) => {
+                let sigma = self.expr(&args[0], Ctx::Pointwise);
+                let (pos, neg) = if name == "abs" {
+                    (a, self.ar.neg(a))
+                } else {
+                    (self.ar.constant(1.0), self.ar.constant(-1.0))
+                };
+                self.kink(sigma, pos, neg, e.span)
+            }
+            _ => match Func::from_name(name) {
+                Some(f) => self.ar.call(f, a),
+                None => self.ar.constant(f64::NAN),
+            },
+        }
+    }
+
+    /// A frozen kink with switching function σ: `Switch(j, pos, neg)`.
+    fn kink(&mut self, sigma: ExprId, pos: ExprId, neg: ExprId, span: Span) -> ExprId {
+        if pos == neg {
+            return pos;
+        }
+        if let Some(v) = self.ar.as_const(sigma) {
+            return if v > 0.0 { pos } else { neg };
+        }
+        let j = match self.switch_of.get(&sigma) {
+            Some(&j) => j,
+            None => {
+                let j = self.switches.len() as u32;
+                if self.switches.len() == MAX_SWITCHES {
+                    self.error(span, format!("more than {MAX_SWITCHES} kinks (abs, min, max, sign, if) in flows and running cost"));
+                }
+                self.switches.push(sigma);
+                self.switch_of.insert(sigma, j);
+                j
+            }
+        };
+        self.ar.switch(j, pos, neg)
+    }
+}

@@ -1,1 +1,315 @@
-//! (in progress)
+//! Roots → live nodes → ordered temporaries: one [`Kernel`] per model function.
+//!
+//! [`kernels`] differentiates a [`Program`] (all partials land in its arena, so f and
+//! its derivatives share subexpressions) and cuts it into straight-line kernels, one per
+//! method of the runtime's model trait. A kernel lists its live nodes in topological
+//! order and only its *structurally non-zero* outputs, each with a slot in a dense output
+//! layout documented on the field that holds it. Matrices are row-major in slots:
+//! entry (r, c) of an r×c block is slot r·cols + c. Both back ends (codegen, tape) read
+//! the same kernels.
+
+use crate::diff::{diff, Var};
+use crate::ir::{Direction, ExprArena, ExprId, Node, Program};
+
+/// A straight-line function: live nodes in topological order and its non-zero outputs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Kernel {
+    /// Every node the outputs need (leaves included), in topological order.
+    pub nodes: Vec<ExprId>,
+    /// Length of the dense output.
+    pub len: usize,
+    /// The structurally non-zero outputs as (slot, expression), slots ascending.
+    pub outputs: Vec<(usize, ExprId)>,
+}
+
+impl Kernel {
+    /// The kernel computing `exprs` (slot i ← exprs\[i\]), zeros dropped.
+    pub fn new(ar: &ExprArena, exprs: &[ExprId]) -> Kernel {
+        let outputs: Vec<(usize, ExprId)> =
+            exprs.iter().copied().enumerate().filter(|&(_, e)| !ar.is_zero(e)).collect();
+        let roots: Vec<ExprId> = outputs.iter().map(|&(_, e)| e).collect();
+        let live = ar.live(&roots);
+        let nodes = (0..live.len()).filter(|&i| live[i]).map(|i| ExprId(i as u32)).collect();
+        Kernel { nodes, len: exprs.len(), outputs }
+    }
+
+    /// Whether every slot has a (non-zero) output, so no zero fill is needed.
+    pub fn is_dense(&self) -> bool {
+        self.outputs.len() == self.len
+    }
+
+    /// Whether the kernel computes nothing (all outputs zero).
+    pub fn is_zero(&self) -> bool {
+        self.outputs.is_empty()
+    }
+
+    /// Whether any live node satisfies `pred` (reads t, x, θ or a switch bit).
+    pub fn uses(&self, ar: &ExprArena, pred: impl Fn(&Node) -> bool) -> bool {
+        self.nodes.iter().any(|&id| pred(&ar.node(id)))
+    }
+}
+
+/// A scalar function and its gradient.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GradKernels {
+    /// The value (1 slot).
+    pub value: Kernel,
+    /// Slots `[0, n)` ∂/∂x, `[n, n+p)` ∂/∂θ, `n+p` either ∂/∂t (guards, switches, event
+    /// and final costs) or the value itself (running cost, whose grad method returns ℓ).
+    pub grad: Kernel,
+}
+
+/// The kernels of one mode's flow.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModeKernels {
+    /// f (n slots).
+    pub rhs: Kernel,
+    /// ∂f/∂x (n×n, row-major).
+    pub jac_x: Kernel,
+    /// ∂f/∂θ (n×p, row-major).
+    pub jac_p: Kernel,
+    /// ∂f/∂t (n slots).
+    pub dt: Kernel,
+    /// Whether f depends on t explicitly.
+    pub depends_on_t: bool,
+    /// Structurally non-zero entries (row, col) of ∂f/∂x.
+    pub sparsity: Vec<(usize, usize)>,
+    /// Fused sensitivity kernel: slots `[0, n)` f, then one slot per entry of
+    /// `sparsity` (∂f/∂x values, same order), then ∂f/∂θ (n×p row-major). Ṡ = f_x S + f_θ is
+    /// formed from these by the back ends with only the non-zero f_x entries.
+    pub sens: Kernel,
+}
+
+/// The kernels of one event.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventKernels {
+    /// g and (∇ₓg, ∂θg, ∂ₜg).
+    pub guard: GradKernels,
+    /// x⁺ = R(t, x⁻, θ) (n slots).
+    pub reset: Kernel,
+    /// Slots `[0, n²)` ∂R/∂x (row-major), `[n², n²+np)` ∂R/∂θ (row-major), then n of ∂R/∂t.
+    pub reset_jac: Kernel,
+    /// φ_k and (φ_x, φ_θ, φ_t), if the cost has `sum` terms for this event.
+    pub cost: Option<GradKernels>,
+}
+
+/// Static description of an event (mirrors the runtime's `EventInfo`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventMeta {
+    /// Declared name or `event_K`.
+    pub name: String,
+    /// Firing direction.
+    pub direction: Direction,
+    /// Mode the event is armed in (`None`: every mode).
+    pub mode: Option<usize>,
+    /// Target mode.
+    pub target: Option<usize>,
+    /// Whether it has a reset block.
+    pub has_reset: bool,
+    /// Whether the cost has `sum` terms for it.
+    pub has_cost: bool,
+}
+
+/// Everything the back ends need: the arena, names and one kernel per model function.
+#[derive(Clone, Debug)]
+pub struct ModelKernels {
+    /// The arena holding every expression and derivative.
+    pub arena: ExprArena,
+    /// Model name.
+    pub name: String,
+    /// State names.
+    pub states: Vec<String>,
+    /// Parameter names.
+    pub params: Vec<String>,
+    /// Declared parameter values.
+    pub param_defaults: Vec<f64>,
+    /// Mode names.
+    pub mode_names: Vec<String>,
+    /// Initial mode.
+    pub initial_mode: usize,
+    /// Event descriptions.
+    pub event_meta: Vec<EventMeta>,
+    /// Observable names.
+    pub observables: Vec<String>,
+    /// x₀(θ) (n slots).
+    pub x0: Kernel,
+    /// ∂x₀/∂θ (n×p, row-major).
+    pub x0_jac: Kernel,
+    /// T(θ) (1 slot) and dT/dθ (p slots), if a horizon is declared.
+    pub horizon: Option<(Kernel, Kernel)>,
+    /// Per mode.
+    pub modes: Vec<ModeKernels>,
+    /// Per event.
+    pub events: Vec<EventKernels>,
+    /// Per switching function σ_j: σ_j and (∇ₓσ_j, ∂θσ_j, ∂ₜσ_j).
+    pub switches: Vec<GradKernels>,
+    /// y = h (nobs slots).
+    pub observe: Kernel,
+    /// Slots `[0, nobs·n)` ∂h/∂x, then `[nobs·n, nobs·(n+p))` ∂h/∂θ, both row-major.
+    pub observe_jac: Kernel,
+    /// ℓ and (ℓ_x, ℓ_θ, ℓ), if the cost has `integral` terms.
+    pub running_cost: Option<GradKernels>,
+    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` terms.
+    pub final_cost: Option<GradKernels>,
+}
+
+impl ModelKernels {
+    /// Number of states n.
+    pub fn nstates(&self) -> usize {
+        self.states.len()
+    }
+    /// Number of parameters p.
+    pub fn nparams(&self) -> usize {
+        self.params.len()
+    }
+    /// Every kernel, for the back ends' scratch sizing and tests.
+    pub fn all_kernels(&self) -> Vec<&Kernel> {
+        let mut v = vec![&self.x0, &self.x0_jac, &self.observe, &self.observe_jac];
+        if let Some((a, b)) = &self.horizon {
+            v.push(a);
+            v.push(b);
+        }
+        for m in &self.modes {
+            v.extend([&m.rhs, &m.jac_x, &m.jac_p, &m.dt, &m.sens]);
+        }
+        for e in &self.events {
+            v.extend([&e.guard.value, &e.guard.grad]);
+            v.extend([&e.reset, &e.reset_jac]);
+            if let Some(c) = &e.cost {
+                v.extend([&c.value, &c.grad]);
+            }
+        }
+        for s in &self.switches {
+            v.extend([&s.value, &s.grad]);
+        }
+        for c in [&self.running_cost, &self.final_cost].into_iter().flatten() {
+            v.extend([&c.value, &c.grad]);
+        }
+        v
+    }
+}
+
+/// ∂e/∂x (n), ∂e/∂θ (p) and a last entry.
+fn grad_exprs(ar: &mut ExprArena, e: ExprId, n: usize, p: usize, last_is_value: bool) -> Vec<ExprId> {
+    let mut v: Vec<ExprId> = (0..n).map(|i| diff(ar, e, Var::State(i))).collect();
+    v.extend((0..p).map(|i| diff(ar, e, Var::Param(i))));
+    v.push(if last_is_value { e } else { diff(ar, e, Var::Time) });
+    v
+}
+
+/// The value and gradient kernels of a scalar `e`.
+fn grad_kernels(ar: &mut ExprArena, e: ExprId, n: usize, p: usize, last_is_value: bool) -> GradKernels {
+    let g = grad_exprs(ar, e, n, p, last_is_value);
+    GradKernels { value: Kernel::new(ar, &[e]), grad: Kernel::new(ar, &g) }
+}
+
+/// Row-major Jacobian of `exprs` with respect to `vars`.
+fn jacobian(ar: &mut ExprArena, exprs: &[ExprId], vars: impl Fn(usize) -> Var, ncols: usize) -> Vec<ExprId> {
+    let mut out = Vec::with_capacity(exprs.len() * ncols);
+    for &e in exprs {
+        for c in 0..ncols {
+            out.push(diff(ar, e, vars(c)));
+        }
+    }
+    out
+}
+
+/// Differentiates the program and cuts it into kernels.
+pub fn kernels(program: &Program) -> ModelKernels {
+    let mut ar = program.arena.clone();
+    let n = program.nstates();
+    let p = program.nparams();
+
+    let x0 = Kernel::new(&ar, &program.x0);
+    let dx0 = jacobian(&mut ar, &program.x0, Var::Param, p);
+    let x0_jac = Kernel::new(&ar, &dx0);
+
+    let horizon = program.horizon.map(|h| {
+        let g: Vec<ExprId> = (0..p).map(|i| diff(&mut ar, h, Var::Param(i))).collect();
+        (Kernel::new(&ar, &[h]), Kernel::new(&ar, &g))
+    });
+
+    let modes = program
+        .modes
+        .iter()
+        .map(|m| {
+            let fx = jacobian(&mut ar, &m.flow, Var::State, n);
+            let fp = jacobian(&mut ar, &m.flow, Var::Param, p);
+            let ft: Vec<ExprId> = m.flow.iter().map(|&e| diff(&mut ar, e, Var::Time)).collect();
+            let sparsity: Vec<(usize, usize)> =
+                (0..n * n).filter(|&k| !ar.is_zero(fx[k])).map(|k| (k / n.max(1), k % n.max(1))).collect();
+            let mut sens: Vec<ExprId> = m.flow.clone();
+            sens.extend(sparsity.iter().map(|&(r, c)| fx[r * n + c]));
+            sens.extend(fp.iter().copied());
+            let depends_on_t = m.flow.iter().any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)));
+            ModeKernels {
+                rhs: Kernel::new(&ar, &m.flow),
+                jac_x: Kernel::new(&ar, &fx),
+                jac_p: Kernel::new(&ar, &fp),
+                dt: Kernel::new(&ar, &ft),
+                depends_on_t,
+                sparsity,
+                sens: Kernel::new(&ar, &sens),
+            }
+        })
+        .collect();
+
+    let events = program
+        .events
+        .iter()
+        .map(|ev| {
+            let guard = grad_kernels(&mut ar, ev.guard, n, p, false);
+            let mut rj = jacobian(&mut ar, &ev.reset, Var::State, n);
+            rj.extend(jacobian(&mut ar, &ev.reset, Var::Param, p));
+            rj.extend(jacobian(&mut ar, &ev.reset, |_| Var::Time, 1));
+            EventKernels {
+                guard,
+                reset: Kernel::new(&ar, &ev.reset),
+                reset_jac: Kernel::new(&ar, &rj),
+                cost: ev.cost.map(|c| grad_kernels(&mut ar, c, n, p, false)),
+            }
+        })
+        .collect();
+
+    let switches = program.switches.iter().map(|&s| grad_kernels(&mut ar, s, n, p, false)).collect();
+
+    let obs: Vec<ExprId> = program.observables.iter().map(|&(_, e)| e).collect();
+    let mut oj = jacobian(&mut ar, &obs, Var::State, n);
+    oj.extend(jacobian(&mut ar, &obs, Var::Param, p));
+
+    let running_cost = program.running_cost.map(|c| grad_kernels(&mut ar, c, n, p, true));
+    let final_cost = program.final_cost.map(|c| grad_kernels(&mut ar, c, n, p, false));
+
+    ModelKernels {
+        name: program.name.clone(),
+        states: program.states.clone(),
+        params: program.params.clone(),
+        param_defaults: program.param_defaults.clone(),
+        mode_names: program.modes.iter().map(|m| m.name.clone()).collect(),
+        initial_mode: program.initial_mode,
+        event_meta: program
+            .events
+            .iter()
+            .map(|e| EventMeta {
+                name: e.name.clone(),
+                direction: e.direction,
+                mode: e.mode,
+                target: e.target,
+                has_reset: e.has_reset,
+                has_cost: e.cost.is_some(),
+            })
+            .collect(),
+        observables: program.observables.iter().map(|(n, _)| n.clone()).collect(),
+        x0,
+        x0_jac,
+        horizon,
+        modes,
+        events,
+        switches,
+        observe: Kernel::new(&ar, &obs),
+        observe_jac: Kernel::new(&ar, &oj),
+        running_cost,
+        final_cost,
+        arena: ar,
+    }
+}

@@ -1,1 +1,544 @@
-//! (in progress)
+//! Event detection on accepted steps (the paper's Algorithm 1) and bracketed root finding.
+//!
+//! The driver watches one scalar function per event and per switching function, signed so
+//! that a crossing in the armed direction is a crossing of zero *upwards*:
+//!
+//! - event k with guard g_k and direction d_k ∈ {+1 (`Up`), −1 (`Down`)}: v = d_k·g_k. It fires
+//!   when v reaches zero from below (v ≥ 0 after v < 0). After it fires it is *disarmed*
+//!   until v has been strictly negative again (it left zero in the opposite sense), so a guard
+//!   that is exactly zero after the reset neither re-triggers nor hides the next crossing;
+//! - switching function σ_j with frozen bit b_j: v = −σ_j if b_j is set, +σ_j otherwise. It
+//!   triggers when the sign of σ_j strictly disagrees with the bit (v > 0); it is always armed.
+//!
+//! On each accepted step [t₀, t₁] the watched values are sampled at t₀, at `INTERIOR` interior
+//! points of the dense output and at t₁. A sign change between two samples gives a bracket.
+//! Two crossings between samples (a near-grazing dip) show up as an interior local maximum of
+//! v that is close to zero relative to v's variation over the step; then v is maximised
+//! on the neighbouring samples' interval by golden-section search and, if the maximum
+//! reaches zero, the bracket [left sample, argmax] is used. Roots are found by the Illinois
+//! variant of regula falsi (with bisection safeguards) to the resolution of t (relative
+//! ~1e-15), returning the end of the bracket where the function has triggered, so the state
+//! handed to the reset is always on or past the guard.
+
+/// Interior samples per step for sign-change detection.
+pub const INTERIOR: usize = 4;
+
+/// Number of samples per step (t₀, the interior points, t₁).
+const NSAMP: usize = INTERIOR + 2;
+
+/// Whether the watched value `v` has triggered (`strict`: v > 0, else v ≥ 0).
+#[inline]
+fn triggered(v: f64, strict: bool) -> bool {
+    if strict {
+        v > 0.0
+    } else {
+        v >= 0.0
+    }
+}
+
+/// Finds the crossing of a continuous `f` in [a, b] where `f(a)` has not triggered and `f(b)`
+/// has (see [`triggered`]): Illinois regula falsi with a bisection step whenever an iteration
+/// fails to halve the bracket. Stops when the bracket is below 2 ulp of t (or after 200
+/// evaluations) and returns the triggered end b, so the returned time is never before the
+/// crossing.
+pub fn locate_root<F: FnMut(f64) -> f64>(
+    mut f: F,
+    mut a: f64,
+    mut fa: f64,
+    mut b: f64,
+    mut fb: f64,
+    strict: bool,
+) -> f64 {
+    if !strict && fb == 0.0 {
+        // Exactly on the guard: still look for an earlier first zero only if fa is not
+        // negative enough to matter; the first time f reaches 0 is b unless it touched before.
+        return b;
+    }
+    let mut side = 0i8; // which end was kept last: −1 a, +1 b
+    let mut width = b - a;
+    for _ in 0..200 {
+        let tol = 2.0 * f64::EPSILON * a.abs().max(b.abs()) + f64::MIN_POSITIVE;
+        if b - a <= tol {
+            break;
+        }
+        let mut c = if fb != fa {
+            b - fb * (b - a) / (fb - fa)
+        } else {
+            0.5 * (a + b)
+        };
+        if !(c > a && c < b) {
+            c = 0.5 * (a + b);
+            if !(c > a && c < b) {
+                break;
+            }
+        }
+        let fc = f(c);
+        if fc.is_nan() {
+            // Let the caller's later evaluation report it; bisect towards a safe answer.
+            b = c;
+            fb = 0.0;
+            break;
+        }
+        if triggered(fc, strict) {
+            b = c;
+            fb = fc;
+            if side == 1 {
+                fa *= 0.5;
+            }
+            side = 1;
+            if !strict && fc == 0.0 {
+                break;
+            }
+        } else {
+            a = c;
+            fa = fc;
+            if side == -1 {
+                fb *= 0.5;
+            }
+            side = -1;
+        }
+        // Safeguard: if the bracket did not at least halve, bisect once.
+        if b - a > 0.5 * width {
+            let m = 0.5 * (a + b);
+            if m > a && m < b {
+                let fm = f(m);
+                if triggered(fm, strict) {
+                    b = m;
+                    fb = fm;
+                } else {
+                    a = m;
+                    fa = fm;
+                }
+                side = 0;
+            }
+        }
+        width = b - a;
+    }
+    let _ = fb;
+    b
+}
+
+/// Golden-section search for the maximum of `f` on [a, b] (30 iterations, the interval
+/// shrinks by 0.618³⁰ ≈ 5·10⁻⁷). Returns (argmax, max) among the evaluated points.
+pub fn maximize<F: FnMut(f64) -> f64>(mut f: F, a: f64, b: f64) -> (f64, f64) {
+    const R: f64 = 0.618_033_988_749_894_9;
+    let (mut lo, mut hi) = (a, b);
+    let mut c = hi - R * (hi - lo);
+    let mut d = lo + R * (hi - lo);
+    let mut fc = f(c);
+    let mut fd = f(d);
+    for _ in 0..30 {
+        if fc >= fd {
+            hi = d;
+            d = c;
+            fd = fc;
+            c = hi - R * (hi - lo);
+            fc = f(c);
+        } else {
+            lo = c;
+            c = d;
+            fc = fd;
+            d = lo + R * (hi - lo);
+            fd = f(d);
+        }
+    }
+    if fc >= fd {
+        (c, fc)
+    } else {
+        (d, fd)
+    }
+}
+
+/// What a watched function is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Watch {
+    /// User event k (index into `ModelInfo::events`).
+    Event(usize),
+    /// Switching function σ_j.
+    Switch(usize),
+}
+
+/// A crossing found on the current step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crossing {
+    /// Index of the watched function (events first, then switches).
+    pub w: usize,
+    /// Located time.
+    pub t: f64,
+}
+
+/// Per-run event-detection state: which functions are watched, armed flags, the values at
+/// the start of the current step, and scratch for the samples (all allocated once).
+#[derive(Clone, Debug)]
+pub struct Scanner {
+    /// Number of user events; watched index w < nevents is event w, else switch w − nevents.
+    pub nevents: usize,
+    /// Whether function w is watched in the current mode (switches: always).
+    pub active: Vec<bool>,
+    /// Armed flags (switches: always true).
+    pub armed: Vec<bool>,
+    /// Signed value v_w at the start of the current step.
+    pub start_val: Vec<f64>,
+    /// Whether v_w was increasing at the end of the previous step (dip detection at t₀).
+    pub rising: Vec<bool>,
+    /// Crossings on the current step, earliest first (filled by [`Scanner::scan`]).
+    pub found: Vec<Crossing>,
+    vals: Vec<f64>,
+    brackets: Vec<Option<(f64, f64, f64, f64)>>,
+}
+
+impl Scanner {
+    /// A scanner for `nevents` events and `nswitches` switching functions.
+    pub fn new(nevents: usize, nswitches: usize) -> Self {
+        let nw = nevents + nswitches;
+        Scanner {
+            nevents,
+            active: vec![false; nw],
+            armed: vec![false; nw],
+            start_val: vec![0.0; nw],
+            rising: vec![false; nw],
+            found: Vec::with_capacity(nw),
+            vals: vec![0.0; nw * NSAMP],
+            brackets: vec![None; nw],
+        }
+    }
+
+    /// Number of watched functions.
+    pub fn len(&self) -> usize {
+        self.active.len()
+    }
+
+    /// Whether nothing is watched at all.
+    pub fn is_empty(&self) -> bool {
+        self.active.is_empty()
+    }
+
+    /// What watched function `w` is.
+    pub fn watch(&self, w: usize) -> Watch {
+        if w < self.nevents {
+            Watch::Event(w)
+        } else {
+            Watch::Switch(w - self.nevents)
+        }
+    }
+
+    /// Whether function `w` triggers on v > 0 (switches) rather than v ≥ 0 (events).
+    pub fn strict(&self, w: usize) -> bool {
+        w >= self.nevents
+    }
+
+    /// (Re)initialises function w at a restart with its signed value `v` at the new state:
+    /// events are armed iff v ≤ 0 (a guard that starts exactly on zero fires at once if the
+    /// flow carries it into the firing side), except the event that just `fired`, which is
+    /// disarmed until v < 0; switches are always armed.
+    pub fn restart_one(&mut self, w: usize, active: bool, v: f64, fired: bool) {
+        self.active[w] = active;
+        self.start_val[w] = v;
+        self.rising[w] = false;
+        self.armed[w] = if self.strict(w) {
+            true
+        } else {
+            !fired && v <= 0.0
+        };
+    }
+
+    /// Scans the accepted step [t0, t1] for crossings.
+    ///
+    /// `sample(t, is_end, active, vals)` must write the signed value v_w(t) of every active w into
+    /// `vals[w]` (using the dense output inside the step and the exact end state at t1).
+    /// `eval(w, t)` evaluates one function at an interior time (for root finding and dip
+    /// search). Crossings no later than `earliest + sim_tol` land in `self.found`, sorted by
+    /// index w (declaration order, events before switches). Returns `Err((w, t))` when a
+    /// watched value is NaN.
+    ///
+    /// When no crossing is found, the armed flags and start values are committed for the
+    /// next step; otherwise the caller restarts every function after handling the event.
+    pub fn scan<S, E>(
+        &mut self,
+        t0: f64,
+        t1: f64,
+        mut sample: S,
+        mut eval: E,
+        sim_tol: f64,
+    ) -> Result<(), (usize, f64)>
+    where
+        S: FnMut(f64, bool, &[bool], &mut [f64]),
+        E: FnMut(usize, f64) -> f64,
+    {
+        self.found.clear();
+        let nw = self.len();
+        if nw == 0 || !self.active.iter().any(|&a| a) {
+            return Ok(());
+        }
+        let h = t1 - t0;
+        let time = |i: usize| -> f64 {
+            if i == NSAMP - 1 {
+                t1
+            } else {
+                t0 + h * (i as f64) / ((NSAMP - 1) as f64)
+            }
+        };
+        // Samples: vals[i * nw + w].
+        self.vals[..nw].copy_from_slice(&self.start_val);
+        for i in 1..NSAMP {
+            let (_, rest) = self.vals.split_at_mut(i * nw);
+            sample(time(i), i == NSAMP - 1, &self.active, &mut rest[..nw]);
+        }
+        for w in 0..nw {
+            if !self.active[w] {
+                continue;
+            }
+            for i in 1..NSAMP {
+                if self.vals[i * nw + w].is_nan() {
+                    return Err((w, time(i)));
+                }
+            }
+        }
+        // Brackets per function.
+        let mut first_right = f64::INFINITY;
+        for w in 0..nw {
+            self.brackets[w] = None;
+            if !self.active[w] {
+                continue;
+            }
+            let strict = self.strict(w);
+            let v = |i: usize| self.vals[i * nw + w];
+            let mut armed = self.armed[w];
+            let mut armed_from = if armed { Some(0) } else { None };
+            let mut bracket = None;
+            for i in 1..NSAMP {
+                let vi = v(i);
+                if !armed {
+                    if vi < 0.0 {
+                        armed = true;
+                        armed_from = Some(i);
+                    }
+                } else if triggered(vi, strict) {
+                    bracket = Some((time(i - 1), v(i - 1), time(i), vi));
+                    break;
+                }
+            }
+            if bracket.is_none() {
+                if let Some(i0) = armed_from {
+                    bracket = self.dip(w, i0, t0, h, &mut eval);
+                }
+            }
+            if let Some(b) = bracket {
+                first_right = first_right.min(b.2);
+            }
+            self.brackets[w] = bracket;
+        }
+        if first_right.is_infinite() {
+            // Commit the step.
+            for w in 0..nw {
+                if !self.active[w] {
+                    continue;
+                }
+                let last = self.vals[(NSAMP - 1) * nw + w];
+                let before = self.vals[(NSAMP - 2) * nw + w];
+                if !self.armed[w] && (0..NSAMP).any(|i| self.vals[i * nw + w] < 0.0) {
+                    self.armed[w] = true;
+                }
+                self.start_val[w] = last;
+                self.rising[w] = last > before;
+            }
+            return Ok(());
+        }
+        // Roots for brackets that can compete with the earliest.
+        let mut earliest = f64::INFINITY;
+        for w in 0..nw {
+            if let Some((a, fa, b, fb)) = self.brackets[w] {
+                if a > first_right {
+                    continue;
+                }
+                let strict = self.strict(w);
+                // A bracket whose left end is already on zero (an armed guard that starts
+                // exactly on its surface and moves into the firing side) fires at that end.
+                let t = if triggered(fa, strict) {
+                    a
+                } else {
+                    locate_root(|t| eval(w, t), a, fa, b, fb, strict)
+                };
+                earliest = earliest.min(t);
+                self.found.push(Crossing { w, t });
+            }
+        }
+        let limit = earliest + sim_tol;
+        self.found.retain(|c| c.t <= limit);
+        Ok(())
+    }
+
+    /// Looks for a double crossing hidden between samples of function w (armed from sample
+    /// i0 on): an interior local maximum of v that is close to zero relative to v's variation
+    /// over the step, or a maximum just after t₀ when v was rising at the end of the last step.
+    fn dip<E: FnMut(usize, f64) -> f64>(
+        &self,
+        w: usize,
+        i0: usize,
+        t0: f64,
+        h: f64,
+        eval: &mut E,
+    ) -> Option<(f64, f64, f64, f64)> {
+        let nw = self.len();
+        let strict = self.strict(w);
+        let v = |i: usize| self.vals[i * nw + w];
+        let time = |i: usize| t0 + h * (i as f64) / ((NSAMP - 1) as f64);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for i in 0..NSAMP {
+            lo = lo.min(v(i));
+            hi = hi.max(v(i));
+        }
+        let spread = hi - lo;
+        let close = |vi: f64| -vi < 0.5 * spread;
+        // A maximum in (t₀, t₁) near sample i: search [s_{i−1}, s_{i+1}].
+        let mut candidates = [usize::MAX; NSAMP];
+        let mut nc = 0;
+        if i0 == 0 && self.rising[w] && v(0) >= v(1) && close(v(0)) {
+            candidates[nc] = 0;
+            nc += 1;
+        }
+        for i in (i0 + 1).max(1)..NSAMP - 1 {
+            if v(i) > v(i - 1) && v(i) >= v(i + 1) && close(v(i)) {
+                candidates[nc] = i;
+                nc += 1;
+            }
+        }
+        for &i in &candidates[..nc] {
+            let (a, b) = if i == 0 {
+                (time(0), time(1))
+            } else {
+                (time(i - 1), time(i + 1))
+            };
+            let (tm, vm) = maximize(|t| eval(w, t), a, b);
+            if triggered(vm, strict) {
+                let left = if i == 0 { 0 } else { i - 1 };
+                return Some((time(left), v(left), tm, vm));
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn root_of_a_parabola_to_machine_precision() {
+        // v(t) = t² − 2 on [1, 2]: root √2.
+        let mut n = 0;
+        let r = locate_root(
+            |t| {
+                n += 1;
+                t * t - 2.0
+            },
+            1.0,
+            -1.0,
+            2.0,
+            2.0,
+            false,
+        );
+        assert!((r - 2f64.sqrt()).abs() <= 4.0 * f64::EPSILON, "{r}");
+        assert!(r * r - 2.0 >= 0.0, "returned the triggered side");
+        assert!(n < 60, "{n} evaluations");
+    }
+
+    #[test]
+    fn root_of_a_flat_function() {
+        // v(t) = (t − 0.3)³: slow convergence for regula falsi without Illinois.
+        let r = locate_root(|t| (t - 0.3f64).powi(3), 0.0, -0.027, 1.0, 0.343, false);
+        assert_relative_eq!(r, 0.3, max_relative = 1e-5);
+        let r = locate_root(|t| (t - 0.3f64).powi(3), 0.0, -0.027, 1.0, 0.343, true);
+        assert!((r - 0.3).abs() < 1e-5);
+    }
+
+    #[test]
+    fn golden_section_finds_max() {
+        let (t, v) = maximize(|t| -(t - 0.4) * (t - 0.4) + 1e-3, 0.0, 1.0);
+        assert!((t - 0.4).abs() < 1e-6);
+        assert_relative_eq!(v, 1e-3, max_relative = 1e-6);
+    }
+
+    /// A dip that crosses zero and comes back between two samples is found; its first root
+    /// is located.
+    #[test]
+    fn scanner_finds_double_crossing_between_samples() {
+        // v(t) = 1e-4 − (t − 0.5)²·... narrow: crosses at 0.5 ± 0.01 on [0, 1].
+        let f = |t: f64| 1e-4 - (t - 0.5) * (t - 0.5);
+        let g = |t: f64| -1.0 + 0.0 * t;
+        let mut sc = Scanner::new(2, 0);
+        sc.restart_one(0, true, f(0.0), false);
+        sc.restart_one(1, true, g(0.0), false);
+        let vals = |t: f64, out: &mut [f64]| {
+            out[0] = f(t);
+            out[1] = g(t);
+        };
+        sc.scan(
+            0.0,
+            1.0,
+            |t, _, _, o| vals(t, o),
+            |w, t| if w == 0 { f(t) } else { g(t) },
+            0.0,
+        )
+        .unwrap();
+        assert_eq!(sc.found.len(), 1);
+        assert_relative_eq!(sc.found[0].t, 0.49, max_relative = 1e-12);
+    }
+
+    /// After firing, a function exactly at zero is disarmed; it re-arms once negative and the
+    /// next crossing fires.
+    #[test]
+    fn disarmed_until_it_leaves_zero() {
+        // v(t) = −t (t − 0.5) ... : 0 at t=0, negative on (0, 0.5)?? use v = t(t − 0.6):
+        // v(0) = 0, v < 0 on (0, 0.6), crosses up at 0.6.
+        let f = |t: f64| t * (t - 0.6);
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, f(0.0), true);
+        assert!(!sc.armed[0]);
+        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
+            .unwrap();
+        assert_eq!(sc.found.len(), 1);
+        assert_relative_eq!(sc.found[0].t, 0.6, max_relative = 1e-14);
+        // The same function without a crossing after the zero never fires: v = −t.
+        let g = |t: f64| -t;
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, 0.0, true);
+        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
+            .unwrap();
+        assert!(sc.found.is_empty());
+        assert!(sc.armed[0]);
+        // And one that stays at zero and then goes up never fires either: v = 0 then t − 0.5
+        // for t > 0.5 is positive: no negative excursion ⇒ stays disarmed.
+        let k = |t: f64| (t - 0.5).max(0.0);
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, 0.0, true);
+        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
+            .unwrap();
+        assert!(sc.found.is_empty());
+        assert!(!sc.armed[0]);
+    }
+
+    #[test]
+    fn simultaneous_crossings_are_grouped_and_ordered() {
+        let fs: [fn(f64) -> f64; 3] = [|t| t - 0.3, |t| t - 0.3 - 1e-15, |t| t - 0.7];
+        let mut sc = Scanner::new(3, 0);
+        for (w, fw) in fs.iter().enumerate() {
+            sc.restart_one(w, true, fw(0.0), false);
+        }
+        sc.scan(
+            0.0,
+            1.0,
+            |t, _, _, o| {
+                for (w, fw) in fs.iter().enumerate() {
+                    o[w] = fw(t);
+                }
+            },
+            |w, t| fs[w](t),
+            1e-12,
+        )
+        .unwrap();
+        let ws: Vec<usize> = sc.found.iter().map(|c| c.w).collect();
+        assert_eq!(ws, vec![0, 1]);
+    }
+}

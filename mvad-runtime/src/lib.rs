@@ -11,6 +11,7 @@ pub mod model;
 
 pub use model::{Direction, EventInfo, HybridModel, ModelAlloc, ModelInfo, Switches, MAX_SWITCHES};
 
+pub mod error;
 pub mod event;
 pub mod fd;
 pub mod integrate;

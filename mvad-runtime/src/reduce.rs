@@ -1,1 +1,254 @@
-//! (in progress)
+//! Reduction of a run to C(θ) and dC/dθ, and the limits used when events accumulate (Zeno).
+//!
+//! For C = ∫₀ᵀ ℓ dt + Σ_k φ_k(t_k, x(t_k⁺), θ) + Φ(T, x(T), θ) the total derivative is
+//!
+//! ```text
+//!   dC/dθ = Σ_seg ∫ (ℓ_x S + ℓ_θ) dt + Σ_k (ℓ(t_k⁻) − ℓ(t_k⁺)) t_k'
+//!         + Σ_k [φ_x (S⁺ + f⁺ t_k') + φ_t t_k' + φ_θ]
+//!         + Φ_x S(T) + Φ_θ + (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ .
+//! ```
+//!
+//! The integral part is the integrator's quadrature state q_θ; the event parts are added by
+//! the driver at each event; [`final_terms`] adds the terms at T.
+//!
+//! Zeno: when dwell times shrink geometrically, a quantity a_k sampled at the k-th event
+//! (event time, post-event state, its total derivative, accumulated cost and gradient)
+//! converges like a_k ≈ a_∞ + B ρᵏ. [`aitken`] estimates a_∞ from three consecutive values
+//! (Aitken's Δ²: a_∞ = a₂ − (a₂ − a₁)² / ((a₂ − a₁) − (a₁ − a₀))), the sum of the geometric
+//! tail. For the gradient terms the error is a_k ≈ a_∞ + (B + C k) ρᵏ; Aitken then leaves
+//! O(ρᵏ/k) of the tail, which is why the driver runs until the events graze before it stops.
+
+use crate::model::{HybridModel, ModelAlloc, Switches};
+use nalgebra::{DefaultAllocator, OMatrix, OVector};
+
+/// Aitken's Δ² limit of a sequence from its last three values a0, a1, a2.
+///
+/// Falls back to a2 when the differences do not look geometric (ratio outside (−0.999, 0.999),
+/// zero or non-finite denominators).
+pub fn aitken(a0: f64, a1: f64, a2: f64) -> f64 {
+    let d1 = a1 - a0;
+    let d2 = a2 - a1;
+    if d2 == 0.0 || d1 == 0.0 {
+        return a2;
+    }
+    let r = d2 / d1;
+    if !r.is_finite() || r.abs() >= 0.999 {
+        return a2;
+    }
+    // a2 + d2 (r + r² + …) = a2 + d2 r/(1 − r)
+    let lim = a2 + d2 * r / (1.0 - r);
+    if lim.is_finite() {
+        lim
+    } else {
+        a2
+    }
+}
+
+/// Gauss–Legendre nodes and weights on [−1, 1], 8 points (exact for degree 15).
+pub const GL8: [(f64, f64); 8] = [
+    (-0.960_289_856_497_536_2, 0.101_228_536_290_376_26),
+    (-0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
+    (-0.525_532_409_916_329, 0.313_706_645_877_887_3),
+    (-0.183_434_642_495_649_8, 0.362_683_783_378_362),
+    (0.183_434_642_495_649_8, 0.362_683_783_378_362),
+    (0.525_532_409_916_329, 0.313_706_645_877_887_3),
+    (0.796_666_477_413_626_7, 0.222_381_034_453_374_47),
+    (0.960_289_856_497_536_2, 0.101_228_536_290_376_26),
+];
+
+/// Adaptive Gauss–Legendre quadrature of a vector-valued integrand on [a, b]: `f(t, out)`
+/// writes the integrand into `out`; the integral is *added* to `acc`. An interval is accepted
+/// when the 8-point rule on it and the sum of the rules on its halves agree to `rtol`
+/// (relative to the larger entry, absolute floor `atol`), else it is split (depth ≤ 30).
+/// `tmp` needs 3·len scratch entries.
+pub fn integrate_adaptive<F: FnMut(f64, &mut [f64])>(
+    f: &mut F,
+    a: f64,
+    b: f64,
+    rtol: f64,
+    atol: f64,
+    acc: &mut [f64],
+    tmp: &mut [f64],
+) {
+    let len = acc.len();
+    let (whole, rest) = tmp.split_at_mut(len);
+    let (halves, val) = rest.split_at_mut(len);
+    gl8(f, a, b, whole, &mut val[..len]);
+    adapt(f, a, b, rtol, atol, acc, whole, halves, &mut val[..len], 0);
+}
+
+/// One 8-point rule on [a, b] into `out`; `val` is scratch of the same length.
+fn gl8<F: FnMut(f64, &mut [f64])>(f: &mut F, a: f64, b: f64, out: &mut [f64], val: &mut [f64]) {
+    out.fill(0.0);
+    let (c, r) = (0.5 * (a + b), 0.5 * (b - a));
+    for &(x, w) in &GL8 {
+        f(c + r * x, val);
+        for (o, v) in out.iter_mut().zip(val.iter()) {
+            *o += w * r * v;
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn adapt<F: FnMut(f64, &mut [f64])>(
+    f: &mut F,
+    a: f64,
+    b: f64,
+    rtol: f64,
+    atol: f64,
+    acc: &mut [f64],
+    whole: &[f64],
+    halves: &mut [f64],
+    val: &mut [f64],
+    depth: usize,
+) {
+    let len = acc.len();
+    let m = 0.5 * (a + b);
+    let mut left = vec![0.0; len];
+    let mut right = vec![0.0; len];
+    gl8(f, a, m, &mut left, val);
+    gl8(f, m, b, &mut right, val);
+    let mut ok = true;
+    for i in 0..len {
+        halves[i] = left[i] + right[i];
+        let scale = halves[i].abs().max(whole[i].abs());
+        if (halves[i] - whole[i]).abs() > rtol * scale + atol {
+            ok = false;
+        }
+    }
+    if ok || depth >= 30 || !(m > a && m < b) {
+        for i in 0..len {
+            acc[i] += halves[i];
+        }
+        return;
+    }
+    adapt(
+        f,
+        a,
+        m,
+        rtol,
+        0.5 * atol,
+        acc,
+        &left,
+        halves,
+        val,
+        depth + 1,
+    );
+    adapt(
+        f,
+        m,
+        b,
+        rtol,
+        0.5 * atol,
+        acc,
+        &right,
+        halves,
+        val,
+        depth + 1,
+    );
+}
+
+/// Scratch for [`final_terms`].
+pub struct FinalWork<M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Φ_x / ℓ_x scratch.
+    pub cx: OVector<f64, M::N>,
+    /// Φ_θ / ℓ_θ scratch.
+    pub cp: OVector<f64, M::P>,
+    /// f(T).
+    pub f: OVector<f64, M::N>,
+}
+
+impl<M: HybridModel> FinalWork<M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Buffers for `model`.
+    pub fn new(model: &M) -> Self {
+        let (n, p) = (model.nstates(), model.nparams());
+        FinalWork {
+            cx: OVector::zeros_generic(n, nalgebra::Const::<1>),
+            cp: OVector::zeros_generic(p, nalgebra::Const::<1>),
+            f: OVector::zeros_generic(n, nalgebra::Const::<1>),
+        }
+    }
+}
+
+/// The terms at T: returns Φ(T, x(T)) and, when `grad` is given, adds
+/// Φ_x S(T) + Φ_θ + (ℓ(T) + Φ_x ẋ(T) + Φ_t) dT/dθ to it. `xdot` is ẋ(T) (f(T), or zero for a
+/// state held at rest after a Zeno accumulation).
+#[allow(clippy::too_many_arguments)]
+pub fn final_terms<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    sw: Switches,
+    t: f64,
+    x: &OVector<f64, M::N>,
+    s: &OMatrix<f64, M::N, M::P>,
+    xdot: &OVector<f64, M::N>,
+    dt_end: &OVector<f64, M::P>,
+    work: &mut FinalWork<M>,
+    grad: Option<&mut OVector<f64, M::P>>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = model.info();
+    let phi = if info.has_final_cost {
+        model.final_cost(t, x, p)
+    } else {
+        0.0
+    };
+    if let Some(grad) = grad {
+        let mut rate = 0.0;
+        if info.has_final_cost {
+            let phi_t = model.final_cost_grad(t, x, p, &mut work.cx, &mut work.cp);
+            // Φ_x S + Φ_θ
+            grad.gemv_tr(1.0, s, &work.cx, 1.0);
+            *grad += &work.cp;
+            rate += work.cx.dot(xdot) + phi_t;
+        }
+        if info.has_running_cost {
+            rate += model.running_cost(sw, t, x, p);
+        }
+        if rate != 0.0 {
+            grad.axpy(rate, dt_end, 1.0);
+        }
+    }
+    phi
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn aitken_is_exact_on_geometric_sequences() {
+        let a = |k: i32| 3.0 + 2.0 * 0.6f64.powi(k);
+        assert_relative_eq!(aitken(a(4), a(5), a(6)), 3.0, max_relative = 1e-13);
+        // Constant and non-geometric fall back to the last value.
+        assert_eq!(aitken(1.0, 1.0, 1.0), 1.0);
+        assert_eq!(aitken(0.0, 1.0, 2.0), 2.0);
+        // Arithmetico-geometric: error O(ρᵏ/k) of the tail, far below the tail itself.
+        let b = |k: i32| 1.0 + (k as f64) * 0.5f64.powi(k);
+        let tail = b(20) - 1.0;
+        assert!((aitken(b(18), b(19), b(20)) - 1.0).abs() < 0.1 * tail);
+    }
+
+    #[test]
+    fn adaptive_quadrature_of_smooth_and_peaked_integrands() {
+        let mut tmp = vec![0.0; 6];
+        let mut acc = [0.0, 0.0];
+        let mut f = |t: f64, out: &mut [f64]| {
+            out[0] = t.sin();
+            out[1] = 1.0 / (1e-4 + (t - 0.3) * (t - 0.3));
+        };
+        integrate_adaptive(&mut f, 0.0, 1.0, 1e-13, 0.0, &mut acc, &mut tmp);
+        assert_relative_eq!(acc[0], 1.0 - 1f64.cos(), max_relative = 1e-13);
+        let exact = 100.0 * ((0.7f64 / 0.01).atan() + (0.3f64 / 0.01).atan());
+        assert_relative_eq!(acc[1], exact, max_relative = 1e-11);
+    }
+}

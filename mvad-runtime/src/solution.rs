@@ -30,7 +30,12 @@ impl Method {
         }
     }
     /// All methods, for option parsing and help texts.
-    pub const ALL: [Method; 4] = [Method::Auto, Method::Tsit5, Method::Verner9, Method::Rosenbrock];
+    pub const ALL: [Method; 4] = [
+        Method::Auto,
+        Method::Tsit5,
+        Method::Verner9,
+        Method::Rosenbrock,
+    ];
     /// Parses a command-line name.
     pub fn from_name(name: &str) -> Option<Method> {
         Self::ALL.into_iter().find(|m| m.name() == name)
@@ -173,4 +178,175 @@ pub struct Stats {
     pub factorizations: usize,
     /// Wall time of the run in seconds.
     pub wall_seconds: f64,
+}
+
+/// The result of [`crate::solve::solve`]: cost, dC/dθ, the event table (with the measure's
+/// atoms), diagnostics, work counters and, with `Options::record`, the trajectory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Solution {
+    /// The horizon T the cost refers to.
+    pub t_end: f64,
+    /// The parameter values of the run.
+    pub params: Vec<f64>,
+    /// C(θ) = ∫₀ᵀ ℓ dt + Σ_k φ_k + Φ(T, x(T)).
+    pub cost: f64,
+    /// dC/dθ, one entry per parameter (empty when `Options::sensitivities` is false).
+    pub gradient: Vec<f64>,
+    /// x(T) (after a Zeno accumulation: the limit state x*).
+    pub x_final: Vec<f64>,
+    /// ∂x(T)/∂θ, column-major n×p (empty without sensitivities).
+    pub s_final: Vec<f64>,
+    /// The mode at T.
+    pub mode_final: usize,
+    /// The user events that fired, in time order (switch crossings are not listed).
+    pub events: Vec<EventRecord>,
+    /// Warnings of a run that finished (grazing, zeno, simultaneous_events).
+    pub diagnostics: Vec<Diagnostic>,
+    /// Work counters.
+    pub stats: Stats,
+    /// Dense record of x and S when `Options::record` was set.
+    pub trajectory: Option<Trajectory>,
+}
+
+/// Nodes per recorded step: x and S are stored at `TRAJ_NODES` equispaced points of each
+/// accepted step and interpolated by the degree-4 polynomial through them (the same order
+/// as the methods' dense output).
+pub const TRAJ_NODES: usize = 5;
+
+/// A smooth piece of the run between two events (or switch crossings).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segment {
+    /// Start time (an event time or 0).
+    pub t_start: f64,
+    /// End time (the next event time or T).
+    pub t_end: f64,
+    /// The mode on the segment.
+    pub mode: usize,
+    /// The frozen switch bits on the segment.
+    pub switches: u64,
+    /// Range of step indices `first_step..end_step` covering the segment.
+    pub first_step: usize,
+    /// One past the last step index.
+    pub end_step: usize,
+}
+
+/// The recorded trajectory: x(t) and S(t) = ∂x/∂θ on every accepted step.
+///
+/// Each step [t₀, t₁] keeps x and S at [`TRAJ_NODES`] equispaced nodes, filled from the
+/// integrator's dense output; [`Trajectory::sample`] evaluates the interpolating polynomial.
+/// The record is right-continuous: at an event time t_k it returns the post-event state
+/// x(t_k⁺), S(t_k⁺) (the step that *starts* at t_k); at T the last step's end.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    /// Number of states n.
+    pub n: usize,
+    /// Number of parameters p in S (0 when run without sensitivities).
+    pub p: usize,
+    /// Start times of the steps.
+    pub t0: Vec<f64>,
+    /// End times of the steps.
+    pub t1: Vec<f64>,
+    /// Segments between events, in time order.
+    pub segments: Vec<Segment>,
+    /// Node data, per step `TRAJ_NODES × (n + n·p)` values: x then S (column-major) per node.
+    pub data: Vec<f64>,
+}
+
+impl Trajectory {
+    /// An empty record for n states and p parameters.
+    pub fn new(n: usize, p: usize) -> Self {
+        Trajectory {
+            n,
+            p,
+            t0: Vec::new(),
+            t1: Vec::new(),
+            segments: Vec::new(),
+            data: Vec::new(),
+        }
+    }
+
+    /// Values stored per node (x then S).
+    pub fn node_len(&self) -> usize {
+        self.n + self.n * self.p
+    }
+
+    /// Number of recorded steps.
+    pub fn len(&self) -> usize {
+        self.t0.len()
+    }
+
+    /// Whether no step was recorded.
+    pub fn is_empty(&self) -> bool {
+        self.t0.is_empty()
+    }
+
+    /// End times of the accepted steps (the integrator's grid).
+    pub fn step_times(&self) -> &[f64] {
+        &self.t1
+    }
+
+    /// The step that holds t (right-continuous: the last step with t₀ ≤ t), clamped to the
+    /// first/last step outside [0, T]. `None` when nothing was recorded.
+    pub fn step_at(&self, t: f64) -> Option<usize> {
+        if self.t0.is_empty() {
+            return None;
+        }
+        let i = self.t0.partition_point(|&s| s <= t);
+        Some(i.saturating_sub(1))
+    }
+
+    /// Lagrange weights of the equispaced nodes at θ = (t − t₀)/(t₁ − t₀).
+    pub fn weights(theta: f64) -> [f64; TRAJ_NODES] {
+        let m = (TRAJ_NODES - 1) as f64;
+        let mut w = [1.0; TRAJ_NODES];
+        for (i, wi) in w.iter_mut().enumerate() {
+            let ti = i as f64 / m;
+            for j in 0..TRAJ_NODES {
+                if j != i {
+                    let tj = j as f64 / m;
+                    *wi *= (theta - tj) / (ti - tj);
+                }
+            }
+        }
+        w
+    }
+
+    /// x(t) and S(t) into `x` (length n) and `s` (length n·p, column-major); see the type's
+    /// doc for which side of an event is returned. Returns false when nothing was recorded.
+    pub fn sample_into(&self, t: f64, x: &mut [f64], s: &mut [f64]) -> bool {
+        let Some(k) = self.step_at(t) else {
+            return false;
+        };
+        let (a, b) = (self.t0[k], self.t1[k]);
+        let theta = if b > a {
+            ((t - a) / (b - a)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let w = Self::weights(theta);
+        let len = self.node_len();
+        let base = k * TRAJ_NODES * len;
+        x.fill(0.0);
+        s.fill(0.0);
+        for (i, wi) in w.iter().enumerate() {
+            let node = &self.data[base + i * len..base + (i + 1) * len];
+            for (xv, nv) in x.iter_mut().zip(&node[..self.n]) {
+                *xv += wi * nv;
+            }
+            for (sv, nv) in s.iter_mut().zip(&node[self.n..]) {
+                *sv += wi * nv;
+            }
+        }
+        true
+    }
+
+    /// x(t) and S(t) (column-major n×p) as new vectors; empty when nothing was recorded.
+    pub fn sample(&self, t: f64) -> (Vec<f64>, Vec<f64>) {
+        let mut x = vec![0.0; self.n];
+        let mut s = vec![0.0; self.n * self.p];
+        if !self.sample_into(t, &mut x, &mut s) {
+            return (Vec::new(), Vec::new());
+        }
+        (x, s)
+    }
 }

@@ -1,1 +1,456 @@
-//! (in progress)
+//! Models loaded at run time: [`InterpretedModel`] evaluates the same scheduled kernels
+//! the `hybrid!` macro compiles, through `mvad_dsl::eval` tapes, with dynamic sizes.
+//!
+//! Each trait method runs one tape into a scratch register file kept in a `RefCell`, so
+//! no call allocates. Matrices are written entry by entry from the tape's non-zero
+//! outputs after one zero fill. [`HybridModel::rhs_sens`] is overridden with the fused
+//! kernel: f, the non-zero entries of f_x and f_θ in one pass, then
+//! Ṡ = f_θ + Σ_{(i,k) ∈ nz(f_x)} (f_x)_{ik} S_{k·}, the same sums in the same order as the
+//! generated code.
+
+use std::cell::RefCell;
+
+use mvad_dsl::diag::Diagnostic;
+use mvad_dsl::eval::Tape;
+use mvad_dsl::ir::{self, Point};
+use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
+use mvad_runtime::{EventInfo, HybridModel, ModelInfo, Switches};
+use nalgebra::{DMatrix, DVector, Dyn};
+
+/// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
+#[derive(Clone, Debug)]
+struct GradTapes {
+    value: Tape,
+    grad: Tape,
+}
+
+#[derive(Clone, Debug)]
+struct ModeTapes {
+    rhs: Tape,
+    jac_x: Tape,
+    jac_p: Tape,
+    dt: Tape,
+    sens: Tape,
+    sparsity: Vec<(usize, usize)>,
+    depends_on_t: bool,
+}
+
+#[derive(Clone, Debug)]
+struct EventTapes {
+    guard: GradTapes,
+    reset: Tape,
+    reset_jac: Tape,
+    cost: Option<GradTapes>,
+}
+
+#[derive(Clone, Debug)]
+struct Scratch {
+    regs: Vec<f64>,
+    out: Vec<f64>,
+}
+
+/// A model loaded from `.hyb` text, evaluated by tapes (`N = P = Dyn`).
+#[derive(Clone, Debug)]
+pub struct InterpretedModel {
+    info: ModelInfo,
+    n: usize,
+    p: usize,
+    x0: Tape,
+    x0_jac: Tape,
+    horizon: Option<(Tape, Tape)>,
+    modes: Vec<ModeTapes>,
+    events: Vec<EventTapes>,
+    switches: Vec<GradTapes>,
+    observe: Tape,
+    observe_jac: Tape,
+    running_cost: Option<GradTapes>,
+    final_cost: Option<GradTapes>,
+    scratch: RefCell<Scratch>,
+}
+
+type X = DVector<f64>;
+type M = DMatrix<f64>;
+
+impl InterpretedModel {
+    /// Builds the tapes of every kernel.
+    pub fn new(k: ModelKernels) -> Self {
+        let ar = &k.arena;
+        let tape = |kernel: &Kernel| Tape::new(ar, kernel);
+        let grad = |g: &GradKernels| GradTapes { value: tape(&g.value), grad: tape(&g.grad) };
+        let info = ModelInfo {
+            name: k.name.clone(),
+            states: k.states.clone(),
+            params: k.params.clone(),
+            param_defaults: k.param_defaults.clone(),
+            modes: k.mode_names.clone(),
+            initial_mode: k.initial_mode,
+            events: k
+                .event_meta
+                .iter()
+                .map(|e| EventInfo {
+                    name: e.name.clone(),
+                    direction: match e.direction {
+                        ir::Direction::Down => mvad_runtime::Direction::Down,
+                        ir::Direction::Up => mvad_runtime::Direction::Up,
+                    },
+                    mode: e.mode,
+                    target: e.target,
+                    has_reset: e.has_reset,
+                    has_cost: e.has_cost,
+                })
+                .collect(),
+            observables: k.observables.clone(),
+            switches: k.switches.len(),
+            has_running_cost: k.running_cost.is_some(),
+            has_final_cost: k.final_cost.is_some(),
+            has_horizon: k.horizon.is_some(),
+            jacobian_sparsity: k.modes.iter().map(|m| m.sparsity.clone()).collect(),
+        };
+        let all = k.all_kernels();
+        let nregs = all.iter().map(|k| k.nodes.len()).max().unwrap_or(0);
+        let nout = all.iter().map(|k| k.len).max().unwrap_or(0);
+        InterpretedModel {
+            n: k.nstates(),
+            p: k.nparams(),
+            x0: tape(&k.x0),
+            x0_jac: tape(&k.x0_jac),
+            horizon: k.horizon.as_ref().map(|(h, g)| (tape(h), tape(g))),
+            modes: k
+                .modes
+                .iter()
+                .map(|m| ModeTapes {
+                    rhs: tape(&m.rhs),
+                    jac_x: tape(&m.jac_x),
+                    jac_p: tape(&m.jac_p),
+                    dt: tape(&m.dt),
+                    sens: tape(&m.sens),
+                    sparsity: m.sparsity.clone(),
+                    depends_on_t: m.depends_on_t,
+                })
+                .collect(),
+            events: k
+                .events
+                .iter()
+                .map(|e| EventTapes {
+                    guard: grad(&e.guard),
+                    reset: tape(&e.reset),
+                    reset_jac: tape(&e.reset_jac),
+                    cost: e.cost.as_ref().map(grad),
+                })
+                .collect(),
+            switches: k.switches.iter().map(grad).collect(),
+            observe: tape(&k.observe),
+            observe_jac: tape(&k.observe_jac),
+            running_cost: k.running_cost.as_ref().map(grad),
+            final_cost: k.final_cost.as_ref().map(grad),
+            scratch: RefCell::new(Scratch { regs: vec![0.0; nregs], out: vec![0.0; nout] }),
+            info,
+        }
+    }
+
+    /// Parses, checks, lowers and schedules `.hyb` text, then builds the tapes.
+    pub fn from_source(src: &str) -> Result<Self, Vec<Diagnostic>> {
+        mvad_dsl::compile(src).map(Self::new)
+    }
+
+    /// The declared parameter values as a vector θ.
+    pub fn default_params(&self) -> X {
+        X::from_column_slice(&self.info.param_defaults)
+    }
+
+    /// Runs `tape` and hands the registers and the dense output buffer to `f`.
+    fn with<R>(&self, tape: &Tape, at: &Point<'_>, f: impl FnOnce(bool, &[f64], &mut [f64]) -> R) -> R {
+        let mut sc = self.scratch.borrow_mut();
+        let Scratch { regs, out } = &mut *sc;
+        let ok = tape.run(at, regs);
+        f(ok, regs, out)
+    }
+
+    /// Writes a vector kernel into `v` (dense, zeros included).
+    fn vec_out(&self, tape: &Tape, at: &Point<'_>, v: &mut X) {
+        let mut sc = self.scratch.borrow_mut();
+        tape.eval(at, &mut sc.regs, v.as_mut_slice());
+    }
+
+    /// Writes a row-major matrix block of a kernel (slots `off..off + rows·cols`) into `m`.
+    fn mat_out(tape: &Tape, ok: bool, regs: &[f64], m: &mut M, cols: usize, off: usize) {
+        if !ok {
+            m.fill(f64::NAN);
+            return;
+        }
+        m.fill(0.0);
+        let size = m.nrows() * cols;
+        for (s, r) in tape.outputs() {
+            if s >= off && s < off + size {
+                let (i, j) = ((s - off) / cols, (s - off) % cols);
+                if let Some(e) = m.get_mut((i, j)) {
+                    *e = regs[r];
+                }
+            }
+        }
+    }
+
+    fn mat(&self, tape: &Tape, at: &Point<'_>, m: &mut M, cols: usize) {
+        self.with(tape, at, |ok, regs, _| Self::mat_out(tape, ok, regs, m, cols, 0));
+    }
+
+    fn scalar(&self, tape: &Tape, at: &Point<'_>) -> f64 {
+        let mut sc = self.scratch.borrow_mut();
+        tape.eval_scalar(at, &mut sc.regs)
+    }
+
+    /// Gradient kernel into `gx`, `gp`; returns the last slot.
+    fn grad(&self, g: &GradTapes, at: &Point<'_>, gx: &mut X, gp: &mut X) -> f64 {
+        let (n, p) = (self.n, self.p);
+        let mut sc = self.scratch.borrow_mut();
+        let Scratch { regs, out } = &mut *sc;
+        g.grad.eval(at, regs, out);
+        copy_into(gx.as_mut_slice(), &out[..n]);
+        copy_into(gp.as_mut_slice(), &out[n..n + p]);
+        out[n + p]
+    }
+
+    fn mode(&self, mode: usize) -> Option<&ModeTapes> {
+        self.modes.get(mode)
+    }
+}
+
+fn copy_into(dst: &mut [f64], src: &[f64]) {
+    let k = dst.len().min(src.len());
+    dst[..k].copy_from_slice(&src[..k]);
+}
+
+fn pt<'a>(t: f64, x: &'a X, p: &'a X, sw: Switches) -> Point<'a> {
+    Point { t, x: x.as_slice(), p: p.as_slice(), sw }
+}
+
+impl HybridModel for InterpretedModel {
+    type N = Dyn;
+    type P = Dyn;
+
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+    fn nstates(&self) -> Dyn {
+        Dyn(self.n)
+    }
+    fn nparams(&self) -> Dyn {
+        Dyn(self.p)
+    }
+
+    fn initial_state(&self, p: &X, x0: &mut X) {
+        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        self.vec_out(&self.x0, &at, x0);
+    }
+    fn initial_state_jac(&self, p: &X, dx0: &mut M) {
+        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        self.mat(&self.x0_jac, &at, dx0, self.p);
+    }
+    fn horizon(&self, p: &X) -> Option<f64> {
+        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        self.horizon.as_ref().map(|(h, _)| self.scalar(h, &at))
+    }
+    fn horizon_grad(&self, p: &X, dt: &mut X) {
+        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        match &self.horizon {
+            Some((_, g)) => self.vec_out(g, &at, dt),
+            None => dt.fill(0.0),
+        }
+    }
+
+    fn rhs(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, f: &mut X) {
+        match self.mode(mode) {
+            Some(m) => self.vec_out(&m.rhs, &pt(t, x, p, sw), f),
+            None => f.fill(f64::NAN),
+        }
+    }
+    fn rhs_jac_x(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, fx: &mut M) {
+        match self.mode(mode) {
+            Some(m) => self.mat(&m.jac_x, &pt(t, x, p, sw), fx, self.n),
+            None => fx.fill(f64::NAN),
+        }
+    }
+    fn rhs_jac_p(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, fp: &mut M) {
+        match self.mode(mode) {
+            Some(m) => self.mat(&m.jac_p, &pt(t, x, p, sw), fp, self.p),
+            None => fp.fill(f64::NAN),
+        }
+    }
+    fn rhs_dt(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, ft: &mut X) {
+        match self.mode(mode) {
+            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &pt(t, x, p, sw), ft),
+            Some(_) => ft.fill(0.0),
+            None => ft.fill(f64::NAN),
+        }
+    }
+    fn rhs_depends_on_t(&self, mode: usize) -> bool {
+        self.mode(mode).is_some_and(|m| m.depends_on_t)
+    }
+
+    fn rhs_sens(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, s: &M, f: &mut X, ds: &mut M) {
+        let Some(m) = self.mode(mode) else {
+            f.fill(f64::NAN);
+            ds.fill(f64::NAN);
+            return;
+        };
+        let (n, np) = (self.n, self.p);
+        let nnz = m.sparsity.len();
+        if s.nrows() != n || s.ncols() != np || ds.nrows() != n || ds.ncols() != np {
+            f.fill(f64::NAN);
+            ds.fill(f64::NAN);
+            return;
+        }
+        let mut sc = self.scratch.borrow_mut();
+        let Scratch { regs, out } = &mut *sc;
+        m.sens.eval(&pt(t, x, p, sw), regs, out);
+        copy_into(f.as_mut_slice(), &out[..n]);
+        let fp = &out[n + nnz..n + nnz + n * np];
+        for r in 0..n {
+            for c in 0..np {
+                ds[(r, c)] = fp[r * np + c];
+            }
+        }
+        for (e, &(r, k)) in m.sparsity.iter().enumerate() {
+            let a = out[n + e];
+            for c in 0..np {
+                ds[(r, c)] += a * s[(k, c)];
+            }
+        }
+    }
+
+    fn guard(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
+        match self.events.get(event) {
+            Some(e) => self.scalar(&e.guard.value, &pt(t, x, p, 0)),
+            None => f64::NAN,
+        }
+    }
+    fn guard_grad(&self, event: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
+        match self.events.get(event) {
+            Some(e) => self.grad(&e.guard, &pt(t, x, p, 0), gx, gp),
+            None => {
+                gx.fill(f64::NAN);
+                gp.fill(f64::NAN);
+                f64::NAN
+            }
+        }
+    }
+    fn reset(&self, event: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
+        match self.events.get(event) {
+            Some(e) => self.vec_out(&e.reset, &pt(t, x, p, 0), xplus),
+            None => xplus.fill(f64::NAN),
+        }
+    }
+    fn reset_jac(&self, event: usize, t: f64, x: &X, p: &X, rx: &mut M, rp: &mut M, rt: &mut X) {
+        let Some(e) = self.events.get(event) else {
+            rx.fill(f64::NAN);
+            rp.fill(f64::NAN);
+            rt.fill(f64::NAN);
+            return;
+        };
+        let (n, np) = (self.n, self.p);
+        let tape = &e.reset_jac;
+        self.with(tape, &pt(t, x, p, 0), |ok, regs, out| {
+            Self::mat_out(tape, ok, regs, rx, n, 0);
+            Self::mat_out(tape, ok, regs, rp, np, n * n);
+            out[..n].fill(if ok { 0.0 } else { f64::NAN });
+            if ok {
+                for (s, r) in tape.outputs() {
+                    if s >= n * n + n * np {
+                        out[s - n * n - n * np] = regs[r];
+                    }
+                }
+            }
+            copy_into(rt.as_mut_slice(), &out[..n]);
+        });
+    }
+
+    fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
+        match self.switches.get(j) {
+            Some(s) => self.scalar(&s.value, &pt(t, x, p, 0)),
+            None => f64::NAN,
+        }
+    }
+    fn switch_grad(&self, j: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
+        match self.switches.get(j) {
+            Some(s) => self.grad(s, &pt(t, x, p, 0), gx, gp),
+            None => {
+                gx.fill(f64::NAN);
+                gp.fill(f64::NAN);
+                f64::NAN
+            }
+        }
+    }
+
+    fn observe(&self, t: f64, x: &X, p: &X, y: &mut [f64]) {
+        let mut sc = self.scratch.borrow_mut();
+        self.observe.eval(&pt(t, x, p, 0), &mut sc.regs, y);
+    }
+    fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
+        let nobs = self.info.observables.len();
+        let (n, np) = (self.n, self.p);
+        let tape = &self.observe_jac;
+        self.with(tape, &pt(t, x, p, 0), |ok, regs, _| {
+            let fill = if ok { 0.0 } else { f64::NAN };
+            yx.iter_mut().take(nobs * n).for_each(|v| *v = fill);
+            yp.iter_mut().take(nobs * np).for_each(|v| *v = fill);
+            if !ok {
+                return;
+            }
+            for (s, r) in tape.outputs() {
+                let slot = if s < nobs * n { yx.get_mut(s) } else { yp.get_mut(s - nobs * n) };
+                if let Some(v) = slot {
+                    *v = regs[r];
+                }
+            }
+        });
+    }
+
+    fn running_cost(&self, sw: Switches, t: f64, x: &X, p: &X) -> f64 {
+        match &self.running_cost {
+            Some(c) => self.scalar(&c.value, &pt(t, x, p, sw)),
+            None => 0.0,
+        }
+    }
+    fn running_cost_grad(&self, sw: Switches, t: f64, x: &X, p: &X, lx: &mut X, lp: &mut X) -> f64 {
+        match &self.running_cost {
+            Some(c) => self.grad(c, &pt(t, x, p, sw), lx, lp),
+            None => {
+                lx.fill(0.0);
+                lp.fill(0.0);
+                0.0
+            }
+        }
+    }
+    fn event_cost(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
+        match self.events.get(event).and_then(|e| e.cost.as_ref()) {
+            Some(c) => self.scalar(&c.value, &pt(t, x, p, 0)),
+            None => 0.0,
+        }
+    }
+    fn event_cost_grad(&self, event: usize, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
+        match self.events.get(event).and_then(|e| e.cost.as_ref()) {
+            Some(c) => self.grad(c, &pt(t, x, p, 0), cx, cp),
+            None => {
+                cx.fill(0.0);
+                cp.fill(0.0);
+                0.0
+            }
+        }
+    }
+    fn final_cost(&self, t: f64, x: &X, p: &X) -> f64 {
+        match &self.final_cost {
+            Some(c) => self.scalar(&c.value, &pt(t, x, p, 0)),
+            None => 0.0,
+        }
+    }
+    fn final_cost_grad(&self, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
+        match &self.final_cost {
+            Some(c) => self.grad(c, &pt(t, x, p, 0), cx, cp),
+            None => {
+                cx.fill(0.0);
+                cp.fill(0.0);
+                0.0
+            }
+        }
+    }
+}

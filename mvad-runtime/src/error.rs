@@ -1,0 +1,156 @@
+//! Why a run failed: [`SolveError`], with the data in its variants.
+//!
+//! A run that *finishes* may still carry warnings (grazing, Zeno, simultaneous events) in
+//! `Solution::diagnostics`; a `SolveError` means there is no trustworthy cost or gradient.
+//! [`SolveError::diagnostic`] turns the numerical failures into the spec's diagnostic kinds
+//! (`max_events`, `step_size_underflow`, `nonfinite`) for callers that print both alike.
+
+use crate::integrate::StepError;
+use crate::solution::{Diagnostic, DiagnosticKind};
+use std::fmt;
+
+/// A run that could not produce a cost and a gradient.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SolveError {
+    /// The model declares no horizon and `Options::t_end` is not set.
+    NoHorizon,
+    /// The horizon is not a finite positive number.
+    BadHorizon {
+        /// The offending value of T.
+        t_end: f64,
+    },
+    /// The parameter vector has the wrong length.
+    ParamCount {
+        /// Number of parameters the model declares.
+        expected: usize,
+        /// Number given.
+        got: usize,
+    },
+    /// A parameter value is NaN or infinite.
+    BadParam {
+        /// Index of the parameter.
+        index: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// An option is out of range (non-positive tolerance, ...).
+    BadOption {
+        /// Which option and why.
+        what: String,
+    },
+    /// A NaN or infinity appeared; the run stopped.
+    NonFinite {
+        /// Time at which it appeared.
+        t: f64,
+        /// The expression it came from (`flow`, `guard of event `impact``, `reset of ...`, `cost`).
+        what: String,
+    },
+    /// The step size fell below the resolution of t.
+    StepSizeUnderflow {
+        /// Time at which the integrator got stuck.
+        t: f64,
+        /// The step size it would need.
+        h: f64,
+    },
+    /// More than `Options::max_events` events fired.
+    MaxEvents {
+        /// Time of the last event.
+        t: f64,
+        /// The limit that was hit.
+        count: usize,
+    },
+    /// The model's structure is unusable (more switching functions than bits, an event
+    /// target that is not a mode, ...).
+    BadModel {
+        /// What is wrong.
+        what: String,
+    },
+    /// A measure was asked of a solution that was run without `Options::record`.
+    NotRecorded,
+    /// An observable index is out of range.
+    NoSuchObservable {
+        /// The index asked for.
+        index: usize,
+        /// How many observables the model has.
+        count: usize,
+    },
+    /// A parameter index is out of range (finite differences).
+    NoSuchParam {
+        /// The index asked for.
+        index: usize,
+        /// How many parameters the model has.
+        count: usize,
+    },
+}
+
+impl SolveError {
+    /// The spec's diagnostic for the numerical failures (`nonfinite`, `step_size_underflow`,
+    /// `max_events`); `None` for bad input.
+    pub fn diagnostic(&self) -> Option<Diagnostic> {
+        let (kind, t) = match self {
+            SolveError::NonFinite { t, .. } => (DiagnosticKind::Nonfinite, *t),
+            SolveError::StepSizeUnderflow { t, .. } => (DiagnosticKind::StepSizeUnderflow, *t),
+            SolveError::MaxEvents { t, .. } => (DiagnosticKind::MaxEvents, *t),
+            _ => return None,
+        };
+        Some(Diagnostic {
+            kind,
+            t,
+            message: self.to_string(),
+        })
+    }
+}
+
+impl fmt::Display for SolveError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SolveError::NoHorizon => {
+                write!(f, "the model declares no horizon; give one with --t-end")
+            }
+            SolveError::BadHorizon { t_end } => {
+                write!(f, "the horizon must be finite and positive, got {t_end}")
+            }
+            SolveError::ParamCount { expected, got } => {
+                write!(f, "expected {expected} parameter values, got {got}")
+            }
+            SolveError::BadParam { index, value } => {
+                write!(f, "parameter {index} is not finite ({value})")
+            }
+            SolveError::BadOption { what } => write!(f, "bad option: {what}"),
+            SolveError::NonFinite { t, what } => write!(f, "non-finite value in {what} at t = {t}"),
+            SolveError::StepSizeUnderflow { t, h } => {
+                write!(f, "step size underflow at t = {t} (step {h:e})")
+            }
+            SolveError::MaxEvents { t, count } => {
+                write!(f, "stopped after {count} events at t = {t} (max_events)")
+            }
+            SolveError::BadModel { what } => write!(f, "unusable model: {what}"),
+            SolveError::NotRecorded => {
+                write!(
+                    f,
+                    "the solution has no trajectory (run with Options::record)"
+                )
+            }
+            SolveError::NoSuchObservable { index, count } => {
+                write!(f, "observable {index} out of range (the model has {count})")
+            }
+            SolveError::NoSuchParam { index, count } => {
+                write!(f, "parameter {index} out of range (the model has {count})")
+            }
+        }
+    }
+}
+
+impl std::error::Error for SolveError {}
+
+impl From<StepError> for SolveError {
+    fn from(e: StepError) -> Self {
+        match e {
+            StepError::StepSizeUnderflow { t, h } => SolveError::StepSizeUnderflow { t, h },
+            StepError::NonFinite { t, what } => SolveError::NonFinite {
+                t,
+                what: format!("flow ({what})"),
+            },
+        }
+    }
+}

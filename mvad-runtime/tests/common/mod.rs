@@ -1,0 +1,475 @@
+//! Test support: a forward-mode dual number and a model adapter that derives every Jacobian
+//! of the [`HybridModel`] trait from one generic description (`Spec`) by dual numbers, so
+//! test models are written once, as plain formulas. Dual numbers are exact derivatives
+//! (no truncation error); they also differentiate the hand-derived closed forms.
+#![allow(dead_code)]
+
+use mvad_runtime::model::{HybridModel, ModelInfo, Switches};
+use nalgebra::{DVector, Dyn, OMatrix, OVector};
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// Number of dual directions.
+pub const K: usize = 16;
+
+/// A dual number v + Σ g_i ε_i.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct D {
+    pub v: f64,
+    pub g: [f64; K],
+}
+
+impl D {
+    pub fn c(v: f64) -> D {
+        D { v, g: [0.0; K] }
+    }
+    pub fn var(v: f64, i: usize) -> D {
+        let mut d = D::c(v);
+        d.g[i] = 1.0;
+        d
+    }
+    fn chain(self, v: f64, dv: f64) -> D {
+        let mut g = self.g;
+        for x in g.iter_mut() {
+            *x *= dv;
+        }
+        D { v, g }
+    }
+}
+
+/// Scalars a model formula may be evaluated with.
+pub trait Sc:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + Add<f64, Output = Self>
+    + Sub<f64, Output = Self>
+    + Mul<f64, Output = Self>
+    + Div<f64, Output = Self>
+{
+    fn cst(v: f64) -> Self;
+    fn val(self) -> f64;
+    fn sqrt(self) -> Self;
+    fn exp(self) -> Self;
+    fn ln(self) -> Self;
+    fn sin(self) -> Self;
+    fn cos(self) -> Self;
+    fn powi(self, n: i32) -> Self;
+    fn tanh(self) -> Self;
+}
+
+impl Sc for f64 {
+    fn cst(v: f64) -> Self {
+        v
+    }
+    fn val(self) -> f64 {
+        self
+    }
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    fn exp(self) -> Self {
+        f64::exp(self)
+    }
+    fn ln(self) -> Self {
+        f64::ln(self)
+    }
+    fn sin(self) -> Self {
+        f64::sin(self)
+    }
+    fn cos(self) -> Self {
+        f64::cos(self)
+    }
+    fn powi(self, n: i32) -> Self {
+        f64::powi(self, n)
+    }
+    fn tanh(self) -> Self {
+        f64::tanh(self)
+    }
+}
+
+impl Sc for D {
+    fn cst(v: f64) -> Self {
+        D::c(v)
+    }
+    fn val(self) -> f64 {
+        self.v
+    }
+    fn sqrt(self) -> Self {
+        let s = self.v.sqrt();
+        self.chain(s, 0.5 / s)
+    }
+    fn exp(self) -> Self {
+        let e = self.v.exp();
+        self.chain(e, e)
+    }
+    fn ln(self) -> Self {
+        self.chain(self.v.ln(), 1.0 / self.v)
+    }
+    fn sin(self) -> Self {
+        self.chain(self.v.sin(), self.v.cos())
+    }
+    fn cos(self) -> Self {
+        self.chain(self.v.cos(), -self.v.sin())
+    }
+    fn powi(self, n: i32) -> Self {
+        self.chain(self.v.powi(n), n as f64 * self.v.powi(n - 1))
+    }
+    fn tanh(self) -> Self {
+        let t = self.v.tanh();
+        self.chain(t, 1.0 - t * t)
+    }
+}
+
+impl Add for D {
+    type Output = D;
+    fn add(self, o: D) -> D {
+        let mut g = self.g;
+        for (a, b) in g.iter_mut().zip(o.g) {
+            *a += b;
+        }
+        D { v: self.v + o.v, g }
+    }
+}
+impl Sub for D {
+    type Output = D;
+    fn sub(self, o: D) -> D {
+        self + (-o)
+    }
+}
+impl Neg for D {
+    type Output = D;
+    fn neg(self) -> D {
+        self.chain(-self.v, -1.0)
+    }
+}
+impl Mul for D {
+    type Output = D;
+    fn mul(self, o: D) -> D {
+        let mut g = [0.0; K];
+        for (i, gi) in g.iter_mut().enumerate() {
+            *gi = self.g[i] * o.v + self.v * o.g[i];
+        }
+        D { v: self.v * o.v, g }
+    }
+}
+impl Div for D {
+    type Output = D;
+    fn div(self, o: D) -> D {
+        let mut g = [0.0; K];
+        for (i, gi) in g.iter_mut().enumerate() {
+            *gi = (self.g[i] * o.v - self.v * o.g[i]) / (o.v * o.v);
+        }
+        D { v: self.v / o.v, g }
+    }
+}
+impl Add<f64> for D {
+    type Output = D;
+    fn add(self, o: f64) -> D {
+        D {
+            v: self.v + o,
+            g: self.g,
+        }
+    }
+}
+impl Sub<f64> for D {
+    type Output = D;
+    fn sub(self, o: f64) -> D {
+        D {
+            v: self.v - o,
+            g: self.g,
+        }
+    }
+}
+impl Mul<f64> for D {
+    type Output = D;
+    fn mul(self, o: f64) -> D {
+        self.chain(self.v * o, o)
+    }
+}
+impl Div<f64> for D {
+    type Output = D;
+    fn div(self, o: f64) -> D {
+        self.chain(self.v / o, 1.0 / o)
+    }
+}
+
+/// A hybrid model as plain generic formulas. Defaults: no switches, identity reset, no costs.
+pub trait Spec {
+    fn info(&self) -> ModelInfo;
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]);
+    fn horizon<S: Sc>(&self, p: &[S]) -> Option<S>;
+    fn rhs<S: Sc>(&self, mode: usize, sw: Switches, t: S, x: &[S], p: &[S], f: &mut [S]);
+    fn guard<S: Sc>(&self, _k: usize, _t: S, _x: &[S], _p: &[S]) -> S {
+        S::cst(1.0)
+    }
+    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
+        xp.copy_from_slice(x);
+    }
+    fn switch<S: Sc>(&self, _j: usize, _t: S, _x: &[S], _p: &[S]) -> S {
+        S::cst(0.0)
+    }
+    fn observe<S: Sc>(&self, _t: S, _x: &[S], _p: &[S], _y: &mut [S]) {}
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, _x: &[S], _p: &[S]) -> S {
+        S::cst(0.0)
+    }
+    fn event_cost<S: Sc>(&self, _k: usize, _t: S, _x: &[S], _p: &[S]) -> S {
+        S::cst(0.0)
+    }
+    fn final_cost<S: Sc>(&self, _t: S, _x: &[S], _p: &[S]) -> S {
+        S::cst(0.0)
+    }
+}
+
+/// [`HybridModel`] (Dyn sizes) of a [`Spec`], every derivative by dual numbers.
+pub struct AdModel<T: Spec> {
+    pub spec: T,
+    pub info: ModelInfo,
+}
+
+impl<T: Spec> AdModel<T> {
+    pub fn new(spec: T) -> Self {
+        let info = spec.info();
+        assert!(1 + info.states.len() + info.params.len() <= K);
+        AdModel { spec, info }
+    }
+    pub fn defaults(&self) -> DVector<f64> {
+        DVector::from_column_slice(&self.info.param_defaults)
+    }
+    fn n(&self) -> usize {
+        self.info.states.len()
+    }
+    fn np(&self) -> usize {
+        self.info.params.len()
+    }
+    /// Seeds t (direction 0), x (1..=n), p (n+1..).
+    fn seed(&self, t: f64, x: &[f64], p: &[f64]) -> (D, Vec<D>, Vec<D>) {
+        let n = x.len();
+        let td = D::var(t, 0);
+        let xd = x
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| D::var(v, 1 + i))
+            .collect();
+        let pd = p
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| D::var(v, 1 + n + i))
+            .collect();
+        (td, xd, pd)
+    }
+    fn split(&self, d: &D, gx: &mut [f64], gp: &mut [f64]) -> f64 {
+        let n = self.n();
+        gx.copy_from_slice(&d.g[1..1 + n]);
+        gp.copy_from_slice(&d.g[1 + n..1 + n + self.np()]);
+        d.g[0]
+    }
+}
+
+type V = OVector<f64, Dyn>;
+type Mx = OMatrix<f64, Dyn, Dyn>;
+
+impl<T: Spec> HybridModel for AdModel<T> {
+    type N = Dyn;
+    type P = Dyn;
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+    fn nstates(&self) -> Dyn {
+        Dyn(self.n())
+    }
+    fn nparams(&self) -> Dyn {
+        Dyn(self.np())
+    }
+    fn initial_state(&self, p: &V, x0: &mut V) {
+        self.spec.x0(p.as_slice(), x0.as_mut_slice());
+    }
+    fn initial_state_jac(&self, p: &V, dx0: &mut Mx) {
+        let pd: Vec<D> = p.iter().enumerate().map(|(i, &v)| D::var(v, i)).collect();
+        let mut x = vec![D::c(0.0); self.n()];
+        self.spec.x0(&pd, &mut x);
+        for r in 0..self.n() {
+            for c in 0..self.np() {
+                dx0[(r, c)] = x[r].g[c];
+            }
+        }
+    }
+    fn horizon(&self, p: &V) -> Option<f64> {
+        self.spec.horizon(p.as_slice())
+    }
+    fn horizon_grad(&self, p: &V, dt: &mut V) {
+        let pd: Vec<D> = p.iter().enumerate().map(|(i, &v)| D::var(v, i)).collect();
+        dt.fill(0.0);
+        if let Some(h) = self.spec.horizon(&pd) {
+            for c in 0..self.np() {
+                dt[c] = h.g[c];
+            }
+        }
+    }
+    fn rhs(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, f: &mut V) {
+        self.spec
+            .rhs(m, sw, t, x.as_slice(), p.as_slice(), f.as_mut_slice());
+    }
+    fn rhs_jac_x(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fx: &mut Mx) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let mut f = vec![D::c(0.0); self.n()];
+        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        for r in 0..self.n() {
+            for c in 0..self.n() {
+                fx[(r, c)] = f[r].g[1 + c];
+            }
+        }
+    }
+    fn rhs_jac_p(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fp: &mut Mx) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let mut f = vec![D::c(0.0); self.n()];
+        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        for r in 0..self.n() {
+            for c in 0..self.np() {
+                fp[(r, c)] = f[r].g[1 + self.n() + c];
+            }
+        }
+    }
+    fn rhs_dt(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, ft: &mut V) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let mut f = vec![D::c(0.0); self.n()];
+        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        for r in 0..self.n() {
+            ft[r] = f[r].g[0];
+        }
+    }
+    fn rhs_depends_on_t(&self, _mode: usize) -> bool {
+        true
+    }
+    fn guard(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
+        self.spec.guard(k, t, x.as_slice(), p.as_slice())
+    }
+    fn guard_grad(&self, k: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let g = self.spec.guard(k, td, &xd, &pd);
+        self.split(&g, gx.as_mut_slice(), gp.as_mut_slice())
+    }
+    fn reset(&self, k: usize, t: f64, x: &V, p: &V, xp: &mut V) {
+        self.spec
+            .reset(k, t, x.as_slice(), p.as_slice(), xp.as_mut_slice());
+    }
+    fn reset_jac(&self, k: usize, t: f64, x: &V, p: &V, rx: &mut Mx, rp: &mut Mx, rt: &mut V) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let mut r = vec![D::c(0.0); self.n()];
+        self.spec.reset(k, td, &xd, &pd, &mut r);
+        let n = self.n();
+        for i in 0..n {
+            rt[i] = r[i].g[0];
+            for c in 0..n {
+                rx[(i, c)] = r[i].g[1 + c];
+            }
+            for c in 0..self.np() {
+                rp[(i, c)] = r[i].g[1 + n + c];
+            }
+        }
+    }
+    fn switch_value(&self, j: usize, t: f64, x: &V, p: &V) -> f64 {
+        self.spec.switch(j, t, x.as_slice(), p.as_slice())
+    }
+    fn switch_grad(&self, j: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let g = self.spec.switch(j, td, &xd, &pd);
+        self.split(&g, gx.as_mut_slice(), gp.as_mut_slice())
+    }
+    fn observe(&self, t: f64, x: &V, p: &V, y: &mut [f64]) {
+        self.spec.observe(t, x.as_slice(), p.as_slice(), y);
+    }
+    fn observe_jac(&self, t: f64, x: &V, p: &V, yx: &mut [f64], yp: &mut [f64]) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let no = self.info.observables.len();
+        let mut y = vec![D::c(0.0); no];
+        self.spec.observe(td, &xd, &pd, &mut y);
+        let (n, np) = (self.n(), self.np());
+        for i in 0..no {
+            yx[i * n..(i + 1) * n].copy_from_slice(&y[i].g[1..1 + n]);
+            yp[i * np..(i + 1) * np].copy_from_slice(&y[i].g[1 + n..1 + n + np]);
+        }
+    }
+    fn running_cost(&self, sw: Switches, t: f64, x: &V, p: &V) -> f64 {
+        self.spec.running(sw, t, x.as_slice(), p.as_slice())
+    }
+    fn running_cost_grad(&self, sw: Switches, t: f64, x: &V, p: &V, lx: &mut V, lp: &mut V) -> f64 {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let l = self.spec.running(sw, td, &xd, &pd);
+        self.split(&l, lx.as_mut_slice(), lp.as_mut_slice());
+        l.v
+    }
+    fn event_cost(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
+        self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
+    }
+    fn event_cost_grad(&self, k: usize, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let c = self.spec.event_cost(k, td, &xd, &pd);
+        self.split(&c, cx.as_mut_slice(), cp.as_mut_slice())
+    }
+    fn final_cost(&self, t: f64, x: &V, p: &V) -> f64 {
+        self.spec.final_cost(t, x.as_slice(), p.as_slice())
+    }
+    fn final_cost_grad(&self, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let c = self.spec.final_cost(td, &xd, &pd);
+        self.split(&c, cx.as_mut_slice(), cp.as_mut_slice())
+    }
+}
+
+/// Builds a `ModelInfo` quickly.
+pub fn info(
+    name: &str,
+    states: &[&str],
+    params: &[(&str, f64)],
+    modes: &[&str],
+    events: Vec<mvad_runtime::EventInfo>,
+    observables: &[&str],
+    switches: usize,
+) -> ModelInfo {
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    ModelInfo {
+        name: name.into(),
+        states: s(states),
+        params: params.iter().map(|(n, _)| n.to_string()).collect(),
+        param_defaults: params.iter().map(|(_, v)| *v).collect(),
+        modes: s(modes),
+        initial_mode: 0,
+        events,
+        observables: s(observables),
+        switches,
+        has_running_cost: true,
+        has_final_cost: true,
+        has_horizon: true,
+        jacobian_sparsity: vec![vec![]; modes.len()],
+    }
+}
+
+/// An event description.
+pub fn ev(
+    name: &str,
+    dir: mvad_runtime::Direction,
+    mode: Option<usize>,
+    target: Option<usize>,
+    has_cost: bool,
+) -> mvad_runtime::EventInfo {
+    mvad_runtime::EventInfo {
+        name: name.into(),
+        direction: dir,
+        mode,
+        target,
+        has_reset: true,
+        has_cost,
+    }
+}
+
+/// Central finite difference of `f` at `x` in direction i with step h.
+pub fn central(f: impl Fn(&DVector<f64>) -> f64, x: &DVector<f64>, i: usize, h: f64) -> f64 {
+    let mut a = x.clone();
+    let mut b = x.clone();
+    a[i] += h;
+    b[i] -= h;
+    (f(&a) - f(&b)) / (2.0 * h)
+}

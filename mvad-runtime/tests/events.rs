@@ -1,0 +1,539 @@
+//! Event handling: the measure against dC/dθ and FD, Zeno, grazing, simultaneous events,
+//! exact zeros after resets, double crossings inside a step, errors.
+
+mod common;
+
+use common::{ev, info, AdModel, Sc, Spec, D};
+use mvad_runtime::fixtures::Ball;
+use mvad_runtime::measure::measure;
+use mvad_runtime::model::{Direction, ModelInfo, Switches};
+use mvad_runtime::solution::{DiagnosticKind, Options};
+use mvad_runtime::solve::solve;
+use nalgebra::DVector;
+
+fn tight() -> Options {
+    Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Options::default()
+    }
+}
+
+fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
+    (a - b).abs() <= rel * a.abs().max(b.abs()) + abs
+}
+
+/// Ball with restitution e, horizon T, cost ∫h dt (θ = e, g, h0, v0).
+struct ZenoBall {
+    t_end: f64,
+    e: f64,
+}
+
+impl Spec for ZenoBall {
+    fn info(&self) -> ModelInfo {
+        let mut i = info(
+            "ZenoBall",
+            &["h", "v"],
+            &[("e", self.e), ("g", 9.81), ("h0", 2.0), ("v0", 0.0)],
+            &["main"],
+            vec![ev("impact", Direction::Down, None, None, false)],
+            &["height"],
+            0,
+        );
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
+        x[0] = p[2];
+        x[1] = p[3];
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(self.t_end))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+        f[0] = x[1];
+        f[1] = -p[1];
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
+        xp[0] = x[0];
+        xp[1] = -(p[0] * x[1]);
+    }
+    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
+        y[0] = x[0];
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+/// Exact series for the ball's ∫h dt when T is past the accumulation time t*:
+/// first fall h0 t1 + v0 t1²/2 − g t1³/6 (t1 = (v0 + V)/g, V = √(v0² + 2 g h0)), then hops
+/// with launch speeds eᵏV, each contributing (2/3) u³/g², summed: (2/3) V³ e³ /(g² (1 − e³)).
+/// t* = t1 + 2 e V /(g (1 − e)).
+fn zeno_series<S: Sc>(e: S, g: S, h0: S, v0: S) -> (S, S) {
+    let v = (v0 * v0 + g * h0 * 2.0).sqrt();
+    let t1 = (v0 + v) / g;
+    let e3 = e * e * e;
+    let c = h0 * t1 + v0 * t1 * t1 / 2.0 - g * t1 * t1 * t1 / 6.0
+        + v * v * v * e3 * (2.0 / 3.0) / (g * g * (-e3 + 1.0));
+    let t_star = t1 + e * v * 2.0 / (g * (-e + 1.0));
+    (c, t_star)
+}
+
+#[test]
+fn zeno_ball_ends_at_accumulation_with_tail() {
+    let m = AdModel::new(ZenoBall { t_end: 3.0, e: 0.5 });
+    let p = m.defaults();
+    let d = |i: usize| D::var(p[i], i);
+    let (c, t_star) = zeno_series(d(0), d(1), d(2), d(3));
+    let start = std::time::Instant::now();
+    let sol = solve(&m, &p, &tight()).unwrap();
+    let wall = start.elapsed().as_secs_f64();
+    let z: Vec<_> = sol
+        .diagnostics
+        .iter()
+        .filter(|d| d.kind == DiagnosticKind::Zeno)
+        .collect();
+    assert_eq!(z.len(), 1, "{:?}", sol.diagnostics);
+    assert!(
+        (z[0].t - t_star.v).abs() < 1e-6,
+        "t* {} vs {}",
+        z[0].t,
+        t_star.v
+    );
+    assert!((sol.cost - c.v).abs() < 1e-6, "C {} vs {}", sol.cost, c.v);
+    for i in 0..4 {
+        assert!(
+            (sol.gradient[i] - c.g[i]).abs() < 1e-6,
+            "dC/dθ{i}: {} vs {}",
+            sol.gradient[i],
+            c.g[i]
+        );
+    }
+    assert!(wall < 0.5, "took {wall} s");
+    // Never through the floor.
+    assert!(
+        sol.x_final[0].abs() < 1e-6 && sol.x_final[1].abs() < 1e-3,
+        "{:?}",
+        sol.x_final
+    );
+    eprintln!(
+        "zeno: {} events, t* {} (exact {}), C err {:.2e}, grad errs {:?}, {:?}",
+        sol.events.len(),
+        z[0].t,
+        t_star.v,
+        sol.cost - c.v,
+        (0..4).map(|i| sol.gradient[i] - c.g[i]).collect::<Vec<_>>(),
+        sol.diagnostics
+    );
+}
+
+/// ⟨μ, 1⟩ on `height` equals dC/dθ for C = ∫h dt (E1, fixture), and the atoms are the
+/// event records' atoms.
+#[test]
+fn measure_of_one_is_the_gradient_of_integral_h() {
+    let ball = Ball::new();
+    let p = ball.default_params();
+    let opts = Options {
+        record: true,
+        ..tight()
+    };
+    let sol = solve(&ball, &p, &opts).unwrap();
+    let mu = measure(&ball, &p, &sol, 0).unwrap();
+    assert_eq!(mu.name, "height");
+    assert_eq!(mu.atoms.len(), 2);
+    let total = mu.pair(|_| 1.0);
+    for j in 0..4 {
+        assert!(
+            close(total[j], sol.gradient[j], 1e-9, 1e-12),
+            "param {j}: {} vs {}",
+            total[j],
+            sol.gradient[j]
+        );
+    }
+    // Height atoms are zero (h is continuous); the density carries everything.
+    assert!(mu.atoms.iter().all(|(_, a)| a.iter().all(|&v| v == 0.0)));
+    // Velocity: d/dθ ∫ v dt = d/dθ (h(T) − h0), with atoms −J t'.
+    let mv = measure(&ball, &p, &sol, 1).unwrap();
+    let tv = mv.pair(|_| 1.0);
+    let dens_only = mv.pair_density(|_| 1.0);
+    let atoms: f64 = mv.atoms.iter().map(|(_, a)| a[0]).sum();
+    assert!((tv[0] - dens_only[0] - atoms).abs() < 1e-12);
+    // h(T) = sample of the trajectory; d h(T)/dθ = S_h(T) (horizon fixed), minus dh0/dθ.
+    let traj = sol.trajectory.as_ref().unwrap();
+    let (_, s) = traj.sample(2.0);
+    for j in 0..4 {
+        let want = s[2 * j] - if j == Ball::H0 { 1.0 } else { 0.0 };
+        assert!(
+            close(tv[j], want, 1e-8, 1e-10),
+            "param {j}: {} vs {want}",
+            tv[j]
+        );
+    }
+    assert!(measure(&ball, &p, &sol, 5).is_err());
+    let unrecorded = solve(&ball, &p, &tight()).unwrap();
+    assert!(measure(&ball, &p, &unrecorded, 0).is_err());
+}
+
+/// Ball with cost ∫ φ(t) h dt for a fixed test function φ: the exact gradient from the
+/// run equals ⟨μ_height, φ⟩ and central differences of the cost.
+struct WeightedBall;
+
+fn phi(t: f64) -> f64 {
+    (3.0 * t).sin() + 0.5 * t * t - 0.2
+}
+
+impl Spec for WeightedBall {
+    fn info(&self) -> ModelInfo {
+        let mut i = ZenoBall { t_end: 2.0, e: 0.8 }.info();
+        i.name = "WeightedBall".into();
+        i
+    }
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
+        x[0] = p[2];
+        x[1] = p[3];
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(2.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+        f[0] = x[1];
+        f[1] = -p[1];
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
+        xp[0] = x[0];
+        xp[1] = -(p[0] * x[1]);
+    }
+    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
+        y[0] = x[0];
+    }
+    fn running<S: Sc>(&self, _sw: Switches, t: S, x: &[S], _p: &[S]) -> S {
+        ((t * 3.0).sin() + t * t * 0.5 - 0.2) * x[0]
+    }
+}
+
+#[test]
+fn measure_paired_with_phi_matches_fd() {
+    let m = AdModel::new(WeightedBall);
+    let p = DVector::from_vec(vec![0.8, 9.81, 2.0, 0.3]);
+    let opts = Options {
+        record: true,
+        ..tight()
+    };
+    let sol = solve(&m, &p, &opts).unwrap();
+    let mu = measure(&m, &p, &sol, 0).unwrap();
+    let paired = mu.pair(phi);
+    let fd_opts = Options {
+        rtol: 1e-12,
+        atol: 1e-14,
+        ..Options::default()
+    };
+    for j in 0..4 {
+        let fd = mvad_runtime::fd::fd_gradient(&m, &p, &fd_opts, j, 1e-5).unwrap();
+        assert!(
+            close(paired[j], sol.gradient[j], 1e-8, 1e-10),
+            "param {j}: pair {} grad {}",
+            paired[j],
+            sol.gradient[j]
+        );
+        assert!(
+            close(paired[j], fd, 1e-6, 1e-8),
+            "param {j}: pair {} fd {fd}",
+            paired[j]
+        );
+    }
+    // Export on a grid: right-continuous density, finite everywhere.
+    let grid: Vec<f64> = (0..=200).map(|i| 2.0 * i as f64 / 200.0).collect();
+    let on = mu.on_grid(&grid);
+    assert_eq!(on.len(), grid.len());
+    assert!(on.iter().flatten().all(|v| v.is_finite()));
+}
+
+/// A ball whose reset puts it *exactly* on the floor (h⁺ = 0), and one launched from the
+/// floor at t = 0: the zero guard neither re-triggers nor hides the next bounce.
+struct FloorBall {
+    exact_zero: bool,
+}
+
+impl Spec for FloorBall {
+    fn info(&self) -> ModelInfo {
+        let mut i = ZenoBall { t_end: 2.0, e: 0.8 }.info();
+        i.param_defaults = vec![0.8, 9.81, 0.0, 5.0];
+        i
+    }
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
+        x[0] = p[2];
+        x[1] = p[3];
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(2.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+        f[0] = x[1];
+        f[1] = -p[1];
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
+        xp[0] = if self.exact_zero { S::cst(0.0) } else { x[0] };
+        xp[1] = -(p[0] * x[1]);
+    }
+    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
+        y[0] = x[0];
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+#[test]
+fn guard_exactly_zero_after_reset_and_at_start() {
+    for exact_zero in [false, true] {
+        let m = AdModel::new(FloorBall { exact_zero });
+        let p = m.defaults();
+        let sol = solve(&m, &p, &tight()).unwrap();
+        // Launched from h = 0 with v0 = 5: hops of 2u/g with u = 5, 4, 3.2, ...
+        let g = 9.81;
+        let mut t = 0.0;
+        let mut u = 5.0;
+        let mut want = Vec::new();
+        loop {
+            t += 2.0 * u / g;
+            if t >= 2.0 {
+                break;
+            }
+            want.push(t);
+            u *= 0.8;
+        }
+        let got: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
+        assert_eq!(got.len(), want.len(), "exact_zero={exact_zero}: {got:?} vs {want:?}");
+        for (a, b) in got.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-12, "{got:?} vs {want:?}");
+        }
+        // Gradient against FD.
+        let fd_opts = Options { rtol: 1e-12, atol: 1e-14, ..Options::default() };
+        for j in [0, 1, 3] {
+            let fd = mvad_runtime::fd::fd_gradient(&m, &p, &fd_opts, j, 1e-5).unwrap();
+            assert!(close(sol.gradient[j], fd, 1e-6, 1e-8), "param {j}: {} vs fd {fd}", sol.gradient[j]);
+        }
+    }
+    // A ball that starts exactly on the floor moving down bounces at t = 0.
+    let m = AdModel::new(FloorBall { exact_zero: false });
+    let p = DVector::from_vec(vec![0.8, 9.81, 0.0, -3.0]);
+    let sol = solve(&m, &p, &tight()).unwrap();
+    assert_eq!(sol.events[0].t, 0.0);
+    assert!((sol.events[0].x_after[1] - 2.4).abs() < 1e-12);
+    assert!(sol.x_final[0] >= -1e-9, "fell through: {:?}", sol.x_final);
+}
+
+/// ẋ = 1; events `enter` when (x − c)² − w² ≤ 0 and `leave` when ≥ 0: a dip of width 2w
+/// that a coarse step straddles without any sign change at its samples.
+struct Dip;
+
+impl Spec for Dip {
+    fn info(&self) -> ModelInfo {
+        let mut i = info(
+            "Dip",
+            &["x"],
+            &[("c", 0.5), ("w", 1e-3)],
+            &["main"],
+            vec![ev("enter", Direction::Down, None, None, false), ev("leave", Direction::Up, None, None, false)],
+            &["x"],
+            0,
+        );
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        x[0] = S::cst(0.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(1.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
+        f[0] = S::cst(1.0);
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
+        (x[0] - p[0]) * (x[0] - p[0]) - p[1] * p[1]
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+#[test]
+fn double_crossing_inside_one_step_is_found() {
+    let m = AdModel::new(Dip);
+    for w in [1e-2, 1e-3, 1e-5] {
+        let p = DVector::from_vec(vec![0.5, w]);
+        let sol = solve(&m, &p, &tight()).unwrap();
+        assert!(sol.stats.steps < 60, "{} steps", sol.stats.steps);
+        let names: Vec<usize> = sol.events.iter().map(|e| e.event).collect();
+        assert_eq!(names, vec![0, 1], "w = {w}: {:?}", sol.events);
+        assert!((sol.events[0].t - (0.5 - w)).abs() < 1e-13);
+        assert!((sol.events[1].t - (0.5 + w)).abs() < 1e-13);
+        // t' = (1, −1) and (1, 1): t_enter = c − w, t_leave = c + w.
+        assert!((sol.events[0].dt[0] - 1.0).abs() < 1e-9 && (sol.events[0].dt[1] + 1.0).abs() < 1e-9);
+        assert!((sol.events[1].dt[0] - 1.0).abs() < 1e-9 && (sol.events[1].dt[1] - 1.0).abs() < 1e-9);
+    }
+}
+
+/// Two events on the same guard: fired at the same time in declaration order, reported.
+struct Twin;
+
+impl Spec for Twin {
+    fn info(&self) -> ModelInfo {
+        let mut i = info(
+            "Twin",
+            &["x", "y"],
+            &[("c", 0.4)],
+            &["main"],
+            vec![ev("a", Direction::Up, None, None, false), ev("b", Direction::Up, None, None, false)],
+            &["y"],
+            0,
+        );
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        x[0] = S::cst(0.0);
+        x[1] = S::cst(1.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(1.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
+        f[0] = S::cst(1.0);
+        f[1] = S::cst(0.0);
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
+        x[0] - p[0]
+    }
+    fn reset<S: Sc>(&self, k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
+        xp[0] = x[0];
+        xp[1] = if k == 0 { x[1] + 1.0 } else { x[1] * 2.0 };
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[1]
+    }
+}
+
+#[test]
+fn simultaneous_events_in_declaration_order() {
+    let m = AdModel::new(Twin);
+    let p = m.defaults();
+    let sol = solve(&m, &p, &tight()).unwrap();
+    assert_eq!(sol.events.iter().map(|e| e.event).collect::<Vec<_>>(), vec![0, 1]);
+    assert_eq!(sol.events[0].t, sol.events[1].t);
+    assert!((sol.x_final[1] - 4.0).abs() < 1e-14); // (1 + 1)·2, not 1·2 + 1
+    assert!(sol.diagnostics.iter().any(|d| d.kind == DiagnosticKind::SimultaneousEvents));
+    // C = 0.4·1 + 0.6·4 = 2.8, dC/dc = 1 − 4 = −3.
+    assert!((sol.cost - 2.8).abs() < 1e-12);
+    assert!((sol.gradient[0] + 3.0).abs() < 1e-9, "{:?}", sol.gradient);
+}
+
+/// A model that goes bad on purpose: ẋ = −1 from x = 1, and depending on `kind` a NaN in
+/// the flow (√x in a second state), the guard (ln x) or the reset, or a chattering switch.
+struct Sick {
+    kind: u8,
+}
+
+impl Spec for Sick {
+    fn info(&self) -> ModelInfo {
+        let events = if self.kind == 1 || self.kind == 2 {
+            vec![ev("e", Direction::Down, None, None, false)]
+        } else {
+            vec![]
+        };
+        let mut i = info("Sick", &["x", "z"], &[("a", 1.0)], &["main"], events, &["x"], usize::from(self.kind == 3));
+        i.has_final_cost = false;
+        i.has_horizon = self.kind != 4;
+        i
+    }
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
+        x[0] = p[0];
+        x[1] = S::cst(0.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        (self.kind != 4).then(|| S::cst(2.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, sw: Switches, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
+        if self.kind == 3 {
+            // ẋ = −sign(x): slides on x = 0 (chattering).
+            f[0] = S::cst(if sw & 1 != 0 { -1.0 } else { 1.0 });
+            f[1] = S::cst(0.0);
+            return;
+        }
+        f[0] = S::cst(-1.0);
+        f[1] = if self.kind == 0 { x[0].sqrt() } else { S::cst(0.0) };
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
+        if self.kind == 1 {
+            x[0].ln() + 10.0
+        } else {
+            x[0] - 0.5
+        }
+    }
+    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
+        xp[0] = x[0];
+        xp[1] = if self.kind == 2 { (x[0] - 1.0).sqrt() } else { x[1] };
+    }
+    fn switch<S: Sc>(&self, _j: usize, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+#[test]
+fn failures_are_errors_that_say_where() {
+    use mvad_runtime::error::SolveError;
+    let run = |kind: u8, opts: &Options| {
+        let m = AdModel::new(Sick { kind });
+        solve(&m, &m.defaults(), opts)
+    };
+    match run(0, &tight()) {
+        Err(SolveError::NonFinite { t, what }) => assert!(what.contains("flow") && t > 0.9 && t <= 1.01, "{what} at {t}"),
+        other => panic!("{other:?}"),
+    }
+    match run(1, &tight()) {
+        Err(SolveError::NonFinite { t, what }) => assert!(what.contains("guard of event `e`") && t > 0.99, "{what} at {t}"),
+        other => panic!("{other:?}"),
+    }
+    match run(2, &tight()) {
+        Err(e @ SolveError::NonFinite { .. }) => {
+            assert!(e.to_string().contains("reset of event `e`"), "{e}");
+            assert_eq!(e.diagnostic().unwrap().kind, DiagnosticKind::Nonfinite);
+        }
+        other => panic!("{other:?}"),
+    }
+    // Chattering on a switch: stopped by max_events, quickly.
+    let start = std::time::Instant::now();
+    match run(3, &Options { max_events: 1000, ..tight() }) {
+        Err(SolveError::MaxEvents { count, .. }) => assert_eq!(count, 1000),
+        Err(SolveError::StepSizeUnderflow { .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    assert!(start.elapsed().as_secs_f64() < 2.0);
+    assert_eq!(run(4, &tight()).unwrap_err(), SolveError::NoHorizon);
+    assert!(run(4, &Options { t_end: Some(1.5), ..tight() }).is_ok());
+    for t_end in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(matches!(run(0, &Options { t_end: Some(t_end), ..tight() }), Err(SolveError::BadHorizon { .. })));
+    }
+    assert!(matches!(run(0, &Options { rtol: 0.0, ..tight() }), Err(SolveError::BadOption { .. })));
+    let m = AdModel::new(Sick { kind: 0 });
+    assert!(matches!(solve(&m, &DVector::from_vec(vec![f64::NAN]), &tight()), Err(SolveError::BadParam { index: 0, .. })));
+    assert!(matches!(solve(&m, &DVector::from_vec(vec![1.0, 2.0]), &tight()), Err(SolveError::ParamCount { expected: 1, got: 2 })));
+    // max_events on the fixture ball.
+    let ball = Ball::new();
+    let r = solve(&ball, &ball.default_params(), &Options { max_events: 1, ..tight() });
+    assert!(matches!(r, Err(SolveError::MaxEvents { count: 1, .. })), "{r:?}");
+}

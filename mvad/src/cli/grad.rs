@@ -1,0 +1,236 @@
+//! `mvad grad MODEL.hyb`: the cost C(θ) and dC/dθ, with the event table: for every event
+//! t_k, the guard slope ∇ₓg·f⁻, transversality, t_k' per param, the jump J_k of every
+//! state and observable, and the atoms α_k = −J_k t_k'. `--json` prints the spec's object.
+
+use clap::Args;
+use mvad::runtime::solution::Solution;
+use mvad::runtime::solve::solve;
+use mvad::{HybridModel, ModelAlloc, ModelInfo};
+use nalgebra::DefaultAllocator;
+use serde_json::{Map, Value};
+
+use super::output::{
+    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, num, stats_json, Table,
+};
+use super::{setup, solve_err, CliError, CmdResult, Common};
+
+/// Arguments of `mvad grad`.
+#[derive(Args, Debug)]
+pub struct GradArgs {
+    /// Common options.
+    #[command(flatten)]
+    pub common: Common,
+    /// Sensitivity mode: `forward` (sensitivities carried along the run) or `adjoint`.
+    #[arg(long, default_value = "forward", value_parser = ["forward", "adjoint"])]
+    pub mode: String,
+}
+
+/// Runs `mvad grad`.
+pub fn run<M: HybridModel>(model: &M, file: &str, args: &GradArgs) -> CmdResult
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let s = setup(model, &args.common)?;
+    if args.mode == "adjoint" {
+        return Err(CliError::Input(
+            "error: --mode adjoint is not yet supported; use --mode forward (the default)".into(),
+        ));
+    }
+    let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
+    let info = model.info();
+    if args.common.json {
+        Ok(json_text(&grad_json(info, &sol, &s.wrt, &args.mode)))
+    } else {
+        Ok(grad_text(info, file, &sol, &s.wrt))
+    }
+}
+
+/// The spec's JSON object for a solution, derivatives restricted to `wrt`.
+pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) -> Value {
+    let all: Vec<usize> = (0..info.params.len()).collect();
+    let mut m = Map::new();
+    m.insert("model".into(), Value::from(info.name.clone()));
+    m.insert("t_end".into(), num(sol.t_end));
+    m.insert("params".into(), by_name(&info.params, &all, &sol.params));
+    m.insert("cost".into(), num(sol.cost));
+    m.insert("gradient".into(), by_name(&info.params, wrt, &sol.gradient));
+    m.insert(
+        "events".into(),
+        Value::Array(sol.events.iter().map(|e| event_json(info, e, wrt)).collect()),
+    );
+    m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
+    m.insert("stats".into(), stats_json(&sol.stats));
+    m.insert("mode".into(), Value::from(mode));
+    Value::Object(m)
+}
+
+/// The readable form: cost, gradient table, event table, atom table, warnings, stats.
+pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "model {} ({file}), T = {}\n",
+        info.name,
+        g(sol.t_end, 10)
+    ));
+    s.push_str(&format!("cost C = {}\n\n", g(sol.cost, 15)));
+
+    let mut t = Table::new(&["param", "value", "dC/dθ"]);
+    for &k in wrt {
+        t.row(vec![
+            info.params[k].clone(),
+            g(sol.params.get(k).copied().unwrap_or(f64::NAN), 10),
+            g(sol.gradient.get(k).copied().unwrap_or(f64::NAN), 15),
+        ]);
+    }
+    s.push_str(&t.render());
+
+    s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
+    if !sol.events.is_empty() {
+        let mode = |m: usize| info.modes.get(m).cloned().unwrap_or_default();
+        let mut header = vec![
+            "#".to_string(),
+            "event".into(),
+            "t".into(),
+            "mode".into(),
+            "guard slope".into(),
+            "transversal".into(),
+        ];
+        header.extend(wrt.iter().map(|&k| format!("dt/d{}", info.params[k])));
+        let mut t = Table::new(&header);
+        for e in &sol.events {
+            let name = info.events.get(e.event).map(|x| x.name.clone()).unwrap_or_default();
+            let modes = if e.mode_before == e.mode_after {
+                mode(e.mode_before)
+            } else {
+                format!("{} -> {}", mode(e.mode_before), mode(e.mode_after))
+            };
+            let mut row = vec![
+                e.index.to_string(),
+                name,
+                g(e.t, 12),
+                modes,
+                g(e.guard_slope, 8),
+                if e.transversal { "yes" } else { "NO (grazing)" }.to_string(),
+            ];
+            row.extend(wrt.iter().map(|&k| g(e.dt.get(k).copied().unwrap_or(f64::NAN), 8)));
+            t.row(row);
+        }
+        s.push_str(&t.render());
+
+        // Jumps and atoms of the observables that jump.
+        let mut header = vec!["#".to_string(), "t".into(), "observable".into(), "jump J".into()];
+        header.extend(wrt.iter().map(|&k| format!("atom d/d{}", info.params[k])));
+        let mut t = Table::new(&header);
+        for e in &sol.events {
+            for (i, o) in info.observables.iter().enumerate() {
+                let jump = e.jump_observables.get(i).copied().unwrap_or(0.0);
+                if jump == 0.0 {
+                    continue;
+                }
+                let mut row = vec![e.index.to_string(), g(e.t, 8), o.clone(), g(jump, 8)];
+                let atoms = e.atoms.get(i).map(Vec::as_slice).unwrap_or(&[]);
+                row.extend(wrt.iter().map(|&k| g(atoms.get(k).copied().unwrap_or(f64::NAN), 8)));
+                t.row(row);
+            }
+        }
+        if t.is_empty() {
+            s.push_str("\nno observable jumps at the events: the measures have no atoms\n");
+        } else {
+            s.push_str("\natoms α = −J t' of the observables that jump:\n");
+            s.push_str(&t.render());
+        }
+    }
+    let diags = diagnostics_text(&sol.diagnostics);
+    if !diags.is_empty() {
+        s.push('\n');
+        s.push_str(&diags);
+    }
+    s.push_str(&format!(
+        "\n{} steps ({} rejected), {} events, {} s\n",
+        sol.stats.steps,
+        sol.stats.rejected_steps,
+        sol.stats.events,
+        g(sol.stats.wall_seconds, 3)
+    ));
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::{Cli, Command};
+    use approx::assert_relative_eq;
+    use clap::Parser;
+    use mvad::runtime::fixtures::Ball;
+
+    fn args(extra: &[&str]) -> GradArgs {
+        let mut v = vec!["mvad", "grad", "ball.hyb"];
+        v.extend_from_slice(extra);
+        match Cli::try_parse_from(v).expect("parses").command {
+            Command::Grad(a) => a,
+            _ => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn json_has_every_key_of_the_spec_and_the_e1_values() {
+        let out = run(&Ball::new(), "ball.hyb", &args(&["--json", "--rtol", "1e-10", "--atol", "1e-12"]))
+            .expect("runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        for key in ["model", "t_end", "params", "cost", "gradient", "events", "diagnostics", "stats"] {
+            assert!(v.get(key).is_some(), "missing {key}: {out}");
+        }
+        assert_eq!(v["model"], "BouncingBall");
+        assert_eq!(v["t_end"], 2.0);
+        assert_eq!(v["params"]["e"], 0.8);
+        let cost = v["cost"].as_f64().expect("number");
+        assert_relative_eq!(cost, 1.8905137123173506, max_relative = 1e-8);
+        let de = v["gradient"]["e"].as_f64().expect("number");
+        assert_relative_eq!(de, 2.8314408141470055, max_relative = 1e-7);
+        let ev = &v["events"][0];
+        for key in [
+            "index", "name", "t", "mode_before", "mode_after", "guard_slope", "transversal", "dt", "jump",
+            "atoms",
+        ] {
+            assert!(ev.get(key).is_some(), "event lacks {key}");
+        }
+        assert_eq!(ev["name"], "impact");
+        assert_eq!(ev["mode_before"], "main");
+        assert_relative_eq!(ev["t"].as_f64().expect("t"), 0.63855085681410093, max_relative = 1e-9);
+        // v⁻ = −g t₁ = −6.264 and v⁺ = −e v⁻: the velocity jumps by (1 + e) g t₁.
+        let t1 = 0.63855085681410093;
+        assert_relative_eq!(ev["guard_slope"].as_f64().expect("slope"), -9.81 * t1, max_relative = 1e-8);
+        assert_relative_eq!(ev["jump"]["velocity"].as_f64().expect("J"), 1.8 * 9.81 * t1, max_relative = 1e-8);
+        assert_eq!(ev["jump"]["height"], 0.0);
+        assert!(ev["atoms"]["velocity"]["g"].is_number());
+        assert_eq!(v["events"].as_array().map(Vec::len), Some(2));
+        for key in ["steps", "rejected_steps", "events", "wall_seconds"] {
+            assert!(v["stats"].get(key).is_some(), "stats lacks {key}");
+        }
+    }
+
+    #[test]
+    fn wrt_restricts_gradient_dt_and_atoms() {
+        let out = run(&Ball::new(), "ball.hyb", &args(&["--json", "--wrt", "e,v0"])).expect("runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        let keys: Vec<&String> = v["gradient"].as_object().expect("obj").keys().collect();
+        assert_eq!(keys, ["e", "v0"]);
+        let dt: Vec<&String> = v["events"][0]["dt"].as_object().expect("obj").keys().collect();
+        assert_eq!(dt, ["e", "v0"]);
+        let atoms: Vec<&String> = v["events"][0]["atoms"]["velocity"].as_object().expect("obj").keys().collect();
+        assert_eq!(atoms, ["e", "v0"]);
+        // params stay complete
+        assert_eq!(v["params"].as_object().map(|o| o.len()), Some(4));
+    }
+
+    #[test]
+    fn text_table_and_adjoint() {
+        let out = run(&Ball::new(), "ball.hyb", &args(&[])).expect("runs");
+        assert!(out.contains("cost C = 1.89051371"), "{out}");
+        assert!(out.contains("events (2):"), "{out}");
+        assert!(out.contains("impact"), "{out}");
+        assert!(out.contains("velocity"), "{out}");
+        let err = run(&Ball::new(), "ball.hyb", &args(&["--mode", "adjoint"])).err().expect("error");
+        assert_eq!(err.status(), 2);
+    }
+}

@@ -1,0 +1,398 @@
+//! `mvad measure MODEL.hyb --observable NAME`: the derivative of one observable's
+//! trajectory as a measure,
+//!
+//! ```text
+//!   μ_y = (h_x S + h_θ) dt + Σ_k α_k δ(t − t_k),   α_k = −J_k t_k',
+//! ```
+//!
+//! a density sampled on a grid plus the atoms, one of each per parameter in `--wrt`. The
+//! pairing ⟨μ_y, 1⟩ = d/dθ ∫₀ᵀ y dt is printed with it (split into its density part and
+//! its atoms). `--plot FILE.svg|png` draws the paper's Figure 1 for the first `--wrt`
+//! parameter: y(t) with the events, the density with the atoms as stems, and
+//! d/dθ ∫₀ᵗ y ds from MV-AD (density integral plus the atoms so far) against central
+//! finite differences of the same integral.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use mvad::runtime::measure::{measure, Measure};
+use mvad::runtime::solution::{Options, Solution};
+use mvad::runtime::solve::solve;
+use mvad::{HybridModel, ModelAlloc};
+use nalgebra::{DefaultAllocator, OVector};
+use serde_json::{Map, Value};
+
+use super::output::{diagnostics_json, diagnostics_text, g, json_text, num, Table};
+use super::plot::{figure1, format_of, Figure1};
+use super::{setup, solve_err, xvec, CliError, CmdResult, Common};
+
+/// Arguments of `mvad measure`.
+#[derive(Args, Debug)]
+pub struct MeasureArgs {
+    /// Common options.
+    #[command(flatten)]
+    pub common: Common,
+    /// The observable y whose derivative is shown.
+    #[arg(long, value_name = "NAME")]
+    pub observable: String,
+    /// Draw the paper's Figure 1 into FILE (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// Number of grid points for the density.
+    #[arg(long, value_name = "N", default_value_t = 201)]
+    pub points: usize,
+    /// Relative step of the central differences in the plot.
+    #[arg(long, value_name = "H", default_value_t = 1e-6)]
+    pub step: f64,
+}
+
+/// Runs `mvad measure`.
+pub fn run<M: HybridModel>(model: &M, file: &str, args: &MeasureArgs) -> CmdResult
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut s = setup(model, &args.common)?;
+    let info = model.info();
+    let obs = info.observable_index(&args.observable).ok_or_else(|| {
+        CliError::Input(format!(
+            "error: unknown observable `{}`; {}",
+            args.observable,
+            if info.observables.is_empty() {
+                "the model declares no observables".to_string()
+            } else {
+                format!("known observables: {}", info.observables.join(", "))
+            }
+        ))
+    })?;
+    if !(2..=1_000_000).contains(&args.points) {
+        return Err(CliError::Input(format!(
+            "error: --points must be between 2 and 1000000, got {}",
+            args.points
+        )));
+    }
+    if !(args.step.is_finite() && args.step > 0.0 && args.step < 1.0) {
+        return Err(CliError::Input(format!("error: --step must be in (0, 1), got {}", args.step)));
+    }
+    if let Some(p) = &args.plot {
+        format_of(p)?;
+    }
+    s.opts.record = true;
+    let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
+    let mu = measure(model, &s.params, &sol, obs).map_err(solve_err)?;
+    let t_end = sol.t_end;
+    let grid: Vec<f64> = (0..args.points)
+        .map(|i| t_end * i as f64 / (args.points - 1) as f64)
+        .collect();
+    let dens = mu.on_grid(&grid);
+    let total = mu.pair(|_| 1.0);
+    let density_part = mu.pair_density(|_| 1.0);
+    let wrt = &s.wrt;
+
+    let mut plot_note = None;
+    if let Some(path) = &args.plot {
+        let fig = figure_data(model, &s.params, &s.opts, &sol, &mu, obs, wrt[0], args.step)?;
+        plot_note = Some(fig.note.clone());
+        figure1(path, &fig)?;
+    }
+
+    if args.common.json {
+        let mut m = Map::new();
+        m.insert("model".into(), Value::from(info.name.clone()));
+        m.insert("observable".into(), Value::from(info.observables[obs].clone()));
+        m.insert("t_end".into(), num(t_end));
+        m.insert(
+            "wrt".into(),
+            Value::from(wrt.iter().map(|&k| info.params[k].clone()).collect::<Vec<_>>()),
+        );
+        m.insert("grid".into(), Value::from(grid.iter().map(|&t| num(t)).collect::<Vec<_>>()));
+        let mut d = Map::new();
+        for &k in wrt {
+            d.insert(
+                info.params[k].clone(),
+                Value::from(dens.iter().map(|row| num(row[k])).collect::<Vec<_>>()),
+            );
+        }
+        m.insert("density".into(), Value::Object(d));
+        let atoms: Vec<Value> = sol
+            .events
+            .iter()
+            .zip(&mu.atoms)
+            .map(|(e, (t, a))| {
+                let mut vals = Map::new();
+                for &k in wrt {
+                    vals.insert(info.params[k].clone(), num(a[k]));
+                }
+                serde_json::json!({
+                    "index": e.index,
+                    "name": info.events.get(e.event).map(|x| x.name.clone()),
+                    "t": num(*t),
+                    "jump": num(e.jump_observables.get(obs).copied().unwrap_or(f64::NAN)),
+                    "values": Value::Object(vals),
+                })
+            })
+            .collect();
+        m.insert("atoms".into(), Value::Array(atoms));
+        let mut pairing = Map::new();
+        for &k in wrt {
+            pairing.insert(
+                info.params[k].clone(),
+                serde_json::json!({
+                    "total": num(total[k]),
+                    "density": num(density_part[k]),
+                    "atoms": num(total[k] - density_part[k]),
+                }),
+            );
+        }
+        m.insert("integral_derivative".into(), Value::Object(pairing));
+        m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
+        if let Some(note) = plot_note {
+            m.insert("plot".into(), serde_json::json!({"file": args.plot.as_ref().map(|p| p.display().to_string()), "comparison": note}));
+        }
+        return Ok(json_text(&Value::Object(m)));
+    }
+
+    let mut out = format!(
+        "model {} ({file}): the derivative of `{}` as a measure on [0, {}]\n",
+        info.name,
+        info.observables[obs],
+        g(t_end, 10)
+    );
+    out.push_str("density (h_x S + h_θ) dt plus atoms α_k δ(t − t_k), α_k = −J_k t_k'\n\n");
+    let mut t = Table::new(
+        &std::iter::once("param".to_string())
+            .chain(["d/dθ ∫y dt".into(), "density part".into(), "atoms part".into()])
+            .collect::<Vec<_>>(),
+    );
+    for &k in wrt {
+        t.row(vec![
+            info.params[k].clone(),
+            g(total[k], 12),
+            g(density_part[k], 12),
+            g(total[k] - density_part[k], 12),
+        ]);
+    }
+    out.push_str(&t.render());
+    out.push_str(&format!("\natoms ({}):\n", mu.atoms.len()));
+    if !mu.atoms.is_empty() {
+        let mut header = vec!["#".to_string(), "t".into(), "jump J".into()];
+        header.extend(wrt.iter().map(|&k| format!("α d/d{}", info.params[k])));
+        let mut t = Table::new(&header);
+        for (e, (tk, a)) in sol.events.iter().zip(&mu.atoms) {
+            let mut row = vec![
+                e.index.to_string(),
+                g(*tk, 10),
+                g(e.jump_observables.get(obs).copied().unwrap_or(f64::NAN), 8),
+            ];
+            row.extend(wrt.iter().map(|&k| g(a[k], 8)));
+            t.row(row);
+        }
+        out.push_str(&t.render());
+    }
+    out.push_str("\ndensity on the grid:\n");
+    let mut header = vec!["t".to_string()];
+    header.extend(wrt.iter().map(|&k| format!("d/d{}", info.params[k])));
+    let mut t = Table::new(&header);
+    let stride = (grid.len() / 20).max(1);
+    for (i, (ti, row)) in grid.iter().zip(&dens).enumerate() {
+        if i % stride == 0 || i + 1 == grid.len() {
+            let mut r = vec![g(*ti, 6)];
+            r.extend(wrt.iter().map(|&k| g(row[k], 8)));
+            t.row(r);
+        }
+    }
+    out.push_str(&t.render());
+    if stride > 1 {
+        out.push_str(&format!("(every {stride}th of {} points; --json prints all)\n", grid.len()));
+    }
+    if let (Some(p), Some(note)) = (&args.plot, plot_note) {
+        out.push_str(&format!("\nwrote {}: {note}\n", p.display()));
+    }
+    out.push_str(&diagnostics_text(&sol.diagnostics));
+    Ok(out)
+}
+
+/// Samples of y on `ts` from a recorded solution (right-continuous at events).
+fn observable_on<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    sol: &Solution,
+    obs: usize,
+    ts: &[f64],
+) -> Vec<f64>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let nobs = model.info().nobservables();
+    let mut y = vec![0.0; nobs];
+    let Some(traj) = sol.trajectory.as_ref() else {
+        return vec![f64::NAN; ts.len()];
+    };
+    ts.iter()
+        .map(|&t| {
+            let (x, _) = traj.sample(t);
+            model.observe(t, &xvec(model, &x), params, &mut y);
+            y[obs]
+        })
+        .collect()
+}
+
+/// Cumulative trapezoid integral of `v` on `ts`.
+fn cumulative(ts: &[f64], v: &[f64]) -> Vec<f64> {
+    let mut acc = 0.0;
+    let mut out = Vec::with_capacity(ts.len());
+    for i in 0..ts.len() {
+        if i > 0 {
+            acc += 0.5 * (ts[i] - ts[i - 1]) * (v[i] + v[i - 1]);
+        }
+        out.push(acc);
+    }
+    out
+}
+
+/// The data of Figure 1 for observable `obs` and parameter `k`.
+#[allow(clippy::too_many_arguments)]
+fn figure_data<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sol: &Solution,
+    mu: &Measure,
+    obs: usize,
+    k: usize,
+    rel_step: f64,
+) -> Result<Figure1, CliError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = model.info();
+    let t_end = sol.t_end;
+    let n = 2001;
+    let ts: Vec<f64> = (0..n).map(|i| t_end * i as f64 / (n - 1) as f64).collect();
+    let y = observable_on(model, params, sol, obs, &ts);
+    let dens: Vec<f64> = ts.iter().map(|&t| mu.density(t)[k]).collect();
+    // MV-AD: ∫₀ᵗ density + Σ_{t_k ≤ t} α_k.
+    let mut cum = cumulative(&ts, &dens);
+    for (tk, a) in &mu.atoms {
+        for (c, &t) in cum.iter_mut().zip(&ts) {
+            if t >= *tk {
+                *c += a[k];
+            }
+        }
+    }
+    // Central differences of ∫₀ᵗ y ds from two recorded primal runs.
+    let h = rel_step * params[k].abs().max(1.0);
+    let run_at = |delta: f64| -> Result<(Vec<f64>, f64), CliError> {
+        let mut p = params.clone();
+        p[k] += delta;
+        let o = Options {
+            record: true,
+            sensitivities: false,
+            // A fixed horizon: the picture compares integrals over the same [0, t].
+            t_end: Some(t_end),
+            ..opts.clone()
+        };
+        let s = solve(model, &p, &o).map_err(solve_err)?;
+        Ok((cumulative(&ts, &observable_on(model, &p, &s, obs, &ts)), p[k]))
+    };
+    let (plus, vp) = run_at(h)?;
+    let (minus, vm) = run_at(-h)?;
+    let fd: Vec<f64> = plus.iter().zip(&minus).map(|(a, b)| (a - b) / (vp - vm)).collect();
+    let mvad_total = mu.pair(|_| 1.0)[k];
+    let fd_total = fd.last().copied().unwrap_or(f64::NAN);
+    let abs = (mvad_total - fd_total).abs();
+    let rel = abs / mvad_total.abs().max(f64::MIN_POSITIVE);
+    let note = format!(
+        "MV-AD {} vs FD {}: abs err {}, rel err {}",
+        g(mvad_total, 8),
+        g(fd_total, 8),
+        g(abs, 3),
+        g(rel, 3)
+    );
+    Ok(Figure1 {
+        title: format!("{}: d{}/d{} as a measure", info.name, info.observables[obs], info.params[k]),
+        observable: info.observables[obs].clone(),
+        param: info.params[k].clone(),
+        trajectory: ts.iter().copied().zip(y).collect(),
+        events: mu.atoms.iter().map(|a| a.0).collect(),
+        density: ts.iter().copied().zip(dens).collect(),
+        atoms: mu.atoms.iter().map(|(t, a)| (*t, a[k])).collect(),
+        cumulative_mvad: ts.iter().copied().zip(cum).collect(),
+        cumulative_fd: ts.iter().copied().zip(fd).collect(),
+        note,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::{Cli, Command};
+    use approx::assert_relative_eq;
+    use clap::Parser;
+    use mvad::runtime::fixtures::Ball;
+
+    fn args(extra: &[&str]) -> MeasureArgs {
+        let mut v = vec!["mvad", "measure", "ball.hyb"];
+        v.extend_from_slice(extra);
+        match Cli::try_parse_from(v).expect("parses").command {
+            Command::Measure(a) => a,
+            _ => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn json_density_atoms_and_the_pairing_with_one() {
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--observable", "height", "--wrt", "e", "--json", "--rtol", "1e-10", "--atol", "1e-12"]),
+        )
+        .expect("runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        assert_eq!(v["observable"], "height");
+        assert_eq!(v["grid"].as_array().map(Vec::len), Some(201));
+        assert_eq!(v["density"]["e"].as_array().map(Vec::len), Some(201));
+        // Before the first impact nothing depends on e.
+        assert_eq!(v["density"]["e"][10], 0.0);
+        // Height is continuous: its atoms vanish.
+        assert_eq!(v["atoms"].as_array().map(Vec::len), Some(2));
+        assert_eq!(v["atoms"][1]["values"]["e"].as_f64().map(f64::abs), Some(0.0));
+        // ⟨μ_height, 1⟩ = d/de ∫h dt = dC/de of the E1 reference.
+        let total = v["integral_derivative"]["e"]["total"].as_f64().expect("number");
+        assert_relative_eq!(total, 2.8314408141470055, max_relative = 1e-7);
+    }
+
+    #[test]
+    fn velocity_has_atoms_and_the_plot_compares_with_fd() {
+        let dir = std::env::temp_dir().join(format!("mvad-measure-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let svg = dir.join("fig.svg").to_string_lossy().to_string();
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--observable", "velocity", "--wrt", "e", "--plot", &svg, "--json"]),
+        )
+        .expect("runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        // Second impact: α = −J t' with J = (1 + e) |v⁻|, t' = dt₂/de = 2 v₁/g.
+        let a = v["atoms"][1]["values"]["e"].as_f64().expect("atom");
+        assert!(a < -1.0, "{a}");
+        let text = std::fs::read_to_string(&svg).expect("plot written");
+        assert!(text.contains("MV-AD"));
+        assert!(v["plot"]["comparison"].as_str().expect("note").contains("FD"));
+    }
+
+    #[test]
+    fn bad_observable_lists_the_known_ones() {
+        let err = run(&Ball::new(), "b", &args(&["--observable", "x"])).err().expect("error");
+        assert_eq!(err.status(), 2);
+        assert!(err.message().contains("known observables: height, velocity"), "{err:?}");
+        let err = run(&Ball::new(), "b", &args(&["--observable", "height", "--plot", "a.pdf"])).err();
+        assert_eq!(err.map(|e| e.status()), Some(2));
+    }
+
+    #[test]
+    fn cumulative_trapezoid() {
+        let ts = [0.0, 1.0, 2.0];
+        assert_eq!(cumulative(&ts, &[0.0, 2.0, 2.0]), vec![0.0, 1.0, 3.0]);
+    }
+}

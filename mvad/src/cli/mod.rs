@@ -1,0 +1,476 @@
+//! The command line: argument parsing (clap), the options every command shares, and
+//! the mapping of failures to exit statuses.
+//!
+//! Every command is a function generic over [`HybridModel`], so the same code serves a
+//! model loaded from a `.hyb` file and a compiled (or hand-written) one. Commands build
+//! their output in a `String`; only [`run`] prints.
+
+use std::ffi::OsString;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use mvad::runtime::error::SolveError;
+use mvad::runtime::solution::{Method, Options};
+use mvad::{HybridModel, ModelAlloc};
+use nalgebra::{Const, DefaultAllocator, OVector};
+
+pub mod check;
+pub mod fdcheck;
+pub mod grad;
+pub mod measure;
+pub mod output;
+pub mod plot;
+pub mod progress;
+pub mod simulate;
+pub mod sweep;
+pub mod workprec;
+
+/// `mvad`: exact parameter derivatives of hybrid models, as measures.
+#[derive(Parser, Debug)]
+#[command(name = "mvad", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Parse and validate a model; print its states, params, modes, events and Jacobian sparsity.
+    Check(check::CheckArgs),
+    /// Simulate: the trajectory as CSV (to --out or stdout) and the table of events.
+    Simulate(simulate::SimulateArgs),
+    /// The cost C and its gradient dC/dθ, with the event table (times, slopes, atoms).
+    Grad(grad::GradArgs),
+    /// The derivative of one observable as a measure: density on a grid plus atoms.
+    Measure(measure::MeasureArgs),
+    /// MV-AD against central finite differences (the paper's Table 1).
+    Fdcheck(fdcheck::FdcheckArgs),
+    /// Vary one parameter over a range; event quantities per value (the paper's Table 2).
+    Sweep(sweep::SweepArgs),
+    /// Error against wall time over tolerances 1e-3 … 1e-12, for MV-AD and central FD.
+    Workprec(workprec::WorkprecArgs),
+}
+
+/// Options every command takes.
+#[derive(Args, Debug, Clone)]
+pub struct Common {
+    /// The model file (`.hyb`).
+    pub model: PathBuf,
+    /// Override a parameter (repeatable): `--set e=0.5`.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub set: Vec<String>,
+    /// Final time T, overriding the model's horizon (then dT/dθ = 0).
+    #[arg(long = "t-end", value_name = "T", allow_negative_numbers = true)]
+    pub t_end: Option<f64>,
+    /// Parameters to differentiate with respect to, comma separated (default: all).
+    #[arg(long, value_name = "A,B,..")]
+    pub wrt: Option<String>,
+    /// Relative tolerance of the integrator.
+    #[arg(long, allow_negative_numbers = true)]
+    pub rtol: Option<f64>,
+    /// Absolute tolerance of the integrator.
+    #[arg(long, allow_negative_numbers = true)]
+    pub atol: Option<f64>,
+    /// Integration method (`auto` copes with stiff models by itself).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "tsit5", "verner9", "rosenbrock"])]
+    pub method: String,
+    /// τ of the grazing test |∇ₓg·f| < τ |∇ₓg| |f|.
+    #[arg(long = "grazing-tol", value_name = "TAU", allow_negative_numbers = true)]
+    pub grazing_tol: Option<f64>,
+    /// Print one JSON object instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Why a command did not succeed, with the exit status it maps to.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CliError {
+    /// Bad input (a model error, already rendered; a bad option): exit status 2.
+    Input(String),
+    /// The model ran and failed: exit status 1.
+    Run(String),
+}
+
+impl CliError {
+    /// The exit status of this failure.
+    pub fn status(&self) -> u8 {
+        match self {
+            CliError::Input(_) => 2,
+            CliError::Run(_) => 1,
+        }
+    }
+    /// The message (for stderr, and the `"error"` key under `--json`).
+    pub fn message(&self) -> &str {
+        match self {
+            CliError::Input(m) | CliError::Run(m) => m,
+        }
+    }
+}
+
+/// What a command produced: text for stdout.
+pub type CmdResult = Result<String, CliError>;
+
+/// Parses `args` and runs the command; never panics on any input.
+///
+/// `load` turns the model path into a model, or into the rendered error (exit 2).
+pub fn run<I, M, L>(args: I, load: L) -> ExitCode
+where
+    I: IntoIterator<Item = OsString>,
+    M: HybridModel,
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+    L: FnOnce(&Path) -> Result<M, String>,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(err) => {
+            use clap::error::ErrorKind;
+            // --help and --version are successes; every other clap error is a usage error (2).
+            let status = match err.kind() {
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => 0,
+                _ => 2,
+            };
+            let text = err.render().to_string();
+            if status == 0 {
+                write_stdout(&text);
+            } else {
+                write_stderr(&text);
+            }
+            return ExitCode::from(status);
+        }
+    };
+    let json = cli.common().json;
+    match dispatch(&cli, load) {
+        Ok(out) => {
+            if write_stdout(&out) {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            }
+        }
+        Err(err) => {
+            let msg = err.message();
+            let mut text = msg.to_string();
+            if !text.ends_with('\n') {
+                text.push('\n');
+            }
+            write_stderr(&text);
+            if json {
+                let kind = if err.status() == 2 { "input" } else { "run" };
+                let obj = serde_json::json!({ "error": msg.trim_end(), "kind": kind });
+                write_stdout(&format!("{obj}\n"));
+            }
+            ExitCode::from(err.status())
+        }
+    }
+}
+
+impl Cli {
+    /// The common options of whichever command was given.
+    pub fn common(&self) -> &Common {
+        match &self.command {
+            Command::Check(a) => &a.common,
+            Command::Simulate(a) => &a.common,
+            Command::Grad(a) => &a.common,
+            Command::Measure(a) => &a.common,
+            Command::Fdcheck(a) => &a.common,
+            Command::Sweep(a) => &a.common,
+            Command::Workprec(a) => &a.common,
+        }
+    }
+}
+
+/// Runs the parsed command on the model `load` returns for the model path.
+fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
+where
+    M: HybridModel,
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+    L: FnOnce(&Path) -> Result<M, String>,
+{
+    let common = cli.common();
+    let model = load(&common.model).map_err(CliError::Input)?;
+    let file = common.model.display().to_string();
+    match &cli.command {
+        Command::Check(a) => check::run(&model, &file, a),
+        Command::Simulate(a) => simulate::run(&model, &file, a),
+        Command::Grad(a) => grad::run(&model, &file, a),
+        Command::Measure(a) => measure::run(&model, &file, a),
+        Command::Fdcheck(a) => fdcheck::run(&model, &file, a),
+        Command::Sweep(a) => sweep::run(&model, &file, a),
+        Command::Workprec(a) => workprec::run(&model, &file, a),
+    }
+}
+
+/// Writes to stdout; false if that failed (a closed pipe is not a panic).
+fn write_stdout(text: &str) -> bool {
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes()).and_then(|_| out.flush()).is_ok()
+}
+
+/// Writes to stderr, ignoring failures.
+pub fn write_stderr(text: &str) {
+    let mut err = std::io::stderr().lock();
+    let _ = err.write_all(text.as_bytes());
+    let _ = err.flush();
+}
+
+/// Everything a run needs, resolved from the common options: the parameter vector
+/// (declared values with `--set` applied), the solver options, the `--wrt` selection.
+pub struct Setup<M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// θ.
+    pub params: OVector<f64, M::P>,
+    /// Solver options (tolerances, method, horizon override, grazing τ).
+    pub opts: Options,
+    /// Indices of the parameters to report derivatives for (`--wrt`, default all).
+    pub wrt: Vec<usize>,
+    /// The final time the run will use (`--t-end` or the model's horizon at θ).
+    pub t_end: f64,
+}
+
+/// Parses a finite number.
+pub fn parse_number(text: &str, what: &str) -> Result<f64, CliError> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(CliError::Input(format!("{what}: `{text}` is not a finite number"))),
+        Err(_) => Err(CliError::Input(format!("{what}: `{text}` is not a number"))),
+    }
+}
+
+/// The list of parameter names, for error messages.
+pub fn known_params(names: &[String]) -> String {
+    if names.is_empty() {
+        "the model has no parameters".to_string()
+    } else {
+        format!("known parameters: {}", names.join(", "))
+    }
+}
+
+/// Index of parameter `name`, or a bad-input error listing the known ones.
+pub fn param_index(names: &[String], name: &str, option: &str) -> Result<usize, CliError> {
+    names.iter().position(|p| p == name).ok_or_else(|| {
+        CliError::Input(format!(
+            "error: unknown parameter `{name}` in {option}; {}",
+            known_params(names)
+        ))
+    })
+}
+
+/// Resolves the common options against a model.
+pub fn setup<M: HybridModel>(model: &M, common: &Common) -> Result<Setup<M>, CliError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = model.info();
+    let params = setup_params_only(model, common)?;
+    let wrt = parse_wrt(&info.params, common.wrt.as_deref())?;
+
+    let mut opts = Options {
+        method: Method::from_name(&common.method).unwrap_or_default(),
+        ..Options::default()
+    };
+    if let Some(r) = common.rtol {
+        if !(r.is_finite() && r > 0.0 && r < 1.0) {
+            return Err(CliError::Input(format!(
+                "error: --rtol must be in (0, 1), got {r}"
+            )));
+        }
+        opts.rtol = r;
+    }
+    if let Some(a) = common.atol {
+        if !(a.is_finite() && a > 0.0) {
+            return Err(CliError::Input(format!(
+                "error: --atol must be positive and finite, got {a}"
+            )));
+        }
+        opts.atol = a;
+    }
+    if let Some(tau) = common.grazing_tol {
+        if !(tau.is_finite() && (0.0..1.0).contains(&tau)) {
+            return Err(CliError::Input(format!(
+                "error: --grazing-tol must be in [0, 1), got {tau}"
+            )));
+        }
+        opts.grazing_tol = tau;
+    }
+    let t_end = match common.t_end {
+        Some(t) => {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(CliError::Input(format!(
+                    "error: --t-end must be positive and finite, got {t}"
+                )));
+            }
+            opts.t_end = Some(t);
+            t
+        }
+        None => match model.horizon(&params) {
+            None => {
+                return Err(CliError::Input(format!(
+                    "error: model `{}` declares no horizon; give one with --t-end T",
+                    info.name
+                )))
+            }
+            Some(t) if !(t.is_finite() && t > 0.0) => {
+                return Err(CliError::Input(format!(
+                    "error: the horizon of model `{}` evaluates to {t} at these parameters; \
+                     it must be positive and finite (or pass --t-end T)",
+                    info.name
+                )))
+            }
+            Some(t) => t,
+        },
+    };
+    Ok(Setup {
+        params,
+        opts,
+        wrt,
+        t_end,
+    })
+}
+
+/// θ: the declared parameter values with every `--set NAME=VALUE` applied.
+pub fn setup_params_only<M: HybridModel>(
+    model: &M,
+    common: &Common,
+) -> Result<OVector<f64, M::P>, CliError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = model.info();
+    let mut values = info.param_defaults.clone();
+    for item in &common.set {
+        let Some((name, value)) = item.split_once('=') else {
+            return Err(CliError::Input(format!(
+                "error: --set expects NAME=VALUE, got `{item}`"
+            )));
+        };
+        let k = param_index(&info.params, name.trim(), "--set")?;
+        values[k] = parse_number(value, &format!("error: --set {}", name.trim()))?;
+    }
+    Ok(OVector::<f64, M::P>::from_iterator_generic(
+        model.nparams(),
+        Const::<1>,
+        values.iter().copied(),
+    ))
+}
+
+/// Maps a runtime failure to an exit status: bad input (options, parameters, horizon)
+/// is 2, a model that ran and failed (non-finite values, step size underflow, too many
+/// events) is 1.
+pub fn solve_err(e: SolveError) -> CliError {
+    match e {
+        SolveError::NoHorizon
+        | SolveError::BadHorizon { .. }
+        | SolveError::ParamCount { .. }
+        | SolveError::BadParam { .. }
+        | SolveError::BadOption { .. }
+        | SolveError::NoSuchObservable { .. }
+        | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}")),
+        _ => CliError::Run(format!("error: the run failed: {e}")),
+    }
+}
+
+/// A vector of the model's parameter dimension from a slice.
+pub fn pvec<M: HybridModel>(model: &M, values: &[f64]) -> OVector<f64, M::P>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    OVector::<f64, M::P>::from_iterator_generic(model.nparams(), Const::<1>, values.iter().copied())
+}
+
+/// A vector of the model's state dimension from a slice.
+pub fn xvec<M: HybridModel>(model: &M, values: &[f64]) -> OVector<f64, M::N>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    OVector::<f64, M::N>::from_iterator_generic(model.nstates(), Const::<1>, values.iter().copied())
+}
+
+/// Parses `--wrt a,b`: known names, duplicates dropped, declaration order kept as given.
+pub fn parse_wrt(names: &[String], wrt: Option<&str>) -> Result<Vec<usize>, CliError> {
+    let Some(list) = wrt else {
+        return Ok((0..names.len()).collect());
+    };
+    let mut out = Vec::new();
+    for name in list.split(',').map(str::trim) {
+        if name.is_empty() {
+            continue;
+        }
+        let k = param_index(names, name, "--wrt")?;
+        if !out.contains(&k) {
+            out.push(k);
+        }
+    }
+    if out.is_empty() {
+        return Err(CliError::Input(format!(
+            "error: --wrt names no parameter; {}",
+            known_params(names)
+        )));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+    use mvad::runtime::fixtures::Ball;
+
+    fn common(extra: &[&str]) -> Common {
+        let mut args = vec!["mvad", "check", "m.hyb"];
+        args.extend_from_slice(extra);
+        match Cli::try_parse_from(args).expect("parses").command {
+            Command::Check(g) => g.common,
+            _ => unreachable!("check was given"),
+        }
+    }
+
+    #[test]
+    fn clap_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn set_overrides_and_unknown_lists_known() {
+        let ball = Ball::new();
+        let s = setup(&ball, &common(&["--set", "e=0.5", "--set", "h0 = 3"])).expect("ok");
+        assert_eq!(s.params.as_slice(), &[0.5, 9.81, 3.0, 0.0]);
+        let err = setup(&ball, &common(&["--set", "q=1"])).err().expect("unknown param");
+        assert_eq!(err.status(), 2);
+        assert!(err.message().contains("known parameters: e, g, h0, v0"), "{err:?}");
+        for bad in ["e", "e=abc", "e=nan", "e=inf"] {
+            let err = setup(&ball, &common(&["--set", bad])).err().expect(bad);
+            assert_eq!(err.status(), 2, "{bad}");
+        }
+    }
+
+    #[test]
+    fn wrt_and_tolerances() {
+        let ball = Ball::new();
+        let s = setup(&ball, &common(&["--wrt", "v0,e,v0", "--rtol", "1e-6"])).expect("ok");
+        assert_eq!(s.wrt, vec![3, 0]);
+        assert_eq!(s.opts.rtol, 1e-6);
+        assert_eq!(s.t_end, 2.0);
+        for bad in [
+            &["--wrt", "x"][..],
+            &["--wrt", ","],
+            &["--rtol", "0"],
+            &["--rtol", "-1"],
+            &["--atol", "inf"],
+            &["--t-end", "-2"],
+            &["--grazing-tol", "2"],
+        ] {
+            let err = setup(&ball, &common(bad)).err().expect("bad option");
+            assert_eq!(err.status(), 2, "{bad:?}");
+        }
+        let s = setup(&ball, &common(&["--t-end", "3.5", "--method", "verner9"])).expect("ok");
+        assert_eq!(s.t_end, 3.5);
+        assert_eq!(s.opts.t_end, Some(3.5));
+        assert_eq!(s.opts.method, Method::Verner9);
+    }
+}

@@ -1,0 +1,264 @@
+//! Output helpers: number formatting, plain-text tables, and the JSON pieces several
+//! commands share (params by name, event records, diagnostics, stats).
+
+use mvad::runtime::solution::{Diagnostic, EventRecord, Stats};
+use mvad::ModelInfo;
+use serde_json::{Map, Value};
+
+/// A JSON number, or `null` for NaN/∞ (JSON has no such numbers).
+pub fn num(x: f64) -> Value {
+    serde_json::Number::from_f64(x)
+        .map(Value::Number)
+        .unwrap_or(Value::Null)
+}
+
+/// `{name: value}` over the selected indices, in the given order.
+pub fn by_name(names: &[String], idx: &[usize], values: &[f64]) -> Value {
+    let mut m = Map::new();
+    for &k in idx {
+        if let (Some(n), Some(&v)) = (names.get(k), values.get(k)) {
+            m.insert(n.clone(), num(v));
+        }
+    }
+    Value::Object(m)
+}
+
+/// One event as the spec's JSON object: index, name, t, modes, guard slope,
+/// transversality, t_k' per param, the jump per state and observable, and the atoms
+/// α_k = −J_k t_k' per observable and param (params restricted to `wrt`).
+pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
+    let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
+    let name = info
+        .events
+        .get(ev.event)
+        .map(|e| e.name.clone())
+        .unwrap_or_else(|| format!("event_{}", ev.event));
+    let mut jump = Map::new();
+    for (i, s) in info.states.iter().enumerate() {
+        jump.insert(s.clone(), num(ev.jump_states.get(i).copied().unwrap_or(f64::NAN)));
+    }
+    for (i, o) in info.observables.iter().enumerate() {
+        jump.insert(
+            o.clone(),
+            num(ev.jump_observables.get(i).copied().unwrap_or(f64::NAN)),
+        );
+    }
+    let mut atoms = Map::new();
+    for (i, o) in info.observables.iter().enumerate() {
+        let row = ev.atoms.get(i).map(Vec::as_slice).unwrap_or(&[]);
+        atoms.insert(o.clone(), by_name(&info.params, wrt, row));
+    }
+    let mut m = Map::new();
+    m.insert("index".into(), Value::from(ev.index));
+    m.insert("name".into(), Value::from(name));
+    m.insert("t".into(), num(ev.t));
+    m.insert("mode_before".into(), Value::from(mode_name(ev.mode_before)));
+    m.insert("mode_after".into(), Value::from(mode_name(ev.mode_after)));
+    m.insert("guard_slope".into(), num(ev.guard_slope));
+    m.insert("transversal".into(), Value::from(ev.transversal));
+    m.insert("dt".into(), by_name(&info.params, wrt, &ev.dt));
+    m.insert("jump".into(), Value::Object(jump));
+    m.insert("atoms".into(), Value::Object(atoms));
+    Value::Object(m)
+}
+
+/// Diagnostics as `[{kind, t, message}]`.
+pub fn diagnostics_json(diags: &[Diagnostic]) -> Value {
+    Value::Array(
+        diags
+            .iter()
+            .map(|d| {
+                let mut m = Map::new();
+                m.insert("kind".into(), Value::from(d.kind.name()));
+                m.insert("t".into(), num(d.t));
+                m.insert("message".into(), Value::from(d.message.clone()));
+                Value::Object(m)
+            })
+            .collect(),
+    )
+}
+
+/// Stats as `{steps, rejected_steps, events, wall_seconds}` plus the other counters.
+pub fn stats_json(s: &Stats) -> Value {
+    let mut m = Map::new();
+    m.insert("steps".into(), Value::from(s.steps));
+    m.insert("rejected_steps".into(), Value::from(s.rejected_steps));
+    m.insert("events".into(), Value::from(s.events));
+    m.insert("wall_seconds".into(), num(s.wall_seconds));
+    m.insert("switch_crossings".into(), Value::from(s.switch_crossings));
+    m.insert("rhs_evals".into(), Value::from(s.rhs_evals));
+    m.insert("jac_evals".into(), Value::from(s.jac_evals));
+    m.insert("factorizations".into(), Value::from(s.factorizations));
+    Value::Object(m)
+}
+
+/// Pretty JSON text with a final newline.
+pub fn json_text(v: &Value) -> String {
+    let mut s = serde_json::to_string_pretty(v).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+    s.push('\n');
+    s
+}
+
+/// A number with `sig` significant digits, fixed notation for moderate magnitudes and
+/// scientific otherwise (like C's `%g`).
+pub fn g(x: f64, sig: usize) -> String {
+    if !x.is_finite() {
+        return format!("{x}");
+    }
+    if x == 0.0 {
+        return "0".to_string();
+    }
+    let sig = sig.max(1);
+    let exp = x.abs().log10().floor() as i32;
+    if (-4..sig as i32).contains(&exp) {
+        let decimals = (sig as i32 - 1 - exp).max(0) as usize;
+        let s = format!("{x:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        let s = format!("{x:.prec$e}", prec = sig - 1);
+        // Trim zeros of the mantissa: 1.500e-7 -> 1.5e-7.
+        match s.split_once('e') {
+            Some((m, e)) if m.contains('.') => {
+                format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.'))
+            }
+            _ => s,
+        }
+    }
+}
+
+/// A plain-text table: a header row, a rule, and left-aligned columns.
+#[derive(Debug, Default)]
+pub struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    /// A table with these column titles.
+    pub fn new<S: AsRef<str>>(header: &[S]) -> Self {
+        Table {
+            header: header.iter().map(|s| s.as_ref().to_string()).collect(),
+            rows: Vec::new(),
+        }
+    }
+    /// Appends a row (missing cells print empty).
+    pub fn row(&mut self, cells: Vec<String>) {
+        self.rows.push(cells);
+    }
+    /// Whether no rows were added.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+    /// The text, each line ending in a newline.
+    pub fn render(&self) -> String {
+        let ncol = self
+            .rows
+            .iter()
+            .map(Vec::len)
+            .chain(std::iter::once(self.header.len()))
+            .max()
+            .unwrap_or(0);
+        let mut width = vec![0usize; ncol];
+        for row in std::iter::once(&self.header).chain(&self.rows) {
+            for (j, c) in row.iter().enumerate() {
+                width[j] = width[j].max(c.chars().count());
+            }
+        }
+        let line = |row: &[String]| {
+            let mut s = String::new();
+            for (j, w) in width.iter().enumerate() {
+                let c = row.get(j).map(String::as_str).unwrap_or("");
+                s.push_str(c);
+                if j + 1 < ncol {
+                    let pad = w - c.chars().count() + 2;
+                    s.extend(std::iter::repeat_n(' ', pad));
+                }
+            }
+            s.trim_end().to_string() + "\n"
+        };
+        let mut out = line(&self.header);
+        let total: usize = width.iter().sum::<usize>() + 2 * ncol.saturating_sub(1);
+        out.push_str(&"-".repeat(total));
+        out.push('\n');
+        for r in &self.rows {
+            out.push_str(&line(r));
+        }
+        out
+    }
+}
+
+/// Diagnostics as text lines (`warning: zeno at t = 1.9: ...`), empty if none.
+pub fn diagnostics_text(diags: &[Diagnostic]) -> String {
+    let mut s = String::new();
+    for d in diags {
+        s.push_str(&format!(
+            "warning: {} at t = {}: {}\n",
+            d.kind.name(),
+            g(d.t, 10),
+            d.message
+        ));
+    }
+    s
+}
+
+/// Cosine similarity of two vectors (1 when both vanish, 0 when only one does).
+pub fn cosine(a: &[f64], b: &[f64]) -> f64 {
+    let dot: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    let na = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let nb = b.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if na == 0.0 && nb == 0.0 {
+        1.0
+    } else if na == 0.0 || nb == 0.0 {
+        0.0
+    } else {
+        dot / (na * nb)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn general_number_format() {
+        assert_eq!(g(2.8314408141470055, 6), "2.83144");
+        assert_eq!(g(0.0, 6), "0");
+        assert_eq!(g(1e-9, 3), "1e-9");
+        assert_eq!(g(-1.5e-7, 4), "-1.5e-7");
+        assert_eq!(g(123456789.0, 4), "1.235e8");
+        assert_eq!(g(100.0, 6), "100");
+        assert_eq!(g(0.001234, 3), "0.00123");
+        assert_eq!(g(f64::NAN, 3), "NaN");
+    }
+
+    #[test]
+    fn table_aligns_columns() {
+        let mut t = Table::new(&["a", "long header"]);
+        t.row(vec!["12345".into(), "x".into()]);
+        let text = t.render();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "a      long header");
+        assert_eq!(lines[1], "-".repeat(18));
+        assert_eq!(lines[2], "12345  x");
+    }
+
+    #[test]
+    fn cosine_similarity() {
+        assert_relative_eq!(cosine(&[1.0, 0.0], &[1.0, 1.0]), 0.5f64.sqrt());
+        assert_eq!(cosine(&[0.0], &[0.0]), 1.0);
+        assert_eq!(cosine(&[0.0], &[2.0]), 0.0);
+        assert_relative_eq!(cosine(&[2.0, -1.0], &[-4.0, 2.0]), -1.0);
+    }
+
+    #[test]
+    fn nonfinite_numbers_are_null() {
+        assert_eq!(num(f64::NAN), Value::Null);
+        assert_eq!(num(f64::INFINITY), Value::Null);
+        assert_eq!(num(1.5), serde_json::json!(1.5));
+    }
+}

@@ -1,0 +1,257 @@
+//! `mvad sweep MODEL.hyb --over NAME=START:STOP:COUNT`: one run per value of parameter
+//! NAME (COUNT values from START to STOP inclusive), as in the paper's Table 2: the value,
+//! the guard slope |∇ₓg·f| of the first event, whether it is transversal, the atom
+//! magnitude ‖α‖ (over the `--wrt` parameters) of `--observable` (default: the first
+//! observable) and the event time; plus dt/dNAME, C and dC/dNAME. `--json` gives every
+//! event of every run.
+
+use clap::Args;
+use mvad::runtime::solve::solve;
+use mvad::{HybridModel, ModelAlloc};
+use nalgebra::DefaultAllocator;
+use serde_json::{Map, Value};
+
+use super::grad::grad_json;
+use super::output::{g, json_text, num, Table};
+use super::progress::Progress;
+use super::{param_index, parse_number, setup, solve_err, CliError, CmdResult, Common};
+
+/// Arguments of `mvad sweep`.
+#[derive(Args, Debug)]
+pub struct SweepArgs {
+    /// Common options.
+    #[command(flatten)]
+    pub common: Common,
+    /// The parameter and its values: NAME=START:STOP:COUNT (COUNT ≥ 1 values, STOP included).
+    #[arg(long, value_name = "NAME=START:STOP:COUNT", allow_hyphen_values = true)]
+    pub over: String,
+    /// The observable whose atoms are shown (default: the first one).
+    #[arg(long, value_name = "NAME")]
+    pub observable: Option<String>,
+}
+
+/// The parsed `--over` value.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Over {
+    /// The parameter's index.
+    pub param: usize,
+    /// The values.
+    pub values: Vec<f64>,
+}
+
+/// Parses `NAME=START:STOP:COUNT` against the parameter names.
+pub fn parse_over(names: &[String], text: &str) -> Result<Over, CliError> {
+    let bad = || {
+        CliError::Input(format!(
+            "error: --over expects NAME=START:STOP:COUNT (e.g. v0=-0.5:-5:10), got `{text}`"
+        ))
+    };
+    let (name, range) = text.split_once('=').ok_or_else(bad)?;
+    let param = param_index(names, name.trim(), "--over")?;
+    let parts: Vec<&str> = range.split(':').collect();
+    let [a, b, c] = parts[..] else {
+        return Err(bad());
+    };
+    let start = parse_number(a, "error: --over START")?;
+    let stop = parse_number(b, "error: --over STOP")?;
+    let count: usize = c.trim().parse().map_err(|_| bad())?;
+    if count == 0 || count > 100_000 {
+        return Err(CliError::Input(format!(
+            "error: --over COUNT must be between 1 and 100000, got {count}"
+        )));
+    }
+    let values = if count == 1 {
+        vec![start]
+    } else {
+        (0..count)
+            .map(|i| start + (stop - start) * i as f64 / (count - 1) as f64)
+            .collect()
+    };
+    Ok(Over { param, values })
+}
+
+/// Runs `mvad sweep`.
+pub fn run<M: HybridModel>(model: &M, file: &str, args: &SweepArgs) -> CmdResult
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let s = setup(model, &args.common)?;
+    let info = model.info();
+    let over = parse_over(&info.params, &args.over)?;
+    let obs = match &args.observable {
+        None => 0,
+        Some(name) => info.observable_index(name).ok_or_else(|| {
+            CliError::Input(format!(
+                "error: unknown observable `{name}`; known observables: {}",
+                info.observables.join(", ")
+            ))
+        })?,
+    };
+    let k = over.param;
+    let pname = &info.params[k];
+    let progress = Progress::new(over.values.len(), &format!("sweep {pname}"));
+    let mut runs = Vec::with_capacity(over.values.len());
+    for &value in &over.values {
+        let mut p = s.params.clone();
+        p[k] = value;
+        let sol = solve(model, &p, &s.opts).map_err(|e| {
+            let e = solve_err(e);
+            let msg = format!("{} (at {pname} = {})", e.message(), g(value, 10));
+            match e {
+                CliError::Input(_) => CliError::Input(msg),
+                CliError::Run(_) => CliError::Run(msg),
+            }
+        })?;
+        progress.inc();
+        runs.push((value, sol));
+    }
+    progress.finish();
+
+    let atom_norm = |atoms: &[Vec<f64>]| -> f64 {
+        atoms
+            .get(obs)
+            .map(|a| s.wrt.iter().map(|&j| a[j] * a[j]).sum::<f64>().sqrt())
+            .unwrap_or(0.0)
+    };
+
+    if args.common.json {
+        let rows: Vec<Value> = runs
+            .iter()
+            .map(|(value, sol)| {
+                let mut m = Map::new();
+                m.insert("value".into(), num(*value));
+                let first = sol.events.first();
+                m.insert("guard_slope".into(), first.map(|e| num(e.guard_slope.abs())).unwrap_or(Value::Null));
+                m.insert("transversal".into(), first.map(|e| Value::from(e.transversal)).unwrap_or(Value::Null));
+                m.insert("atom_magnitude".into(), first.map(|e| num(atom_norm(&e.atoms))).unwrap_or(Value::Null));
+                m.insert("event_time".into(), first.map(|e| num(e.t)).unwrap_or(Value::Null));
+                m.insert("run".into(), grad_json(info, sol, &s.wrt, "forward"));
+                Value::Object(m)
+            })
+            .collect();
+        let mut m = Map::new();
+        m.insert("model".into(), Value::from(info.name.clone()));
+        m.insert("param".into(), Value::from(pname.clone()));
+        m.insert(
+            "observable".into(),
+            info.observables.get(obs).map(|o| Value::from(o.clone())).unwrap_or(Value::Null),
+        );
+        m.insert("rows".into(), Value::Array(rows));
+        return Ok(json_text(&Value::Object(m)));
+    }
+
+    let obs_name = info.observables.get(obs).cloned().unwrap_or_else(|| "-".into());
+    let mut out = format!(
+        "model {} ({file}): sweep of {pname} over {} values; first event of each run, atoms of `{obs_name}`\n\n",
+        info.name,
+        runs.len()
+    );
+    let mut t = Table::new(&[
+        pname.clone(),
+        "K".into(),
+        "guard slope |∇g·f|".into(),
+        "transversal".into(),
+        "atom |α|".into(),
+        "event time".into(),
+        format!("dt/d{pname}"),
+        "C".into(),
+        format!("dC/d{pname}"),
+    ]);
+    let mut warnings = String::new();
+    for (value, sol) in &runs {
+        let mut row = vec![g(*value, 8), sol.events.len().to_string()];
+        match sol.events.first() {
+            Some(e) => row.extend([
+                g(e.guard_slope.abs(), 6),
+                if e.transversal { "True" } else { "False" }.to_string(),
+                g(atom_norm(&e.atoms), 6),
+                g(e.t, 6),
+                g(e.dt[k], 6),
+            ]),
+            None => row.extend(["-", "-", "-", "-", "-"].map(String::from)),
+        }
+        row.push(g(sol.cost, 10));
+        row.push(g(sol.gradient[k], 10));
+        t.row(row);
+        for d in &sol.diagnostics {
+            warnings.push_str(&format!(
+                "warning: at {pname} = {}: {} at t = {}: {}\n",
+                g(*value, 8),
+                d.kind.name(),
+                g(d.t, 8),
+                d.message
+            ));
+        }
+    }
+    out.push_str(&t.render());
+    out.push_str(&warnings);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::{Cli, Command};
+    use approx::assert_relative_eq;
+    use clap::Parser;
+    use mvad::runtime::fixtures::Ball;
+
+    fn args(extra: &[&str]) -> SweepArgs {
+        let mut v = vec!["mvad", "sweep", "ball.hyb"];
+        v.extend_from_slice(extra);
+        match Cli::try_parse_from(v).expect("parses").command {
+            Command::Sweep(a) => a,
+            _ => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn parses_ranges() {
+        let names: Vec<String> = ["a", "v0"].map(String::from).to_vec();
+        let o = parse_over(&names, "v0=-0.5:-5:10").expect("ok");
+        assert_eq!(o.param, 1);
+        assert_eq!(o.values.len(), 10);
+        assert_relative_eq!(o.values[0], -0.5);
+        assert_relative_eq!(o.values[9], -5.0);
+        assert_relative_eq!(o.values[1], -1.0);
+        assert_eq!(parse_over(&names, "a=1:2:1").expect("ok").values, vec![1.0]);
+        for bad in ["v0", "v0=1:2", "v0=1:2:x", "v0=1:2:0", "q=1:2:3", "v0=a:2:3", "v0=1:2:3:4"] {
+            assert_eq!(parse_over(&names, bad).err().map(|e| e.status()), Some(2), "{bad}");
+        }
+    }
+
+    /// E2 (h0 = 1): the first impact of the ball thrown down at v0 has
+    /// t = (v0 + sqrt(v0² + 2 g h0)) / g and |∇g·f| = sqrt(v0² + 2 g h0).
+    #[test]
+    fn e2_table_two_against_the_closed_form() {
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&[
+                "--over", "v0=-0.5:-5:10", "--set", "h0=1", "--observable", "height", "--json", "--rtol",
+                "1e-10", "--atol", "1e-12",
+            ]),
+        )
+        .expect("runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        let rows = v["rows"].as_array().expect("rows");
+        assert_eq!(rows.len(), 10);
+        for r in rows {
+            let v0 = r["value"].as_f64().expect("v0");
+            let speed = (v0 * v0 + 2.0 * 9.81).sqrt();
+            assert_relative_eq!(r["guard_slope"].as_f64().expect("n"), speed, max_relative = 1e-8);
+            assert_relative_eq!(r["event_time"].as_f64().expect("n"), (v0 + speed) / 9.81, max_relative = 1e-8);
+            assert_eq!(r["transversal"], true);
+            assert!(r["atom_magnitude"].as_f64().expect("n") < 1e-12);
+        }
+        assert_relative_eq!(rows[0]["guard_slope"].as_f64().expect("n"), 4.457577817604534, max_relative = 1e-9);
+        assert_relative_eq!(rows[9]["event_time"].as_f64().expect("n"), 0.17123551038388318, max_relative = 1e-9);
+    }
+
+    #[test]
+    fn text_table() {
+        let out = run(&Ball::new(), "ball.hyb", &args(&["--over", "e=0.5:0.9:3"])).expect("runs");
+        assert!(out.contains("guard slope |∇g·f|"), "{out}");
+        assert_eq!(out.lines().filter(|l| l.contains("True")).count(), 3, "{out}");
+    }
+}

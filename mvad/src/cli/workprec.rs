@@ -1,0 +1,395 @@
+//! `mvad workprec MODEL.hyb`: error against wall time over tolerances 1e-3 … 1e-12.
+//!
+//! For each rtol (atol = rtol · `--atol-ratio`), two ways to get C and dC/dθ:
+//! - MV-AD: one run with sensitivities;
+//! - central FD: one primal run for C and two primal runs per `--wrt` parameter, with
+//!   relative step `--step` (default: rtol^(1/3), which balances the O(h²) truncation
+//!   error against the O(rtol/h) error of the differenced runs).
+//!
+//! Errors are relative to a reference: `--reference C=VALUE` for the cost and
+//! `--reference NAME=VALUE` for dC/dNAME, or else an MV-AD run at rtol 1e-13. The error
+//! of dC/dθ is max_i |Δ_i| / max_i |ref_i| over the `--wrt` parameters. Wall times are
+//! means over repeated runs (at least 20 ms of work, at most 200 repetitions).
+//! `--plot FILE.svg|png` draws both errors against wall time, log-log.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use mvad::runtime::error::SolveError;
+use mvad::runtime::solution::{Options, Solution};
+use mvad::runtime::solve::solve;
+use mvad::{HybridModel, ModelAlloc};
+use nalgebra::{DefaultAllocator, OVector};
+use serde_json::{Map, Value};
+
+use super::output::{g, json_text, num, Table};
+use super::plot::{format_of, workprec as plot_workprec, Curve};
+use super::progress::Progress;
+use super::{param_index, parse_number, setup, solve_err, CliError, CmdResult, Common};
+
+/// Arguments of `mvad workprec`.
+#[derive(Args, Debug)]
+pub struct WorkprecArgs {
+    /// Common options.
+    #[command(flatten)]
+    pub common: Common,
+    /// Reference values: `C=VALUE` for the cost, `NAME=VALUE` for dC/dNAME (repeatable).
+    #[arg(long, value_name = "NAME=VALUE")]
+    pub reference: Vec<String>,
+    /// Relative step of the central differences (default: rtol^(1/3) at each tolerance).
+    #[arg(long, value_name = "H")]
+    pub step: Option<f64>,
+    /// atol = rtol · RATIO.
+    #[arg(long = "atol-ratio", value_name = "RATIO", default_value_t = 1e-2)]
+    pub atol_ratio: f64,
+    /// Draw the error against wall time into FILE (.svg or .png), log-log.
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+}
+
+/// The tolerances of the diagram.
+pub const TOLERANCES: [f64; 10] = [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12];
+
+/// One row: tolerance, and for MV-AD and FD the wall time, C and its error, dC/dθ and its error.
+#[derive(Clone, Debug)]
+struct Row {
+    rtol: f64,
+    atol: f64,
+    mvad: Point,
+    fd: Point,
+}
+
+#[derive(Clone, Debug)]
+struct Point {
+    seconds: f64,
+    cost: f64,
+    cost_err: f64,
+    grad: Vec<f64>,
+    grad_err: f64,
+    step: f64,
+}
+
+/// Mean wall time of `f` over enough repetitions, and its last result.
+fn timed<T>(mut f: impl FnMut() -> Result<T, SolveError>) -> Result<(f64, T), SolveError> {
+    let start = Instant::now();
+    let mut out = f()?;
+    let mut reps = 1u32;
+    while start.elapsed().as_secs_f64() < 0.02 && reps < 200 {
+        out = f()?;
+        reps += 1;
+    }
+    Ok((start.elapsed().as_secs_f64() / f64::from(reps), out))
+}
+
+/// The error measure of a gradient: max_i |a_i − r_i| / max_i |r_i|.
+fn grad_error(a: &[f64], r: &[f64]) -> f64 {
+    let diff = a.iter().zip(r).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    let scale = r.iter().map(|y| y.abs()).fold(0.0, f64::max);
+    if scale > 0.0 {
+        diff / scale
+    } else {
+        diff
+    }
+}
+
+fn rel_error(a: f64, r: f64) -> f64 {
+    if r != 0.0 {
+        (a - r).abs() / r.abs()
+    } else {
+        (a - r).abs()
+    }
+}
+
+/// Runs `mvad workprec`.
+pub fn run<M: HybridModel>(model: &M, file: &str, args: &WorkprecArgs) -> CmdResult
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let s = setup(model, &args.common)?;
+    let info = model.info();
+    if let Some(p) = &args.plot {
+        format_of(p)?;
+    }
+    if let Some(h) = args.step {
+        if !(h.is_finite() && h > 0.0 && h < 1.0) {
+            return Err(CliError::Input(format!("error: --step must be in (0, 1), got {h}")));
+        }
+    }
+    if !(args.atol_ratio.is_finite() && args.atol_ratio > 0.0) {
+        return Err(CliError::Input(format!(
+            "error: --atol-ratio must be positive, got {}",
+            args.atol_ratio
+        )));
+    }
+    let wrt = &s.wrt;
+
+    // Reference values: given, or a tight MV-AD run.
+    let mut ref_cost = None;
+    let mut ref_grad: Vec<Option<f64>> = vec![None; info.params.len()];
+    for item in &args.reference {
+        let (name, value) = item.split_once('=').ok_or_else(|| {
+            CliError::Input(format!("error: --reference expects NAME=VALUE, got `{item}`"))
+        })?;
+        let value = parse_number(value, &format!("error: --reference {}", name.trim()))?;
+        match name.trim() {
+            "C" | "cost" => ref_cost = Some(value),
+            other => {
+                let k = param_index(&info.params, other, "--reference (use C=VALUE for the cost)")?;
+                ref_grad[k] = Some(value);
+            }
+        }
+    }
+    let need_run = ref_cost.is_none() || wrt.iter().any(|&k| ref_grad[k].is_none());
+    let mut source = "given";
+    if need_run {
+        let o = Options {
+            rtol: 1e-13,
+            atol: 1e-15,
+            ..s.opts.clone()
+        };
+        let sol = solve(model, &s.params, &o).map_err(solve_err)?;
+        ref_cost.get_or_insert(sol.cost);
+        for &k in wrt {
+            ref_grad[k].get_or_insert(sol.gradient[k]);
+        }
+        source = if args.reference.is_empty() { "MV-AD at rtol 1e-13" } else { "given, the rest MV-AD at rtol 1e-13" };
+    }
+    let ref_cost = ref_cost.unwrap_or(f64::NAN);
+    let ref_g: Vec<f64> = wrt.iter().map(|&k| ref_grad[k].unwrap_or(f64::NAN)).collect();
+
+    let progress = Progress::new(TOLERANCES.len(), "workprec");
+    let mut rows = Vec::new();
+    for &rtol in &TOLERANCES {
+        let atol = rtol * args.atol_ratio;
+        let o = Options {
+            rtol,
+            atol,
+            ..s.opts.clone()
+        };
+        let mv = mvad_point(model, &s.params, &o, wrt, ref_cost, &ref_g).map_err(solve_err)?;
+        let step = args.step.unwrap_or_else(|| rtol.cbrt());
+        let fd = fd_point(model, &s.params, &o, wrt, step, ref_cost, &ref_g).map_err(solve_err)?;
+        rows.push(Row { rtol, atol, mvad: mv, fd });
+        progress.inc();
+    }
+    progress.finish();
+
+    if let Some(path) = &args.plot {
+        let curve = |label: &str, f: &dyn Fn(&Row) -> (f64, f64)| Curve {
+            label: label.to_string(),
+            points: rows.iter().map(f).collect(),
+        };
+        let panels = vec![
+            (
+                "relative error of C".to_string(),
+                vec![
+                    curve("MV-AD", &|r| (r.mvad.seconds, r.mvad.cost_err)),
+                    curve("central FD (primal run)", &|r| (r.fd.seconds, r.fd.cost_err)),
+                ],
+            ),
+            (
+                "relative error of dC/dθ".to_string(),
+                vec![
+                    curve("MV-AD", &|r| (r.mvad.seconds, r.mvad.grad_err)),
+                    curve("central FD", &|r| (r.fd.seconds, r.fd.grad_err)),
+                ],
+            ),
+        ];
+        plot_workprec(path, &format!("{}: error against wall time", info.name), &panels)?;
+    }
+
+    let names: Vec<String> = wrt.iter().map(|&k| info.params[k].clone()).collect();
+    if args.common.json {
+        let point = |p: &Point| {
+            let mut gm = Map::new();
+            for (n, v) in names.iter().zip(&p.grad) {
+                gm.insert(n.clone(), num(*v));
+            }
+            serde_json::json!({
+                "wall_seconds": num(p.seconds),
+                "cost": num(p.cost),
+                "cost_error": num(p.cost_err),
+                "gradient": Value::Object(gm),
+                "gradient_error": num(p.grad_err),
+            })
+        };
+        let rows_json: Vec<Value> = rows
+            .iter()
+            .map(|r| {
+                let mut fd = point(&r.fd);
+                if let Value::Object(m) = &mut fd {
+                    m.insert("step".into(), num(r.fd.step));
+                }
+                serde_json::json!({
+                    "rtol": num(r.rtol), "atol": num(r.atol),
+                    "mvad": point(&r.mvad), "fd": fd,
+                })
+            })
+            .collect();
+        let mut gm = Map::new();
+        for (n, v) in names.iter().zip(&ref_g) {
+            gm.insert(n.clone(), num(*v));
+        }
+        let mut m = Map::new();
+        m.insert("model".into(), Value::from(info.name.clone()));
+        m.insert("wrt".into(), Value::from(names.clone()));
+        m.insert(
+            "reference".into(),
+            serde_json::json!({"cost": num(ref_cost), "gradient": Value::Object(gm), "source": source}),
+        );
+        m.insert("rows".into(), Value::Array(rows_json));
+        return Ok(json_text(&Value::Object(m)));
+    }
+
+    let mut out = format!(
+        "model {} ({file}): error against wall time, w.r.t. {}\nreference ({source}): C = {}, dC/dθ = [{}]\n\
+         errors are relative; dC/dθ error = max |Δ| / max |ref| over the parameters\n\n",
+        info.name,
+        names.join(", "),
+        g(ref_cost, 15),
+        ref_g.iter().map(|&v| g(v, 15)).collect::<Vec<_>>().join(", ")
+    );
+    let mut t = Table::new(&[
+        "rtol", "MV-AD time", "MV-AD err C", "MV-AD err dC", "FD time", "FD err C", "FD err dC", "FD step",
+    ]);
+    for r in &rows {
+        t.row(vec![
+            g(r.rtol, 2),
+            format!("{} s", g(r.mvad.seconds, 3)),
+            g(r.mvad.cost_err, 2),
+            g(r.mvad.grad_err, 2),
+            format!("{} s", g(r.fd.seconds, 3)),
+            g(r.fd.cost_err, 2),
+            g(r.fd.grad_err, 2),
+            g(r.fd.step, 2),
+        ]);
+    }
+    out.push_str(&t.render());
+    if let Some(p) = &args.plot {
+        out.push_str(&format!("\nwrote {}\n", p.display()));
+    }
+    Ok(out)
+}
+
+fn mvad_point<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    wrt: &[usize],
+    ref_cost: f64,
+    ref_g: &[f64],
+) -> Result<Point, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (seconds, sol): (f64, Solution) = timed(|| solve(model, params, opts))?;
+    let grad: Vec<f64> = wrt.iter().map(|&k| sol.gradient[k]).collect();
+    Ok(Point {
+        seconds,
+        cost: sol.cost,
+        cost_err: rel_error(sol.cost, ref_cost),
+        grad_err: grad_error(&grad, ref_g),
+        grad,
+        step: 0.0,
+    })
+}
+
+fn fd_point<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    wrt: &[usize],
+    rel_step: f64,
+    ref_cost: f64,
+    ref_g: &[f64],
+) -> Result<Point, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let primal = Options {
+        sensitivities: false,
+        record: false,
+        ..opts.clone()
+    };
+    let (seconds, (cost, grad)) = timed(|| {
+        let cost = solve(model, params, &primal)?.cost;
+        let mut grad = Vec::with_capacity(wrt.len());
+        for &k in wrt {
+            let h = rel_step * params[k].abs().max(1.0);
+            let mut p = params.clone();
+            p[k] += h;
+            let cp = solve(model, &p, &primal)?.cost;
+            let up = p[k];
+            p[k] = params[k] - h;
+            let cm = solve(model, &p, &primal)?.cost;
+            grad.push((cp - cm) / (up - p[k]));
+        }
+        Ok((cost, grad))
+    })?;
+    Ok(Point {
+        seconds,
+        cost,
+        cost_err: rel_error(cost, ref_cost),
+        grad_err: grad_error(&grad, ref_g),
+        grad,
+        step: rel_step,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::{Cli, Command};
+    use clap::Parser;
+    use mvad::runtime::fixtures::Ball;
+
+    fn args(extra: &[&str]) -> WorkprecArgs {
+        let mut v = vec!["mvad", "workprec", "ball.hyb"];
+        v.extend_from_slice(extra);
+        match Cli::try_parse_from(v).expect("parses").command {
+            Command::Workprec(a) => a,
+            _ => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn errors_fall_with_the_tolerance_against_the_closed_form() {
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--json", "--wrt", "e", "--reference", "C=1.8905137123173506", "--reference", "e=2.8314408141470055"]),
+        )
+        .expect("runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        assert_eq!(v["reference"]["source"], "given");
+        let rows = v["rows"].as_array().expect("rows");
+        assert_eq!(rows.len(), TOLERANCES.len());
+        let err = |i: usize, k: &str, q: &str| rows[i][k][q].as_f64().expect("number");
+        // The tightest MV-AD run is accurate to ~1e-9 and better than the loosest.
+        assert!(err(9, "mvad", "gradient_error") < 1e-8, "{out}");
+        assert!(err(9, "mvad", "cost_error") < 1e-8, "{out}");
+        assert!(err(9, "mvad", "gradient_error") < err(0, "mvad", "gradient_error").max(1e-14));
+        // MV-AD beats FD at the same tolerance from 1e-6 on.
+        assert!(err(5, "mvad", "gradient_error") < err(5, "fd", "gradient_error"), "{out}");
+        assert!(rows[0]["mvad"]["wall_seconds"].as_f64().expect("t") > 0.0);
+    }
+
+    #[test]
+    fn text_and_bad_references() {
+        let out = run(&Ball::new(), "ball.hyb", &args(&["--wrt", "e"])).expect("runs");
+        assert!(out.contains("MV-AD at rtol 1e-13"), "{out}");
+        assert_eq!(out.lines().filter(|l| l.contains(" s ")).count(), TOLERANCES.len(), "{out}");
+        for bad in [&["--reference", "x=1"][..], &["--reference", "C"], &["--reference", "C=q"], &["--step", "2"]] {
+            let err = run(&Ball::new(), "ball.hyb", &args(bad)).err();
+            assert_eq!(err.map(|e| e.status()), Some(2), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn gradient_error_measure() {
+        assert_eq!(grad_error(&[1.0, 2.0], &[1.0, 4.0]), 0.5);
+        assert_eq!(grad_error(&[1.0], &[0.0]), 1.0);
+        assert_eq!(rel_error(1.1, 1.0), 0.10000000000000009);
+    }
+}

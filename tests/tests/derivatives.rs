@@ -1,0 +1,348 @@
+//! Every generated partial derivative against central finite differences.
+//!
+//! For each model (the files in `models/*.hyb` and a model using every construct of the
+//! language), at seeded pseudo-random points: ∂f/∂x, ∂f/∂θ, ∂f/∂t per mode and switch
+//! word, the fused Ṡ = f_x S + f_θ, ∇g/∂θg/∂ₜg per event, ∂R/∂x, ∂R/∂θ, ∂R/∂t, σ_j's
+//! gradient, ∂h/∂x, ∂h/∂θ, ℓ/φ/Φ partials, ∂x₀/∂θ and dT/dθ. Central differences use
+//! h = ε^(1/3)·|v| (ε^(1/3) at v = 0), so parameters like τ = 1e-8 get a relative step.
+//! Both doors are checked: the interpreted model and the `hybrid!`-compiled one.
+
+use mvad::interp::InterpretedModel;
+use mvad::{HybridModel, ModelAlloc};
+use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
+
+/// The language's every construct: modes, kinks in flows and ℓ, time dependence, event
+/// and final costs, a param-dependent horizon, observables using observables.
+pub const SINK: &str = include_str!("sink.hyb");
+
+mvad::hybrid!(include "tests/sink.hyb");
+
+/// The `.hyb` files of models/.
+pub fn model_files() -> Vec<(String, String)> {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../models");
+    let mut out: Vec<(String, String)> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
+                .filter_map(|p| Some((p.file_name()?.to_string_lossy().into_owned(), std::fs::read_to_string(&p).ok()?)))
+                .collect()
+        })
+        .unwrap_or_default();
+    out.sort();
+    out
+}
+
+/// A small deterministic generator (splitmix64), uniform in [0, 1).
+pub struct Rng(u64);
+impl Rng {
+    /// A generator with the given seed.
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+    /// The next number in [0, 1).
+    pub fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+fn vn<M: HybridModel>(m: &M, v: &[f64]) -> OVector<f64, M::N>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut o = OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    o.as_mut_slice().copy_from_slice(v);
+    o
+}
+
+fn vp<M: HybridModel>(m: &M, v: &[f64]) -> OVector<f64, M::P>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut o = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    o.as_mut_slice().copy_from_slice(v);
+    o
+}
+
+/// Row-major copy of a nalgebra matrix.
+fn rows<R: nalgebra::Dim, C: nalgebra::Dim>(m: &OMatrix<f64, R, C>) -> Vec<f64>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<R, C>,
+{
+    let mut v = Vec::with_capacity(m.nrows() * m.ncols());
+    for r in 0..m.nrows() {
+        for c in 0..m.ncols() {
+            v.push(m[(r, c)]);
+        }
+    }
+    v
+}
+
+/// A point: states, params, time.
+#[derive(Clone, Debug)]
+pub struct Pt {
+    /// States.
+    pub x: Vec<f64>,
+    /// Params.
+    pub p: Vec<f64>,
+    /// Time.
+    pub t: f64,
+}
+
+/// A random point near the model's defaults: θ = θ₀(1 + 0.2u), x = x₀(θ) + u·max(1, |x₀|)/2.
+pub fn random_point<M: HybridModel>(m: &M, rng: &mut Rng) -> Pt
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = m.info();
+    let p: Vec<f64> =
+        info.param_defaults.iter().map(|&d| if d == 0.0 { rng.range(-0.3, 0.3) } else { d * rng.range(0.8, 1.2) }).collect();
+    let mut x0 = OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    m.initial_state(&vp(m, &p), &mut x0);
+    let x = x0.iter().map(|&v| v + rng.range(-0.5, 0.5) * v.abs().max(1.0)).collect();
+    Pt { x, p, t: rng.range(0.05, 1.5) }
+}
+
+/// Which variable block a derivative is taken in.
+#[derive(Clone, Copy, Debug)]
+enum Wrt {
+    X,
+    P,
+    T,
+}
+
+/// Compares `sym` (row-major outputs × vars of block `wrt`) with central differences of `val`.
+fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec<f64>) {
+    let nout = val(pt).len();
+    let nvar = match wrt {
+        Wrt::X => pt.x.len(),
+        Wrt::P => pt.p.len(),
+        Wrt::T => 1,
+    };
+    assert_eq!(sym.len(), nout * nvar, "{what}: size");
+    fn get(q: &mut Pt, wrt: Wrt, j: usize) -> &mut f64 {
+        match wrt {
+            Wrt::X => &mut q.x[j],
+            Wrt::P => &mut q.p[j],
+            Wrt::T => &mut q.t,
+        }
+    }
+    for j in 0..nvar {
+        let mut q = pt.clone();
+        let v = *get(&mut q, wrt, j);
+        let h = f64::EPSILON.cbrt() * if v != 0.0 { v.abs() } else { 1.0 };
+        *get(&mut q, wrt, j) = v + h;
+        let up = val(&q);
+        *get(&mut q, wrt, j) = v - h;
+        let dn = val(&q);
+        let h2 = (v + h) - (v - h);
+        for i in 0..nout {
+            let fd = (up[i] - dn[i]) / h2;
+            let s = sym[i * nvar + j];
+            let tol = 1e-6 * s.abs().max(fd.abs()) + 20.0 * f64::EPSILON * (up[i].abs() + dn[i].abs()) / h2 + 1e-9;
+            assert!(
+                (s - fd).abs() <= tol,
+                "{what}: d[{i}]/d{wrt:?}[{j}] symbolic {s:e} vs FD {fd:e} at {pt:?}"
+            );
+        }
+    }
+}
+
+/// Checks every partial of `m` at `pt` with switch word `sw`.
+pub fn check_model<M: HybridModel>(m: &M, pt: &Pt, sw: u64, rng: &mut Rng)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = m.info().clone();
+    let n = pt.x.len();
+    let p = pt.p.len();
+    let zn = || OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    let zp = || OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    let znn = || OMatrix::<f64, M::N, M::N>::zeros_generic(m.nstates(), m.nstates());
+    let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(m.nstates(), m.nparams());
+    let (x, pv) = (vn(m, &pt.x), vp(m, &pt.p));
+    let t = pt.t;
+
+    // Flow, per mode.
+    for mode in 0..info.modes.len() {
+        let f = |q: &Pt| {
+            let mut f = zn();
+            m.rhs(mode, sw, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut f);
+            f.as_slice().to_vec()
+        };
+        let mut fx = znn();
+        m.rhs_jac_x(mode, sw, t, &x, &pv, &mut fx);
+        let mut fp = znp();
+        m.rhs_jac_p(mode, sw, t, &x, &pv, &mut fp);
+        let mut ft = zn();
+        m.rhs_dt(mode, sw, t, &x, &pv, &mut ft);
+        let what = format!("{} mode {mode} f", info.name);
+        fd_check(&what, pt, Wrt::X, &rows(&fx), &f);
+        fd_check(&what, pt, Wrt::P, &rows(&fp), &f);
+        fd_check(&what, pt, Wrt::T, ft.as_slice(), &f);
+        if !m.rhs_depends_on_t(mode) {
+            assert!(ft.iter().all(|&v| v == 0.0), "{what}: autonomous flow with ∂f/∂t ≠ 0");
+        }
+        // Sparsity: every entry outside the declared pattern is exactly zero.
+        for r in 0..n {
+            for c in 0..n {
+                if !info.jacobian_sparsity[mode].contains(&(r, c)) {
+                    assert_eq!(fx[(r, c)], 0.0, "{what}: f_x[{r},{c}] outside the sparsity pattern");
+                }
+            }
+        }
+        // Fused sensitivity right-hand side.
+        let mut s = znp();
+        s.iter_mut().for_each(|v| *v = rng.range(-1.0, 1.0));
+        let (mut f1, mut ds) = (zn(), znp());
+        m.rhs_sens(mode, sw, t, &x, &pv, &s, &mut f1, &mut ds);
+        let want = &fx * &s + &fp;
+        assert_eq!(f1.as_slice(), f(pt).as_slice(), "{what}: rhs_sens f");
+        for (a, b) in ds.iter().zip(want.iter()) {
+            assert!((a - b).abs() <= 1e-13 * (1.0 + b.abs()), "{what}: rhs_sens {a} vs {b}");
+        }
+    }
+
+    // Events.
+    for k in 0..info.events.len() {
+        let what = format!("{} event {k}", info.name);
+        let g = |q: &Pt| vec![m.guard(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+        let (mut gx, mut gp) = (zn(), zp());
+        let gt = m.guard_grad(k, t, &x, &pv, &mut gx, &mut gp);
+        fd_check(&format!("{what} guard"), pt, Wrt::X, gx.as_slice(), &g);
+        fd_check(&format!("{what} guard"), pt, Wrt::P, gp.as_slice(), &g);
+        fd_check(&format!("{what} guard"), pt, Wrt::T, &[gt], &g);
+
+        let r = |q: &Pt| {
+            let mut xp = zn();
+            m.reset(k, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut xp);
+            xp.as_slice().to_vec()
+        };
+        let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
+        m.reset_jac(k, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        fd_check(&format!("{what} reset"), pt, Wrt::X, &rows(&rx), &r);
+        fd_check(&format!("{what} reset"), pt, Wrt::P, &rows(&rp), &r);
+        fd_check(&format!("{what} reset"), pt, Wrt::T, rt.as_slice(), &r);
+
+        let c = |q: &Pt| vec![m.event_cost(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+        let (mut cx, mut cp) = (zn(), zp());
+        let ct = m.event_cost_grad(k, t, &x, &pv, &mut cx, &mut cp);
+        fd_check(&format!("{what} cost"), pt, Wrt::X, cx.as_slice(), &c);
+        fd_check(&format!("{what} cost"), pt, Wrt::P, cp.as_slice(), &c);
+        fd_check(&format!("{what} cost"), pt, Wrt::T, &[ct], &c);
+    }
+
+    // Switching functions.
+    for j in 0..info.switches {
+        let what = format!("{} switch {j}", info.name);
+        let s = |q: &Pt| vec![m.switch_value(j, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+        let (mut gx, mut gp) = (zn(), zp());
+        let gt = m.switch_grad(j, t, &x, &pv, &mut gx, &mut gp);
+        fd_check(&what, pt, Wrt::X, gx.as_slice(), &s);
+        fd_check(&what, pt, Wrt::P, gp.as_slice(), &s);
+        fd_check(&what, pt, Wrt::T, &[gt], &s);
+    }
+
+    // Observables.
+    let nobs = info.observables.len();
+    let y = |q: &Pt| {
+        let mut y = vec![0.0; nobs];
+        m.observe(q.t, &vn(m, &q.x), &vp(m, &q.p), &mut y);
+        y
+    };
+    let (mut yx, mut yp) = (vec![9.0; nobs * n], vec![9.0; nobs * p]);
+    m.observe_jac(t, &x, &pv, &mut yx, &mut yp);
+    fd_check(&format!("{} observe", info.name), pt, Wrt::X, &yx, &y);
+    fd_check(&format!("{} observe", info.name), pt, Wrt::P, &yp, &y);
+
+    // Costs.
+    let l = |q: &Pt| vec![m.running_cost(sw, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+    let (mut lx, mut lp) = (zn(), zp());
+    let lv = m.running_cost_grad(sw, t, &x, &pv, &mut lx, &mut lp);
+    assert_eq!(lv, l(pt)[0], "running_cost_grad returns ℓ");
+    fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
+    fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
+    let phi = |q: &Pt| vec![m.final_cost(q.t, &vn(m, &q.x), &vp(m, &q.p))];
+    let (mut cx, mut cp) = (zn(), zp());
+    let ct = m.final_cost_grad(t, &x, &pv, &mut cx, &mut cp);
+    fd_check(&format!("{} Φ", info.name), pt, Wrt::X, cx.as_slice(), &phi);
+    fd_check(&format!("{} Φ", info.name), pt, Wrt::P, cp.as_slice(), &phi);
+    fd_check(&format!("{} Φ", info.name), pt, Wrt::T, &[ct], &phi);
+
+    // x₀(θ) and T(θ).
+    let x0 = |q: &Pt| {
+        let mut x0 = zn();
+        m.initial_state(&vp(m, &q.p), &mut x0);
+        x0.as_slice().to_vec()
+    };
+    let mut dx0 = znp();
+    m.initial_state_jac(&pv, &mut dx0);
+    fd_check(&format!("{} x0", info.name), pt, Wrt::P, &rows(&dx0), &x0);
+    let hz = |q: &Pt| vec![m.horizon(&vp(m, &q.p)).unwrap_or(0.0)];
+    let mut dt = zp();
+    m.horizon_grad(&pv, &mut dt);
+    fd_check(&format!("{} T", info.name), pt, Wrt::P, dt.as_slice(), &hz);
+}
+
+/// The switch word of the branches active at `pt` (bit j iff σ_j > 0), as the runtime keeps it.
+pub fn consistent_switches<M: HybridModel>(m: &M, pt: &Pt) -> u64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (x, p) = (vn(m, &pt.x), vp(m, &pt.p));
+    (0..m.info().switches).filter(|&j| m.switch_value(j, pt.t, &x, &p) > 0.0).fold(0, |w, j| w | (1 << j))
+}
+
+fn check_all<M: HybridModel>(m: &M, seed: u64, npoints: usize)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut rng = Rng::new(seed);
+    for _ in 0..npoints {
+        let pt = random_point(m, &mut rng);
+        let sw = consistent_switches(m, &pt);
+        check_model(m, &pt, sw, &mut rng);
+    }
+}
+
+#[test]
+fn interpreted_models_match_finite_differences() {
+    let files = model_files();
+    assert!(files.len() >= 4, "models/*.hyb not found");
+    for (name, src) in files {
+        let m = InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        check_all(&m, 7, 20);
+    }
+    let m = InterpretedModel::from_source(SINK).expect("sink model");
+    assert_eq!(m.info().switches, 6);
+    check_all(&m, 11, 60);
+}
+
+/// The example models compiled by `hybrid!`.
+mod compiled {
+    mvad::hybrid!(include "../models/bouncing_ball.hyb");
+    mvad::hybrid!(include "../models/ceiling.hyb");
+    mvad::hybrid!(include "../models/e2_sweep.hyb");
+    mvad::hybrid!(include "../models/stiff_relay.hyb");
+    mvad::hybrid!(include "../models/thermostat.hyb");
+    mvad::hybrid!(include "../models/zeno_ball.hyb");
+}
+
+#[test]
+fn compiled_models_match_finite_differences() {
+    check_all(&compiled::BouncingBall::new(), 1, 20);
+    check_all(&compiled::Ceiling::new(), 2, 20);
+    check_all(&compiled::E2Sweep::new(), 3, 20);
+    check_all(&compiled::StiffRelay::new(), 4, 20);
+    check_all(&compiled::Thermostat::new(), 5, 20);
+    check_all(&compiled::ZenoBall::new(), 6, 20);
+    check_all(&Sink::new(), 12, 60);
+}

@@ -1,0 +1,17 @@
+use mvad::hybrid;
+
+hybrid! {
+    model Ball {
+        state h = 2.0;
+        state v = 0.0;
+        flow {
+            der(h) = v;
+            der(v) = -9.81;
+        }
+        event impact when h - 0.5 {
+            v = -v;
+        }
+    }
+}
+
+fn main() {}

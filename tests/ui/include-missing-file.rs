@@ -1,0 +1,3 @@
+mvad::hybrid!(include "models/no_such_model.hyb");
+
+fn main() {}

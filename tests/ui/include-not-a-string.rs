@@ -1,0 +1,3 @@
+mvad::hybrid!(include models::ball);
+
+fn main() {}

@@ -1,0 +1,14 @@
+use mvad::hybrid;
+
+hybrid! {
+    model Ball {
+        param g = 9.81;
+        state h = 2.0;
+        state v = 0.0;
+        flow {
+            der(h) = v;
+        }
+    }
+}
+
+fn main() {}

@@ -1,0 +1,11 @@
+use mvad::hybrid;
+
+hybrid! {
+    model Empty {
+        param k = 0.5;
+        flow {
+        }
+    }
+}
+
+fn main() {}

@@ -1,0 +1,7 @@
+use mvad::hybrid;
+
+hybrid! {
+    model Ball
+}
+
+fn main() {}

@@ -1,0 +1,18 @@
+use mvad::hybrid;
+
+hybrid! {
+    model Thermostat {
+        state temp = 19.0;
+        initial mode warming;
+        mode heating {
+            der(temp) = 1.0;
+            event switch_off when temp >= 22 -> cooling;
+        }
+        mode cooling {
+            der(temp) = -1.0;
+            event switch_on when temp <= 18 -> heating;
+        }
+    }
+}
+
+fn main() {}
