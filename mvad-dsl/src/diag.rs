@@ -256,7 +256,13 @@ pub fn render(file_name: &str, src: &str, diags: &[Diagnostic]) -> String {
             // Control characters would garble the terminal: show them as U+FFFD.
             let text: String = line_text(src, &starts, l)
                 .chars()
-                .map(|ch| if ch.is_control() && ch != '\t' { '\u{FFFD}' } else { ch })
+                .map(|ch| {
+                    if ch.is_control() && ch != '\t' {
+                        '\u{FFFD}'
+                    } else {
+                        ch
+                    }
+                })
                 .collect();
             if l != previous_line {
                 out.push_str(&format!("{l:>width$} | {text}\n"));

@@ -197,7 +197,12 @@ fn func_derivative(ar: &mut ExprArena, f: Func, a: ExprId, e: ExprId) -> ExprId 
 
 /// The gradient of `root` with respect to every state, every param and the time:
 /// (∂/∂x, ∂/∂θ, ∂/∂t).
-pub fn gradient(ar: &mut ExprArena, root: ExprId, n: usize, p: usize) -> (Vec<ExprId>, Vec<ExprId>, ExprId) {
+pub fn gradient(
+    ar: &mut ExprArena,
+    root: ExprId,
+    n: usize,
+    p: usize,
+) -> (Vec<ExprId>, Vec<ExprId>, ExprId) {
     let gx = (0..n).map(|i| diff(ar, root, Var::State(i))).collect();
     let gp = (0..p).map(|i| diff(ar, root, Var::Param(i))).collect();
     let gt = diff(ar, root, Var::Time);
@@ -216,7 +221,15 @@ mod tests {
         let at = |x: f64, p: f64, t: f64| {
             let xs = [x, 0.3];
             let ps = [p];
-            ar.eval(&[e], &Point { t, x: &xs, p: &ps, sw })[0]
+            ar.eval(
+                &[e],
+                &Point {
+                    t,
+                    x: &xs,
+                    p: &ps,
+                    sw,
+                },
+            )[0]
         };
         let base = match var {
             Var::State(_) => x,
@@ -237,7 +250,15 @@ mod tests {
             let d = diff(ar, e, var);
             let xs = [x, 0.3];
             let ps = [p];
-            let sym = ar.eval(&[d], &Point { t, x: &xs, p: &ps, sw })[0];
+            let sym = ar.eval(
+                &[d],
+                &Point {
+                    t,
+                    x: &xs,
+                    p: &ps,
+                    sw,
+                },
+            )[0];
             let num = fd(ar, e, x, p, t, sw, var);
             assert_relative_eq!(sym, num, epsilon = 1e-6, max_relative = 1e-6);
         }
@@ -324,7 +345,15 @@ mod tests {
         }
         let d = diff(&mut ar, e, Var::State(0));
         let xs = [0.1];
-        let v = ar.eval(&[d], &Point { t: 0.0, x: &xs, p: &[], sw: 0 })[0];
+        let v = ar.eval(
+            &[d],
+            &Point {
+                t: 0.0,
+                x: &xs,
+                p: &[],
+                sw: 0,
+            },
+        )[0];
         assert!(v.is_finite());
     }
 }

@@ -61,8 +61,16 @@ impl Tape {
             ops.push(op);
             reg.insert(id, r as u32);
         }
-        let outputs = kernel.outputs.iter().map(|&(s, e)| (s as u32, reg.get(&e).copied().unwrap_or(0))).collect();
-        Tape { ops, outputs, len: kernel.len }
+        let outputs = kernel
+            .outputs
+            .iter()
+            .map(|&(s, e)| (s as u32, reg.get(&e).copied().unwrap_or(0)))
+            .collect();
+        Tape {
+            ops,
+            outputs,
+            len: kernel.len,
+        }
     }
 
     /// Registers needed by [`Tape::run`].
@@ -175,7 +183,12 @@ mod tests {
         let mut out = [9.0; 3];
         for (xv, bits) in [(0.7, 1u64), (-0.7, 1), (0.7, 0)] {
             let xs = [xv, 0.3];
-            let at = Point { t: 0.25, x: &xs, p: &[1.5], sw: bits };
+            let at = Point {
+                t: 0.25,
+                x: &xs,
+                p: &[1.5],
+                sw: bits,
+            };
             tape.eval(&at, &mut regs, &mut out);
             let want = ar.eval(&[sw, d], &at);
             assert_relative_eq!(out[0], want[0]);
@@ -184,7 +197,16 @@ mod tests {
         }
         // Too little scratch: NaN, no panic.
         let mut small = [0.0; 1];
-        tape.eval(&Point { t: 0.0, x: &[], p: &[], sw: 0 }, &mut small, &mut out);
+        tape.eval(
+            &Point {
+                t: 0.0,
+                x: &[],
+                p: &[],
+                sw: 0,
+            },
+            &mut small,
+            &mut out,
+        );
         assert!(out[0].is_nan());
     }
 }

@@ -211,9 +211,11 @@ impl Node {
         let (a, b, c) = match *self {
             Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) => (None, None, None),
             Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => (Some(a), None, None),
-            Node::Add(a, b) | Node::Mul(a, b) | Node::Div(a, b) | Node::Pow(a, b) | Node::Switch(_, a, b) => {
-                (Some(a), Some(b), None)
-            }
+            Node::Add(a, b)
+            | Node::Mul(a, b)
+            | Node::Div(a, b)
+            | Node::Pow(a, b)
+            | Node::Switch(_, a, b) => (Some(a), Some(b), None),
             Node::Select(_, c, a, b) => (Some(c), Some(a), Some(b)),
         };
         a.into_iter().chain(b).chain(c)
@@ -221,7 +223,10 @@ impl Node {
 
     /// Whether the node is a leaf (constant, time, state or parameter).
     pub fn is_leaf(&self) -> bool {
-        matches!(self, Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_))
+        matches!(
+            self,
+            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_)
+        )
     }
 }
 

@@ -105,8 +105,13 @@ fn expand_inner(input: TokenStream) -> TokenStream {
 /// `include "path.hyb"`: reads the file and compiles it; errors go on the path literal.
 fn expand_include(kw: TokenSpan, rest: &[TokenTree]) -> TokenStream {
     let lit = match rest {
-        [TokenTree::Literal(lit)] => syn::parse2::<syn::LitStr>(TokenTree::Literal(lit.clone()).into()),
-        _ => Err(syn::Error::new(kw, "expected a file path: `include \"path/to/model.hyb\"`")),
+        [TokenTree::Literal(lit)] => {
+            syn::parse2::<syn::LitStr>(TokenTree::Literal(lit.clone()).into())
+        }
+        _ => Err(syn::Error::new(
+            kw,
+            "expected a file path: `include \"path/to/model.hyb\"`",
+        )),
     };
     let lit = match lit {
         Ok(l) => l,
@@ -120,8 +125,8 @@ fn expand_include(kw: TokenSpan, rest: &[TokenTree]) -> TokenStream {
     let src = match std::fs::read_to_string(&path) {
         Ok(s) => s,
         Err(e) => {
-            return syn::Error::new(lit.span(), format!("cannot read `{}`: {e}", path.display()))
-                .to_compile_error()
+            let message = format!("cannot read `{rel}` (relative to the crate's Cargo.toml): {e}");
+            return syn::Error::new(lit.span(), message).to_compile_error();
         }
     };
     let abs = path.to_string_lossy().into_owned();
@@ -169,5 +174,136 @@ fn stub(name: Option<&str>, span: TokenSpan) -> TokenStream {
         pub struct #ty;
         #[allow(dead_code)]
         pub struct #params;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::str::FromStr;
+
+    fn expand_str(src: &str) -> String {
+        expand(TokenStream::from_str(src).expect("lexes")).to_string()
+    }
+
+    #[test]
+    fn errors_become_compile_errors_plus_stubs() {
+        let out = expand_str("model Ball { state h = 0; flow { der(h) = vv + ww; } }");
+        assert_eq!(out.matches("compile_error").count(), 2, "{out}");
+        assert!(out.contains("undefined name `vv`"), "{out}");
+        assert!(out.contains("undefined name `ww`"), "{out}");
+        assert!(out.contains("pub struct Ball ;"), "{out}");
+        assert!(out.contains("pub struct BallParams ;"), "{out}");
+        // No stub for a reserved model name, and no panic.
+        let out = expand_str("model type { state h = 0; flow { der(h) = 1; } }");
+        assert!(
+            out.contains("compile_error") && !out.contains("struct"),
+            "{out}"
+        );
+    }
+
+    #[test]
+    fn valid_model_expands_to_code() {
+        let out = expand_str(
+            "model Decay { param k = 0.5; state x = 1; flow { der(x) = -k * x; } horizon 1; }",
+        );
+        assert!(!out.contains("compile_error"), "{out}");
+        assert!(
+            out.contains("Decay") && out.contains("DecayParams"),
+            "{out}"
+        );
+    }
+
+    #[test]
+    fn odd_inputs_give_errors_not_panics() {
+        for src in [
+            "",
+            "include",
+            "include 1",
+            "include \"a\" \"b\"",
+            "model",
+            "model 3 { }",
+            "fn main() {}",
+            "model M { state x = 'c'; }",
+            "model M { state x = b\"x\"; }",
+            "model M { state x = 1; flow { der(x) = x ; } } model N { }",
+        ] {
+            let out = expand_str(src);
+            assert!(out.contains("compile_error"), "{src}: {out}");
+        }
+    }
+
+    fn temp_file(name: &str, text: &str) -> std::path::PathBuf {
+        let path = std::env::temp_dir().join(format!("mvad-dsl-{}-{name}", std::process::id()));
+        std::fs::write(&path, text).expect("write temp file");
+        path
+    }
+
+    #[test]
+    fn include_reads_the_file() {
+        // An absolute path ignores CARGO_MANIFEST_DIR.
+        let good = temp_file(
+            "good.hyb",
+            "model Inc { state x = 0; flow { der(x) = 1; } }\n",
+        );
+        let out = expand_str(&format!("include {:?}", good.to_str().unwrap()));
+        assert!(out.contains("include_str"), "{out}");
+        assert!(!out.contains("compile_error"), "{out}");
+        assert!(out.contains("Inc"), "{out}");
+
+        let bad = temp_file(
+            "bad.hyb",
+            "model Bad {\n  state x = 0;\n  flow { der(x) = y; }\n}\n",
+        );
+        let out = expand_str(&format!("include {:?}", bad.to_str().unwrap()));
+        assert!(out.contains("compile_error"), "{out}");
+        assert!(out.contains(":3:19: error: undefined name `y`"), "{out}");
+        assert!(out.contains("pub struct Bad ;"), "{out}");
+        assert!(out.contains("include_str"), "{out}");
+
+        let out = expand_str("include \"/nonexistent/dir/model.hyb\"");
+        assert!(out.contains("cannot read"), "{out}");
+        let _ = std::fs::remove_file(good);
+        let _ = std::fs::remove_file(bad);
+    }
+
+    #[test]
+    fn render_format() {
+        let src = "model M {\n\tstate h = 0;\n\tflow { der(h) = vv; }\n}\n";
+        let diags = front(src).unwrap_err();
+        let text = diag::render("m.hyb", src, &diags);
+        assert_eq!(
+            text,
+            "m.hyb:3:18: error: undefined name `vv`\n  |\n3 | \tflow { der(h) = vv; }\n  | \t                ^^\n"
+        );
+        // Labels and help.
+        let src =
+            "model M {\n  param a = 1;\n  param a = 2;\n  state h = 0; flow { der(h) = a; }\n}";
+        let text = diag::render("m.hyb", src, &front(src).unwrap_err());
+        assert_eq!(
+            text,
+            "m.hyb:3:9: error: duplicate declaration of `a`\n  |\n3 |   param a = 2;\n  |         ^\n2 |   param a = 1;\n  |         - first declared here\n"
+        );
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        #[test]
+        fn front_never_panics_on_any_text(s in "\\PC{0,200}") {
+            let _ = front(&s);
+        }
+
+        #[test]
+        fn front_never_panics_on_model_like_text(
+            s in "(model M \\{|state x = |param p = |flow \\{|der\\(x\\) = |event e when |if |then |else |\\(|\\)|\\{|\\}|;|,|[-+*/^]|<=|>=|->|x|p|t|1\\.5|2|sin\\(|max\\(| ){0,60}"
+        ) {
+            if let Err(d) = front(&s) {
+                prop_assert!(!d.is_empty());
+                let text = diag::render("f.hyb", &s, &d);
+                prop_assert!(text.starts_with("f.hyb:"));
+            }
+        }
     }
 }

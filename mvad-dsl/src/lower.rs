@@ -135,7 +135,11 @@ impl<'a> Lowerer<'a> {
             .states()
             .map(|s| {
                 let id = self.expr(&s.init, Ctx::Pointwise);
-                self.no_state_or_time(id, s.init.span, &format!("the initial value of `{}`", s.name.name));
+                self.no_state_or_time(
+                    id,
+                    s.init.span,
+                    &format!("the initial value of `{}`", s.name.name),
+                );
                 id
             })
             .collect();
@@ -145,16 +149,25 @@ impl<'a> Lowerer<'a> {
         let mut mode_index: HashMap<&str, usize> = HashMap::new();
         if let Some(flow) = model.flow() {
             let f = self.flow(&flow.ders, n, flow.span, "main");
-            modes.push(Mode { name: "main".into(), flow: f });
+            modes.push(Mode {
+                name: "main".into(),
+                flow: f,
+            });
             mode_index.insert("main", 0);
         }
         for m in model.modes() {
             let f = self.flow(&m.ders, n, m.span, &m.name.name);
             mode_index.insert(m.name.name.as_str(), modes.len());
-            modes.push(Mode { name: m.name.name.clone(), flow: f });
+            modes.push(Mode {
+                name: m.name.name.clone(),
+                flow: f,
+            });
         }
         if modes.is_empty() {
-            self.error(model.name.span, format!("model `{}` has no `flow` and no `mode`", model.name.name));
+            self.error(
+                model.name.span,
+                format!("model `{}` has no `flow` and no `mode`", model.name.name),
+            );
         }
         let initial_mode = match model.initial_mode() {
             Some(im) => match mode_index.get(im.mode.name.as_str()) {
@@ -172,10 +185,16 @@ impl<'a> Lowerer<'a> {
         let all = model.all_events();
         let mut event_index: HashMap<String, usize> = HashMap::new();
         for (k, (mode, ev)) in all.iter().enumerate() {
-            let name = ev.name.as_ref().map_or_else(|| format!("event_{k}"), |i| i.name.clone());
+            let name = ev
+                .name
+                .as_ref()
+                .map_or_else(|| format!("event_{k}"), |i| i.name.clone());
             event_index.insert(name.clone(), k);
             let Some(cmp) = ev.comparison() else {
-                self.error(ev.guard.span(), "the guard of an event must be a comparison");
+                self.error(
+                    ev.guard.span(),
+                    "the guard of an event must be a comparison",
+                );
                 continue;
             };
             let l = self.expr(&cmp.lhs, Ctx::Pointwise);
@@ -201,7 +220,10 @@ impl<'a> Lowerer<'a> {
                 for a in resets {
                     match self.names.get(a.state.name.as_str()) {
                         Some(&Sym::State(i)) => reset[i] = self.expr(&a.value, Ctx::Pointwise),
-                        _ => self.error(a.state.span, format!("reset of `{}`, which is not a state", a.state.name)),
+                        _ => self.error(
+                            a.state.span,
+                            format!("reset of `{}`, which is not a state", a.state.name),
+                        ),
                     }
                 }
             }
@@ -285,7 +307,10 @@ impl<'a> Lowerer<'a> {
     }
 
     fn no_state_or_time(&mut self, id: ExprId, span: Span, what: &str) {
-        if self.ar.depends_on(id, |n| matches!(n, Node::State(_) | Node::Time)) {
+        if self
+            .ar
+            .depends_on(id, |n| matches!(n, Node::State(_) | Node::Time))
+        {
             self.error(span, format!("{what} may use only params and consts"));
         }
     }
@@ -295,14 +320,20 @@ impl<'a> Lowerer<'a> {
         for d in ders {
             match self.names.get(d.state.name.as_str()) {
                 Some(&Sym::State(i)) => f[i] = Some(self.expr(&d.value, Ctx::Frozen)),
-                _ => self.error(d.state.span, format!("`der` of `{}`, which is not a state", d.state.name)),
+                _ => self.error(
+                    d.state.span,
+                    format!("`der` of `{}`, which is not a state", d.state.name),
+                ),
             }
         }
         f.into_iter()
             .enumerate()
             .map(|(i, e)| {
                 e.unwrap_or_else(|| {
-                    self.error(span, format!("state number {} has no `der` in mode `{mode}`", i + 1));
+                    self.error(
+                        span,
+                        format!("state number {} has no `der` in mode `{mode}`", i + 1),
+                    );
                     self.ar.constant(0.0)
                 })
             })
@@ -402,7 +433,10 @@ impl<'a> Lowerer<'a> {
             Some(Sym::Observable(e)) => {
                 let key = e as *const ast::Expr;
                 if self.inlining.contains(&key) {
-                    self.error(id.span, format!("observable `{}` refers to itself", id.name));
+                    self.error(
+                        id.span,
+                        format!("observable `{}` refers to itself", id.name),
+                    );
                     return self.ar.constant(f64::NAN);
                 }
                 self.inlining.push(key);
@@ -417,7 +451,13 @@ impl<'a> Lowerer<'a> {
         }
     }
 
-    fn call(&mut self, e: &'a ast::Expr, func: &'a ast::Ident, args: &'a [ast::Expr], ctx: Ctx) -> ExprId {
+    fn call(
+        &mut self,
+        e: &'a ast::Expr,
+        func: &'a ast::Ident,
+        args: &'a [ast::Expr],
+        ctx: Ctx,
+    ) -> ExprId {
         let name = func.name.as_str();
         let want = match name {
             "min" | "max" | "pow" => 2,
@@ -430,12 +470,20 @@ impl<'a> Lowerer<'a> {
         if args.len() != want {
             self.error(
                 func.span,
-                format!("`{name}` takes {want} argument{}, found {}", if want == 1 { "" } else { "s" }, args.len()),
+                format!(
+                    "`{name}` takes {want} argument{}, found {}",
+                    if want == 1 { "" } else { "s" },
+                    args.len()
+                ),
             );
             return self.ar.constant(f64::NAN);
         }
         let a = self.expr(&args[0], ctx);
-        let b = if want == 2 { Some(self.expr(&args[1], ctx)) } else { None };
+        let b = if want == 2 {
+            Some(self.expr(&args[1], ctx))
+        } else {
+            None
+        };
         let b = b.unwrap_or(a);
         match (name, ctx) {
             ("pow", _) => self.ar.pow(a, b),
@@ -494,5 +542,118 @@ impl<'a> Lowerer<'a> {
             }
         };
         self.ar.switch(j, pos, neg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ir::Point;
+
+    fn program(src: &str) -> Program {
+        let model = crate::front(src).unwrap_or_else(|e| panic!("front: {e:?}"));
+        lower(&model).unwrap_or_else(|e| panic!("lower: {e:?}"))
+    }
+
+    fn errors(src: &str) -> Vec<String> {
+        match crate::front(src).and_then(|m| lower(&m)) {
+            Ok(_) => Vec::new(),
+            Err(e) => e.into_iter().map(|d| d.message).collect(),
+        }
+    }
+
+    #[test]
+    fn events_directions_names_and_resets() {
+        let p = program(
+            "model M { param e = 0.8; state h = 1; state v = 0;
+               flow { der(h) = v; der(v) = -9.81; }
+               event impact when h <= 0 { v = -e * v; }
+               event when v > 2;
+               event when 1 >= h - v { h = v; v = h; } }",
+        );
+        assert_eq!(p.modes.len(), 1);
+        assert_eq!(p.modes[0].name, "main");
+        let names: Vec<&str> = p.events.iter().map(|e| e.name.as_str()).collect();
+        assert_eq!(names, ["impact", "event_1", "event_2"]);
+        let dirs: Vec<Direction> = p.events.iter().map(|e| e.direction).collect();
+        assert_eq!(dirs, [Direction::Down, Direction::Up, Direction::Up]);
+        assert!(!p.events[1].has_reset);
+        // Identity for unassigned states; right-hand sides read the pre-event state.
+        assert_eq!(p.events[0].reset[0], p.arena.clone().state(0));
+        let x = [0.3, 1.7];
+        let at = Point { t: 0.0, x: &x, p: &[0.8], sw: 0 };
+        assert_eq!(p.arena.eval(&p.events[2].reset, &at), vec![1.7, 0.3]);
+        // g = LHS − RHS.
+        assert_eq!(p.arena.eval(&[p.events[2].guard], &at), vec![1.0 - (0.3 - 1.7)]);
+    }
+
+    #[test]
+    fn kinks_become_deduplicated_switches_only_in_flows_and_running_cost() {
+        let p = program(
+            "model M { param a = 1; state x = 1; state y = 2;
+               flow { der(x) = abs(x - y) + sign(x - y); der(y) = min(x, y) + max(y, a); }
+               observe o = abs(x - y);
+               event when abs(x) <= 1;
+               cost = integral(max(y, a)) + final(abs(x)); }",
+        );
+        // abs(x−y), sign(x−y), min(x, y) share σ = x − y; max(y, a) has σ = y − a.
+        assert_eq!(p.switches.len(), 2);
+        let x = [0.5, 2.0];
+        let th = [1.0];
+        let at = |sw| Point { t: 0.0, x: &x, p: &th, sw };
+        // Frozen branches follow the bits, not the point: bit 0 set means x − y > 0.
+        let f_pos = p.arena.eval(&p.modes[0].flow, &at(0b11));
+        let f_neg = p.arena.eval(&p.modes[0].flow, &at(0b00));
+        assert_eq!(f_pos, vec![(0.5 - 2.0) + 1.0, 2.0 + 2.0]);
+        assert_eq!(f_neg, vec![(2.0 - 0.5) - 1.0, 0.5 + 1.0]);
+        // Observables are pointwise whatever the bits.
+        assert_eq!(p.arena.eval(&[p.observables[0].1], &at(0b11)), vec![1.5]);
+    }
+
+    #[test]
+    fn if_branches_follow_the_comparison() {
+        let p = program(
+            "model M { state x = 1;
+               flow { der(x) = (if x < 2 then 10 else 20) + (if x >= 3 then 100 else 200); }
+               observe o = if x < 2 then 10 else 20; }",
+        );
+        assert_eq!(p.switches.len(), 2);
+        let x = [1.0];
+        let at = |sw| Point { t: 0.0, x: &x, p: &[], sw };
+        // σ₀ = x − 2 > 0 selects the else branch of `<`; σ₁ = x − 3 > 0 the then branch of `>=`.
+        assert_eq!(p.arena.eval(&p.modes[0].flow, &at(0b01)), vec![20.0 + 200.0]);
+        assert_eq!(p.arena.eval(&p.modes[0].flow, &at(0b10)), vec![10.0 + 100.0]);
+        assert_eq!(p.arena.eval(&[p.observables[0].1], &at(0)), vec![10.0]);
+    }
+
+    #[test]
+    fn observables_are_inlined_and_consts_folded() {
+        let p = program(
+            "model M { const c = 2 * 3; param a = c + 1; state x = a;
+               flow { der(x) = o1 * c; }
+               observe o1 = x + a; }",
+        );
+        assert_eq!(p.param_defaults, vec![7.0]);
+        let mut ar = p.arena.clone();
+        let (x, a) = (ar.state(0), ar.param(0));
+        let s = ar.add(x, a);
+        let six = ar.constant(6.0);
+        assert_eq!(p.modes[0].flow[0], ar.mul(s, six));
+        assert_eq!(p.observables[0].1, s);
+    }
+
+    #[test]
+    fn bad_models_are_errors_not_panics() {
+        let cyc = "model M { state x = 1; flow { der(x) = a; } observe a = b; observe b = a; }";
+        assert!(!errors(cyc).is_empty());
+        let hz = "model M { state x = 1; flow { der(x) = 1; } horizon x; }";
+        assert!(!errors(hz).is_empty());
+        let mut many = String::from("model M { state x = 1; flow { der(x) = 0");
+        for i in 0..70 {
+            many.push_str(&format!(" + abs(x - {i})"));
+        }
+        many.push_str("; } }");
+        let e = errors(&many);
+        assert!(e.iter().any(|m| m.contains("kinks")), "{e:?}");
     }
 }

@@ -33,8 +33,11 @@ pub const MAX_NESTING: usize = 128;
 /// first syntax error, so that vector has one entry).
 pub fn parse(src: &str) -> Result<ast::Model, Vec<Diagnostic>> {
     check_nesting(src).map_err(|d| vec![d])?;
-    let mut pairs = HybParser::parse(Rule::file, src).map_err(|e| vec![diag::from_pest(&e, src)])?;
-    let file = pairs.next().ok_or_else(|| vec![Diagnostic::new(Span::point(0), "empty input")])?;
+    let mut pairs =
+        HybParser::parse(Rule::file, src).map_err(|e| vec![diag::from_pest(&e, src)])?;
+    let file = pairs
+        .next()
+        .ok_or_else(|| vec![Diagnostic::new(Span::point(0), "empty input")])?;
     let model = file
         .into_inner()
         .find(|p| p.as_rule() == Rule::model)
@@ -160,7 +163,11 @@ fn internal(span: Span, what: &str) -> Diagnostic {
     Diagnostic::new(span, format!("internal parser error: {what}"))
 }
 
-fn next<'a>(it: &mut impl Iterator<Item = Pair<'a, Rule>>, span: Span, what: &str) -> Res<Pair<'a, Rule>> {
+fn next<'a>(
+    it: &mut impl Iterator<Item = Pair<'a, Rule>>,
+    span: Span,
+    what: &str,
+) -> Res<Pair<'a, Rule>> {
     it.next().ok_or_else(|| internal(span, what))
 }
 
@@ -420,7 +427,10 @@ fn power(op: &Op) -> u8 {
 fn too_deep(span: Span) -> Diagnostic {
     Diagnostic::new(
         span,
-        format!("expression nested too deeply (more than {} levels)", ast::MAX_DEPTH),
+        format!(
+            "expression nested too deeply (more than {} levels)",
+            ast::MAX_DEPTH
+        ),
     )
 }
 
@@ -490,7 +500,9 @@ fn expr_with_depth(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
         while let Some(top) = ops.last() {
             let tp = power(top);
             if tp > pw || (tp == pw && !right_assoc) {
-                let top = ops.pop().ok_or_else(|| internal(span_of(&p), "operator stack"))?;
+                let top = ops
+                    .pop()
+                    .ok_or_else(|| internal(span_of(&p), "operator stack"))?;
                 reduce(&mut operands, top)?;
             } else {
                 break;
@@ -579,7 +591,7 @@ fn build_primary(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::span::line_col;
 
@@ -680,7 +692,10 @@ model Thermostat {
         assert_eq!(cmp.op, CmpOp::Le);
         assert_eq!(&BALL[cmp.op_span.range()], "<=");
         assert_eq!(impact.resets.as_ref().unwrap().len(), 1);
-        assert_eq!(sexpr(&impact.resets.as_ref().unwrap()[0].value), "(* (neg e) v)");
+        assert_eq!(
+            sexpr(&impact.resets.as_ref().unwrap()[0].value),
+            "(* (neg e) v)"
+        );
         assert_eq!(ball.observes().count(), 2);
         let cost = ball.cost().unwrap();
         assert_eq!(cost.terms.len(), 1);
@@ -688,7 +703,10 @@ model Thermostat {
         assert_eq!(ball.horizon().unwrap().value.kind, ExprKind::Number(2.0));
         // Spans point at the right text.
         assert_eq!(&BALL[ball.name.span.range()], "BouncingBall");
-        assert_eq!(&BALL[impact.span.range()].lines().next().unwrap(), &"event impact when h <= 0 {");
+        assert_eq!(
+            &BALL[impact.span.range()].lines().next().unwrap(),
+            &"event impact when h <= 0 {"
+        );
 
         let th = parse(THERMOSTAT).expect("thermostat parses");
         assert_eq!(th.modes().count(), 2);
@@ -752,7 +770,10 @@ model Thermostat {
         let m = parse(src).unwrap();
         let f: Vec<f64> = m.cost().unwrap().terms.iter().map(|t| t.factor).collect();
         assert_eq!(f, vec![0.5, -2.0, 0.25, -3.0]);
-        assert!(matches!(m.cost().unwrap().terms[2].kind, ast::CostKind::Sum { .. }));
+        assert!(matches!(
+            m.cost().unwrap().terms[2].kind,
+            ast::CostKind::Sum { .. }
+        ));
     }
 
     /// Parse `src`, expect a syntax error at `line:col` whose message contains `msg`.
@@ -763,8 +784,17 @@ model Thermostat {
         };
         assert_eq!(errs.len(), 1, "{src:?}");
         let d = &errs[0];
-        assert_eq!(line_col(src, d.span.start), (line, col), "{src:?}: {}", d.message);
-        assert!(d.message.contains(msg), "{src:?}: got {:?}, want {msg:?}", d.message);
+        assert_eq!(
+            line_col(src, d.span.start),
+            (line, col),
+            "{src:?}: {}",
+            d.message
+        );
+        assert!(
+            d.message.contains(msg),
+            "{src:?}: got {:?}, want {msg:?}",
+            d.message
+        );
     }
 
     #[test]
@@ -774,14 +804,44 @@ model Thermostat {
         expect_error("model M {", 1, 10, "unexpected end of input");
         expect_error("model M { param a = 1 }", 1, 23, "unexpected `}`; expected");
         expect_error("model M { param a = 1 }", 1, 23, "`;`");
-        expect_error("model M {\n  state x = (1 + ;\n}", 2, 18, "expected an expression");
-        expect_error("model M {\n  flow { der(x) = g + * v; }\n}", 2, 23, "unexpected `*`");
-        expect_error("model M { foo x = 1; }", 1, 11, "unexpected `foo`; expected `param`");
-        expect_error("model M { event when x == 0 { } }", 1, 24, "unexpected `==`");
+        expect_error(
+            "model M {\n  state x = (1 + ;\n}",
+            2,
+            18,
+            "expected an expression",
+        );
+        expect_error(
+            "model M {\n  flow { der(x) = g + * v; }\n}",
+            2,
+            23,
+            "unexpected `*`",
+        );
+        expect_error(
+            "model M { foo x = 1; }",
+            1,
+            11,
+            "unexpected `foo`; expected `param`",
+        );
+        expect_error(
+            "model M { event when x == 0 { } }",
+            1,
+            24,
+            "unexpected `==`",
+        );
         expect_error("model M { param a = 1.0f64; }", 1, 21, "");
-        expect_error("model M { param a = 1; } trailing", 1, 26, "expected end of input");
+        expect_error(
+            "model M { param a = 1; } trailing",
+            1,
+            26,
+            "expected end of input",
+        );
         expect_error("model M { cost = h; }", 1, 18, "expected");
-        expect_error("model M { param a = 1e999; }", 1, 21, "number `1e999` is out of range");
+        expect_error(
+            "model M { param a = 1e999; }",
+            1,
+            21,
+            "number `1e999` is out of range",
+        );
         expect_error("model M { /* unterminated", 1, 11, "");
         expect_error("\u{0}\u{1}\u{ff}garbage", 1, 1, "character U+0000");
     }
@@ -805,7 +865,11 @@ model Thermostat {
     #[test]
     fn deep_nesting_is_an_error_not_a_stack_overflow() {
         let n = 100_000;
-        assert_too_deep(&model_with_rhs(&format!("{}x{}", "(".repeat(n), ")".repeat(n))));
+        assert_too_deep(&model_with_rhs(&format!(
+            "{}x{}",
+            "(".repeat(n),
+            ")".repeat(n)
+        )));
         assert_too_deep(&model_with_rhs(&format!("{}x", "- ".repeat(n))));
         assert_too_deep(&model_with_rhs(&format!("{}x", "-".repeat(n))));
         assert_too_deep(&model_with_rhs(&format!("x{}", "^x".repeat(n))));
@@ -815,7 +879,11 @@ model Thermostat {
             "if x < 1 then 0 else ".repeat(n),
             ""
         )));
-        assert_too_deep(&model_with_rhs(&format!("{}x{}", "sin(".repeat(n), ")".repeat(n))));
+        assert_too_deep(&model_with_rhs(&format!(
+            "{}x{}",
+            "sin(".repeat(n),
+            ")".repeat(n)
+        )));
         // Unbalanced opening brackets only.
         assert_too_deep(&"(".repeat(n));
     }
@@ -831,7 +899,10 @@ model Thermostat {
 
     #[test]
     fn nesting_prescan_ignores_comments() {
-        let src = format!("// {}\nmodel M {{ state x = 0; flow {{ der(x) = 1; }} }}", "(".repeat(1000));
+        let src = format!(
+            "// {}\nmodel M {{ state x = 0; flow {{ der(x) = 1; }} }}",
+            "(".repeat(1000)
+        );
         parse(&src).expect("comment parens are not nesting");
     }
 }

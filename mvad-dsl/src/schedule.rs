@@ -25,12 +25,23 @@ pub struct Kernel {
 impl Kernel {
     /// The kernel computing `exprs` (slot i ← exprs\[i\]), zeros dropped.
     pub fn new(ar: &ExprArena, exprs: &[ExprId]) -> Kernel {
-        let outputs: Vec<(usize, ExprId)> =
-            exprs.iter().copied().enumerate().filter(|&(_, e)| !ar.is_zero(e)).collect();
+        let outputs: Vec<(usize, ExprId)> = exprs
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|&(_, e)| !ar.is_zero(e))
+            .collect();
         let roots: Vec<ExprId> = outputs.iter().map(|&(_, e)| e).collect();
         let live = ar.live(&roots);
-        let nodes = (0..live.len()).filter(|&i| live[i]).map(|i| ExprId(i as u32)).collect();
-        Kernel { nodes, len: exprs.len(), outputs }
+        let nodes = (0..live.len())
+            .filter(|&i| live[i])
+            .map(|i| ExprId(i as u32))
+            .collect();
+        Kernel {
+            nodes,
+            len: exprs.len(),
+            outputs,
+        }
     }
 
     /// Whether every slot has a (non-zero) output, so no zero fill is needed.
@@ -190,21 +201,45 @@ impl ModelKernels {
 }
 
 /// ∂e/∂x (n), ∂e/∂θ (p) and a last entry.
-fn grad_exprs(ar: &mut ExprArena, e: ExprId, n: usize, p: usize, last_is_value: bool) -> Vec<ExprId> {
+fn grad_exprs(
+    ar: &mut ExprArena,
+    e: ExprId,
+    n: usize,
+    p: usize,
+    last_is_value: bool,
+) -> Vec<ExprId> {
     let mut v: Vec<ExprId> = (0..n).map(|i| diff(ar, e, Var::State(i))).collect();
     v.extend((0..p).map(|i| diff(ar, e, Var::Param(i))));
-    v.push(if last_is_value { e } else { diff(ar, e, Var::Time) });
+    v.push(if last_is_value {
+        e
+    } else {
+        diff(ar, e, Var::Time)
+    });
     v
 }
 
 /// The value and gradient kernels of a scalar `e`.
-fn grad_kernels(ar: &mut ExprArena, e: ExprId, n: usize, p: usize, last_is_value: bool) -> GradKernels {
+fn grad_kernels(
+    ar: &mut ExprArena,
+    e: ExprId,
+    n: usize,
+    p: usize,
+    last_is_value: bool,
+) -> GradKernels {
     let g = grad_exprs(ar, e, n, p, last_is_value);
-    GradKernels { value: Kernel::new(ar, &[e]), grad: Kernel::new(ar, &g) }
+    GradKernels {
+        value: Kernel::new(ar, &[e]),
+        grad: Kernel::new(ar, &g),
+    }
 }
 
 /// Row-major Jacobian of `exprs` with respect to `vars`.
-fn jacobian(ar: &mut ExprArena, exprs: &[ExprId], vars: impl Fn(usize) -> Var, ncols: usize) -> Vec<ExprId> {
+fn jacobian(
+    ar: &mut ExprArena,
+    exprs: &[ExprId],
+    vars: impl Fn(usize) -> Var,
+    ncols: usize,
+) -> Vec<ExprId> {
     let mut out = Vec::with_capacity(exprs.len() * ncols);
     for &e in exprs {
         for c in 0..ncols {
@@ -235,13 +270,22 @@ pub fn kernels(program: &Program) -> ModelKernels {
         .map(|m| {
             let fx = jacobian(&mut ar, &m.flow, Var::State, n);
             let fp = jacobian(&mut ar, &m.flow, Var::Param, p);
-            let ft: Vec<ExprId> = m.flow.iter().map(|&e| diff(&mut ar, e, Var::Time)).collect();
-            let sparsity: Vec<(usize, usize)> =
-                (0..n * n).filter(|&k| !ar.is_zero(fx[k])).map(|k| (k / n.max(1), k % n.max(1))).collect();
+            let ft: Vec<ExprId> = m
+                .flow
+                .iter()
+                .map(|&e| diff(&mut ar, e, Var::Time))
+                .collect();
+            let sparsity: Vec<(usize, usize)> = (0..n * n)
+                .filter(|&k| !ar.is_zero(fx[k]))
+                .map(|k| (k / n.max(1), k % n.max(1)))
+                .collect();
             let mut sens: Vec<ExprId> = m.flow.clone();
             sens.extend(sparsity.iter().map(|&(r, c)| fx[r * n + c]));
             sens.extend(fp.iter().copied());
-            let depends_on_t = m.flow.iter().any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)));
+            let depends_on_t = m
+                .flow
+                .iter()
+                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)));
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
@@ -271,14 +315,22 @@ pub fn kernels(program: &Program) -> ModelKernels {
         })
         .collect();
 
-    let switches = program.switches.iter().map(|&s| grad_kernels(&mut ar, s, n, p, false)).collect();
+    let switches = program
+        .switches
+        .iter()
+        .map(|&s| grad_kernels(&mut ar, s, n, p, false))
+        .collect();
 
     let obs: Vec<ExprId> = program.observables.iter().map(|&(_, e)| e).collect();
     let mut oj = jacobian(&mut ar, &obs, Var::State, n);
     oj.extend(jacobian(&mut ar, &obs, Var::Param, p));
 
-    let running_cost = program.running_cost.map(|c| grad_kernels(&mut ar, c, n, p, true));
-    let final_cost = program.final_cost.map(|c| grad_kernels(&mut ar, c, n, p, false));
+    let running_cost = program
+        .running_cost
+        .map(|c| grad_kernels(&mut ar, c, n, p, true));
+    let final_cost = program
+        .final_cost
+        .map(|c| grad_kernels(&mut ar, c, n, p, false));
 
     ModelKernels {
         name: program.name.clone(),

@@ -35,8 +35,8 @@ impl ExprArena {
     pub fn add(&mut self, a: ExprId, b: ExprId) -> ExprId {
         match (self.as_const(a), self.as_const(b)) {
             (Some(x), Some(y)) => return self.constant(x + y),
-            (Some(x), None) if x == 0.0 => return b,
-            (None, Some(y)) if y == 0.0 => return a,
+            (Some(0.0), None) => return b,
+            (None, Some(0.0)) => return a,
             _ => {}
         }
         if self.node(a) == Node::Neg(b) || self.node(b) == Node::Neg(a) {
@@ -70,7 +70,11 @@ impl ExprArena {
             Node::Const(bits) => self.constant(-f64::from_bits(bits)),
             Node::Neg(x) => x,
             Node::Mul(x, y) if self.as_const(x).is_some() || self.as_const(y).is_some() => {
-                let (x, y) = if self.as_const(x).is_some() { (x, y) } else { (y, x) };
+                let (x, y) = if self.as_const(x).is_some() {
+                    (x, y)
+                } else {
+                    (y, x)
+                };
                 let c = self.constant(-self.as_const(x).unwrap_or(0.0));
                 self.mul(c, y)
             }
@@ -82,11 +86,11 @@ impl ExprArena {
     pub fn mul(&mut self, a: ExprId, b: ExprId) -> ExprId {
         match (self.as_const(a), self.as_const(b)) {
             (Some(x), Some(y)) => return self.constant(x * y),
-            (Some(x), None) | (None, Some(x)) if x == 0.0 => return self.constant(0.0),
-            (Some(x), None) if x == 1.0 => return b,
-            (None, Some(y)) if y == 1.0 => return a,
-            (Some(x), None) if x == -1.0 => return self.neg(b),
-            (None, Some(y)) if y == -1.0 => return self.neg(a),
+            (Some(0.0), None) | (None, Some(0.0)) => return self.constant(0.0),
+            (Some(1.0), None) => return b,
+            (None, Some(1.0)) => return a,
+            (Some(-1.0), None) => return self.neg(b),
+            (None, Some(-1.0)) => return self.neg(a),
             _ => {}
         }
         // Pull negations out: (−a)·b = −(a·b).
@@ -102,10 +106,18 @@ impl ExprArena {
             return self.powi(a, 2);
         }
         // Constant first, then merge nested constant factors: c₁·(c₂·x) = (c₁c₂)·x.
-        let (a, b) = if self.as_const(b).is_some() { (b, a) } else { (a, b) };
+        let (a, b) = if self.as_const(b).is_some() {
+            (b, a)
+        } else {
+            (a, b)
+        };
         if let Some(c1) = self.as_const(a) {
             if let Node::Mul(x, y) = self.node(b) {
-                let (x, y) = if self.as_const(y).is_some() { (y, x) } else { (x, y) };
+                let (x, y) = if self.as_const(y).is_some() {
+                    (y, x)
+                } else {
+                    (x, y)
+                };
                 if let Some(c2) = self.as_const(x) {
                     let c = self.constant(c1 * c2);
                     return self.mul(c, y);
@@ -125,9 +137,9 @@ impl ExprArena {
     pub fn div(&mut self, a: ExprId, b: ExprId) -> ExprId {
         match (self.as_const(a), self.as_const(b)) {
             (Some(x), Some(y)) => return self.constant(x / y),
-            (Some(x), None) if x == 0.0 => return self.constant(0.0),
-            (None, Some(y)) if y == 1.0 => return a,
-            (None, Some(y)) if y == -1.0 => return self.neg(a),
+            (Some(0.0), None) => return self.constant(0.0),
+            (None, Some(1.0)) => return a,
+            (None, Some(-1.0)) => return self.neg(a),
             _ => {}
         }
         if let Node::Neg(x) = self.node(a) {
@@ -254,7 +266,7 @@ mod tests {
     simp!(mul_zero, |ar| { let a = x(&mut ar); let z = ar.constant(0.0); ar.mul(a, z) } => |ar| ar.constant(0.0));
     simp!(x_minus_x, |ar| { let a = x(&mut ar); ar.sub(a, a) } => |ar| ar.constant(0.0));
     simp!(neg_neg, |ar| { let a = x(&mut ar); let n = ar.neg(a); ar.neg(n) } => |ar| x(ar));
-    simp!(fold, |ar| { let a = ar.constant(2.0); let b = ar.constant(3.0); let m = ar.mul(a, b); let s = ar.sin_of(m); s } => |ar| ar.constant(6f64.sin()));
+    simp!(fold, |ar| { let a = ar.constant(2.0); let b = ar.constant(3.0); let m = ar.mul(a, b); ar.sin_of(m) } => |ar| ar.constant(6f64.sin()));
     simp!(commute, |ar| { let a = ar.state(0); let b = ar.param(1); ar.mul(a, b) } => |ar| { let b = ar.param(1); let a = ar.state(0); ar.mul(b, a) });
     simp!(commute_add, |ar| { let a = ar.state(0); let b = ar.time(); ar.add(a, b) } => |ar| { let b = ar.time(); let a = ar.state(0); ar.add(b, a) });
     simp!(square, |ar| { let a = x(&mut ar); ar.mul(a, a) } => |ar| { let a = x(ar); ar.powi(a, 2) });
@@ -293,7 +305,7 @@ mod tests {
                 _ => ar.intern(Node::Const(c.to_bits())),
             };
             let pick = |ar: &mut ExprArena, stack: &[ExprId], k: u8| {
-                if stack.is_empty() || k % 3 == 0 {
+                if stack.is_empty() || k.is_multiple_of(3) {
                     leaf(ar, k / 3)
                 } else {
                     stack[k as usize % stack.len()]

@@ -53,6 +53,10 @@ impl SourceMap {
     }
 }
 
+/// One level of the depth-first walk: the tokens left and, for a spelled group, its
+/// closing delimiter with its span.
+type Level = (std::vec::IntoIter<TokenTree>, Option<(char, Span)>);
+
 /// Spells `input` as model text and records where each token went (see the module docs).
 ///
 /// Walks the token tree depth first with an explicit stack, so arbitrarily deep input
@@ -63,8 +67,7 @@ pub fn restring(input: TokenStream) -> (String, SourceMap) {
     // Whether the next token must be preceded by a space.
     let mut space = false;
     // Each level: its remaining tokens and, for a spelled group, its closing delimiter.
-    let mut stack: Vec<(std::vec::IntoIter<TokenTree>, Option<(char, Span)>)> =
-        vec![(input.into_iter().collect::<Vec<_>>().into_iter(), None)];
+    let mut stack: Vec<Level> = vec![(input.into_iter().collect::<Vec<_>>().into_iter(), None)];
     let mut push = |text: &mut String, space: &mut bool, s: &str, span: Span, joint: bool| {
         if *space {
             text.push(' ');
@@ -93,7 +96,13 @@ pub fn restring(input: TokenStream) -> (String, SourceMap) {
                     continue;
                 }
                 let joint = p.spacing() == Spacing::Joint;
-                push(&mut text, &mut space, &p.as_char().to_string(), p.span(), joint);
+                push(
+                    &mut text,
+                    &mut space,
+                    &p.as_char().to_string(),
+                    p.span(),
+                    joint,
+                );
             }
             TokenTree::Group(g) => {
                 let delims = match g.delimiter() {
@@ -105,7 +114,13 @@ pub fn restring(input: TokenStream) -> (String, SourceMap) {
                 let inner = g.stream().into_iter().collect::<Vec<_>>().into_iter();
                 match delims {
                     Some((open, close)) => {
-                        push(&mut text, &mut space, &open.to_string(), g.span_open(), false);
+                        push(
+                            &mut text,
+                            &mut space,
+                            &open.to_string(),
+                            g.span_open(),
+                            false,
+                        );
                         stack.push((inner, Some((close, g.span_close()))));
                     }
                     None => stack.push((inner, None)),
@@ -169,7 +184,9 @@ mod tests {
         let pos = |s: &str| text.find(s).unwrap();
         let line_col = |sp: Span| (sp.start().line, sp.start().column);
         // `bad` alone.
-        let (a, b) = map.lookup(span::Span::new(pos("bad"), pos("bad") + 3)).unwrap();
+        let (a, b) = map
+            .lookup(span::Span::new(pos("bad"), pos("bad") + 3))
+            .unwrap();
         assert_eq!(line_col(a), (1, 25));
         assert_eq!(line_col(b), (1, 25));
         // `(g + bad)`: from `(` to `)`.

@@ -858,7 +858,7 @@ where
         let mut x_final = self.integ.y().x.clone();
         let mut s_final = self.integ.y().s.clone();
         if let Some((t_star_geo, ratio)) = self.zeno_stop {
-            self.close_segment(self.events.last().map_or(0.0, |e| e.t));
+            // The segment up to the last event was closed when it fired.
             let z = &self.zeno;
             let c = z.count;
             let s = |i: usize| &z.snaps[(c - 3 + i) % 3];

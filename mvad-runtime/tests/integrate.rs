@@ -7,6 +7,35 @@ use mvad_runtime::integrate::{AugState, Integrator};
 use mvad_runtime::solution::{Method, Options};
 use mvad_runtime::{HybridModel, ModelInfo, Switches};
 use nalgebra::{Const, DVector, Dyn, OMatrix, OVector};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+// ---- allocation counting (per thread, so parallel tests do not interfere) -------------
+
+struct CountingAlloc;
+
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+// SAFETY: forwards to the system allocator; the counter is a const-initialised thread-local
+// `Cell` (touching it never allocates).
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(|c| c.get())
+}
 
 // ---- a closure-based model (Dyn sizes), flows only -------------------------------------
 
@@ -797,6 +826,16 @@ fn auto_switches_to_rosenbrock_on_the_stiff_lag() {
     assert_eq!(it.active_method(), Method::Rosenbrock);
     let st = it.stats();
     assert!(st.steps < 500, "{st:?}");
+    // Explicit Tsit5 alone is held at h ≈ 3.5τ by stability: over [0, 1e-5] it already needs
+    // hundreds of steps, i.e. ~1e8 for [0, 3].
+    let o5 = opts(Method::Tsit5, 1e-8, 1e-10);
+    let mut it5 = Integrator::new(&m, &p, &o5);
+    it5.restart(0.0, &y0, 0, 0);
+    while it5.t() < 1e-5 {
+        it5.step(1e-5).unwrap();
+    }
+    let n5 = it5.stats().steps + it5.stats().rejected_steps;
+    assert!(n5 as f64 > 0.5 * 1e-5 / (3.6 * tau), "{:?}", it5.stats());
     let (x, s) = stiff_lag_exact(tau, k, t_end);
     // Sanity of the reference: to first order in τ, y = (1 + 2kτ) e^{λ₊t} with
     // λ₊ = −k(1 + kτ), so ∂y/∂τ = (2k − k²t) e^{λ₊t}.
@@ -890,4 +929,96 @@ fn verner_tight_tolerance_decay() {
         it5.step(t_end).unwrap();
     }
     assert!(it5.stats().steps > 3 * st.steps);
+}
+
+#[test]
+#[ignore = "prints work counters for the report"]
+fn print_ball_stats() {
+    let ball = Ball::new();
+    let p = ball.default_params();
+    for method in [Method::Tsit5, Method::Verner9, Method::Rosenbrock] {
+        for sens in [false, true] {
+            let mut o = opts(method, 1e-10, 1e-10);
+            o.sensitivities = sens;
+            let mut it = Integrator::new(&ball, &p, &o);
+            let mut y0 = AugState::zeros(Const::<2>, Const::<4>);
+            ball.initial_state(&p, &mut y0.x);
+            ball.initial_state_jac(&p, &mut y0.s);
+            it.restart(0.0, &y0, 0, 0);
+            let mut hs = vec![];
+            while it.t() < 0.6 {
+                it.step(0.6).unwrap();
+                hs.push(it.t() - it.t_prev());
+            }
+            println!("{method:?} sens={sens}: {:?} h={hs:?}", it.stats());
+        }
+    }
+    let m = stiff_lag();
+    let p = DVector::from_vec(vec![1e-8, 0.5]);
+    let mut y0 = AugState::zeros(Dyn(2), Dyn(2));
+    y0.x[1] = 1.0;
+    for (method, sec) in [
+        (Method::Auto, false),
+        (Method::Rosenbrock, false),
+        (Method::Auto, true),
+    ] {
+        let mut o = opts(method, 1e-8, 1e-10);
+        o.sens_error_control = sec;
+        let mut it = Integrator::new(&m, &p, &o);
+        it.restart(0.0, &y0, 0, 0);
+        let mut switched = None;
+        while it.t() < 3.0 {
+            it.step(3.0).unwrap();
+            if switched.is_none() && it.active_method() == Method::Rosenbrock {
+                switched = Some((it.stats().steps, it.t()));
+            }
+        }
+        let (x, s) = stiff_lag_exact(1e-8, 0.5, 3.0);
+        let y = it.y();
+        println!(
+            "stiff lag {method:?} sens_error_control={sec}: switched at {switched:?}, {:?}, rel err x {:.1e} S_tau {:.1e} S_k {:.1e}",
+            it.stats(),
+            ((y.x[1] - x[1]) / x[1]).abs(),
+            ((y.s[(0, 0)] - s[0][0]) / s[0][0]).abs(),
+            ((y.s[(0, 1)] - s[0][1]) / s[0][1]).abs()
+        );
+    }
+}
+
+#[test]
+fn stepping_allocates_nothing_for_static_sizes() {
+    // Tsit5 and Verner: restart, steps, dense output and truncation allocate nothing.
+    // Rodas5P allocates exactly its W matrix and pivots per factorisation (nalgebra's `LU`
+    // takes its matrix by value) and nothing else.
+    let ball = Ball::new();
+    let p = ball.default_params();
+    for method in [Method::Tsit5, Method::Verner9, Method::Rosenbrock, Method::Auto] {
+        let o = opts(method, 1e-10, 1e-10);
+        let mut it = Integrator::new(&ball, &p, &o);
+        let mut y0 = AugState::zeros(Const::<2>, Const::<4>);
+        ball.initial_state(&p, &mut y0.x);
+        ball.initial_state_jac(&p, &mut y0.s);
+        let mut out = y0.clone();
+        let mut xo = y0.x;
+        let before = allocations();
+        for _ in 0..3 {
+            it.restart(0.0, &y0, 0, 0);
+            while it.t() < 0.6 {
+                it.step(0.6).unwrap();
+                let tm = 0.5 * (it.t_prev() + it.t());
+                it.dense(tm, &mut out);
+                it.dense_x(tm, &mut xo);
+            }
+            let tc = 0.5 * (it.t_prev() + it.t());
+            it.truncate(tc);
+            it.step(0.6).unwrap();
+        }
+        let n = allocations() - before;
+        let expected = if method == Method::Rosenbrock {
+            2 * it.stats().factorizations
+        } else {
+            0
+        };
+        assert_eq!(n, expected, "{method:?}: {:?}", it.stats());
+    }
 }

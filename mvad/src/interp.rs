@@ -76,7 +76,10 @@ impl InterpretedModel {
     pub fn new(k: ModelKernels) -> Self {
         let ar = &k.arena;
         let tape = |kernel: &Kernel| Tape::new(ar, kernel);
-        let grad = |g: &GradKernels| GradTapes { value: tape(&g.value), grad: tape(&g.grad) };
+        let grad = |g: &GradKernels| GradTapes {
+            value: tape(&g.value),
+            grad: tape(&g.grad),
+        };
         let info = ModelInfo {
             name: k.name.clone(),
             states: k.states.clone(),
@@ -143,7 +146,10 @@ impl InterpretedModel {
             observe_jac: tape(&k.observe_jac),
             running_cost: k.running_cost.as_ref().map(grad),
             final_cost: k.final_cost.as_ref().map(grad),
-            scratch: RefCell::new(Scratch { regs: vec![0.0; nregs], out: vec![0.0; nout] }),
+            scratch: RefCell::new(Scratch {
+                regs: vec![0.0; nregs],
+                out: vec![0.0; nout],
+            }),
             info,
         }
     }
@@ -159,7 +165,12 @@ impl InterpretedModel {
     }
 
     /// Runs `tape` and hands the registers and the dense output buffer to `f`.
-    fn with<R>(&self, tape: &Tape, at: &Point<'_>, f: impl FnOnce(bool, &[f64], &mut [f64]) -> R) -> R {
+    fn with<R>(
+        &self,
+        tape: &Tape,
+        at: &Point<'_>,
+        f: impl FnOnce(bool, &[f64], &mut [f64]) -> R,
+    ) -> R {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
         let ok = tape.run(at, regs);
@@ -191,7 +202,9 @@ impl InterpretedModel {
     }
 
     fn mat(&self, tape: &Tape, at: &Point<'_>, m: &mut M, cols: usize) {
-        self.with(tape, at, |ok, regs, _| Self::mat_out(tape, ok, regs, m, cols, 0));
+        self.with(tape, at, |ok, regs, _| {
+            Self::mat_out(tape, ok, regs, m, cols, 0)
+        });
     }
 
     fn scalar(&self, tape: &Tape, at: &Point<'_>) -> f64 {
@@ -221,7 +234,12 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
 }
 
 fn pt<'a>(t: f64, x: &'a X, p: &'a X, sw: Switches) -> Point<'a> {
-    Point { t, x: x.as_slice(), p: p.as_slice(), sw }
+    Point {
+        t,
+        x: x.as_slice(),
+        p: p.as_slice(),
+        sw,
+    }
 }
 
 impl HybridModel for InterpretedModel {
@@ -239,19 +257,39 @@ impl HybridModel for InterpretedModel {
     }
 
     fn initial_state(&self, p: &X, x0: &mut X) {
-        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        let at = Point {
+            t: 0.0,
+            x: &[],
+            p: p.as_slice(),
+            sw: 0,
+        };
         self.vec_out(&self.x0, &at, x0);
     }
     fn initial_state_jac(&self, p: &X, dx0: &mut M) {
-        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        let at = Point {
+            t: 0.0,
+            x: &[],
+            p: p.as_slice(),
+            sw: 0,
+        };
         self.mat(&self.x0_jac, &at, dx0, self.p);
     }
     fn horizon(&self, p: &X) -> Option<f64> {
-        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        let at = Point {
+            t: 0.0,
+            x: &[],
+            p: p.as_slice(),
+            sw: 0,
+        };
         self.horizon.as_ref().map(|(h, _)| self.scalar(h, &at))
     }
     fn horizon_grad(&self, p: &X, dt: &mut X) {
-        let at = Point { t: 0.0, x: &[], p: p.as_slice(), sw: 0 };
+        let at = Point {
+            t: 0.0,
+            x: &[],
+            p: p.as_slice(),
+            sw: 0,
+        };
         match &self.horizon {
             Some((_, g)) => self.vec_out(g, &at, dt),
             None => dt.fill(0.0),
@@ -287,7 +325,17 @@ impl HybridModel for InterpretedModel {
         self.mode(mode).is_some_and(|m| m.depends_on_t)
     }
 
-    fn rhs_sens(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, s: &M, f: &mut X, ds: &mut M) {
+    fn rhs_sens(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &X,
+        p: &X,
+        s: &M,
+        f: &mut X,
+        ds: &mut M,
+    ) {
         let Some(m) = self.mode(mode) else {
             f.fill(f64::NAN);
             ds.fill(f64::NAN);
@@ -397,7 +445,11 @@ impl HybridModel for InterpretedModel {
                 return;
             }
             for (s, r) in tape.outputs() {
-                let slot = if s < nobs * n { yx.get_mut(s) } else { yp.get_mut(s - nobs * n) };
+                let slot = if s < nobs * n {
+                    yx.get_mut(s)
+                } else {
+                    yp.get_mut(s - nobs * n)
+                };
                 if let Some(v) = slot {
                     *v = regs[r];
                 }

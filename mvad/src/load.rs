@@ -81,7 +81,7 @@ pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
 /// Compiles model text held in memory; `name` is the file name used in error messages.
 pub fn load_str(name: &str, src: &str) -> Result<InterpretedModel, LoadError> {
     if let Some(d) = precheck(src) {
-        return Err(model_error(name, src, vec![d]));
+        return Err(clipped_error(name, src, d));
     }
     InterpretedModel::from_source(src).map_err(|diags| model_error(name, src, diags))
 }
@@ -106,7 +106,7 @@ pub fn load_bytes(name: &str, bytes: &[u8]) -> Result<InterpretedModel, LoadErro
                 ),
             )
             .with_help("a `.hyb` model is UTF-8 text");
-            Err(model_error(name, &lossy, vec![d]))
+            Err(clipped_error(name, &lossy, d))
         }
     }
 }
@@ -132,6 +132,27 @@ fn precheck(src: &str) -> Option<Diagnostic> {
         )
         .with_help("a `.hyb` model is plain text"),
     )
+}
+
+/// Like [`model_error`] for an error found below the grammar, but quoting the offending
+/// line only up to a few dozen characters past the error, so a binary file does not
+/// flood the terminal.
+fn clipped_error(name: &str, src: &str, d: Diagnostic) -> LoadError {
+    let end = d.span.end.min(src.len());
+    let line_end = src[end..].find('\n').map_or(src.len(), |i| end + i);
+    let mut cut = src[end..line_end]
+        .char_indices()
+        .nth(40)
+        .map_or(line_end, |(i, _)| end + i);
+    while !src.is_char_boundary(cut) {
+        cut -= 1;
+    }
+    let rendered = render(name, &src[..cut], std::slice::from_ref(&d));
+    LoadError::Model {
+        file: name.to_string(),
+        diagnostics: vec![d],
+        rendered,
+    }
 }
 
 fn model_error(name: &str, src: &str, diagnostics: Vec<Diagnostic>) -> LoadError {

@@ -25,7 +25,12 @@ pub fn model_files() -> Vec<(String, String)> {
             rd.filter_map(|e| e.ok())
                 .map(|e| e.path())
                 .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
-                .filter_map(|p| Some((p.file_name()?.to_string_lossy().into_owned(), std::fs::read_to_string(&p).ok()?)))
+                .filter_map(|p| {
+                    Some((
+                        p.file_name()?.to_string_lossy().into_owned(),
+                        std::fs::read_to_string(&p).ok()?,
+                    ))
+                })
                 .collect()
         })
         .unwrap_or_default();
@@ -41,7 +46,7 @@ impl Rng {
         Rng(seed)
     }
     /// The next number in [0, 1).
-    pub fn next(&mut self) -> f64 {
+    pub fn uniform(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -50,7 +55,7 @@ impl Rng {
     }
     /// Uniform in [lo, hi).
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
+        lo + (hi - lo) * self.uniform()
     }
 }
 
@@ -103,12 +108,28 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let info = m.info();
-    let p: Vec<f64> =
-        info.param_defaults.iter().map(|&d| if d == 0.0 { rng.range(-0.3, 0.3) } else { d * rng.range(0.8, 1.2) }).collect();
+    let p: Vec<f64> = info
+        .param_defaults
+        .iter()
+        .map(|&d| {
+            if d == 0.0 {
+                rng.range(-0.3, 0.3)
+            } else {
+                d * rng.range(0.8, 1.2)
+            }
+        })
+        .collect();
     let mut x0 = OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
     m.initial_state(&vp(m, &p), &mut x0);
-    let x = x0.iter().map(|&v| v + rng.range(-0.5, 0.5) * v.abs().max(1.0)).collect();
-    Pt { x, p, t: rng.range(0.05, 1.5) }
+    let x = x0
+        .iter()
+        .map(|&v| v + rng.range(-0.5, 0.5) * v.abs().max(1.0))
+        .collect();
+    Pt {
+        x,
+        p,
+        t: rng.range(0.05, 1.5),
+    }
 }
 
 /// Which variable block a derivative is taken in.
@@ -147,7 +168,9 @@ fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec
         for i in 0..nout {
             let fd = (up[i] - dn[i]) / h2;
             let s = sym[i * nvar + j];
-            let tol = 1e-6 * s.abs().max(fd.abs()) + 20.0 * f64::EPSILON * (up[i].abs() + dn[i].abs()) / h2 + 1e-9;
+            let tol = 1e-6 * s.abs().max(fd.abs())
+                + 20.0 * f64::EPSILON * (up[i].abs() + dn[i].abs()) / h2
+                + 1e-9;
             assert!(
                 (s - fd).abs() <= tol,
                 "{what}: d[{i}]/d{wrt:?}[{j}] symbolic {s:e} vs FD {fd:e} at {pt:?}"
@@ -189,13 +212,20 @@ where
         fd_check(&what, pt, Wrt::P, &rows(&fp), &f);
         fd_check(&what, pt, Wrt::T, ft.as_slice(), &f);
         if !m.rhs_depends_on_t(mode) {
-            assert!(ft.iter().all(|&v| v == 0.0), "{what}: autonomous flow with ∂f/∂t ≠ 0");
+            assert!(
+                ft.iter().all(|&v| v == 0.0),
+                "{what}: autonomous flow with ∂f/∂t ≠ 0"
+            );
         }
         // Sparsity: every entry outside the declared pattern is exactly zero.
         for r in 0..n {
             for c in 0..n {
                 if !info.jacobian_sparsity[mode].contains(&(r, c)) {
-                    assert_eq!(fx[(r, c)], 0.0, "{what}: f_x[{r},{c}] outside the sparsity pattern");
+                    assert_eq!(
+                        fx[(r, c)],
+                        0.0,
+                        "{what}: f_x[{r},{c}] outside the sparsity pattern"
+                    );
                 }
             }
         }
@@ -207,7 +237,10 @@ where
         let want = &fx * &s + &fp;
         assert_eq!(f1.as_slice(), f(pt).as_slice(), "{what}: rhs_sens f");
         for (a, b) in ds.iter().zip(want.iter()) {
-            assert!((a - b).abs() <= 1e-13 * (1.0 + b.abs()), "{what}: rhs_sens {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-13 * (1.0 + b.abs()),
+                "{what}: rhs_sens {a} vs {b}"
+            );
         }
     }
 
@@ -298,7 +331,9 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let (x, p) = (vn(m, &pt.x), vp(m, &pt.p));
-    (0..m.info().switches).filter(|&j| m.switch_value(j, pt.t, &x, &p) > 0.0).fold(0, |w, j| w | (1 << j))
+    (0..m.info().switches)
+        .filter(|&j| m.switch_value(j, pt.t, &x, &p) > 0.0)
+        .fold(0, |w, j| w | (1 << j))
 }
 
 fn check_all<M: HybridModel>(m: &M, seed: u64, npoints: usize)

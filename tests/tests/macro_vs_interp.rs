@@ -37,7 +37,14 @@ impl Rng {
 
 /// Every output of every method of `m` at one point, labelled, in a fixed order.
 #[allow(clippy::too_many_arguments)]
-fn snapshot<M: HybridModel>(m: &M, x: &[f64], p: &[f64], t: f64, sw: u64, s: &[f64]) -> Vec<(String, Vec<f64>)>
+fn snapshot<M: HybridModel>(
+    m: &M,
+    x: &[f64],
+    p: &[f64],
+    t: f64,
+    sw: u64,
+    s: &[f64],
+) -> Vec<(String, Vec<f64>)>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
@@ -80,7 +87,10 @@ where
         let mut ft = zn();
         m.rhs_dt(mode, sw, t, &xv, &pv, &mut ft);
         put(format!("ft{mode}"), ft.as_slice());
-        put(format!("dep_t{mode}"), &[f64::from(u8::from(m.rhs_depends_on_t(mode)))]);
+        put(
+            format!("dep_t{mode}"),
+            &[f64::from(u8::from(m.rhs_depends_on_t(mode)))],
+        );
         let (mut f2, mut ds) = (zn(), znp());
         m.rhs_sens(mode, sw, t, &xv, &pv, &sv, &mut f2, &mut ds);
         put(format!("sens_f{mode}"), f2.as_slice());
@@ -141,7 +151,14 @@ where
 
 /// [`snapshot`] of a loaded model (outside any generic where-clause, which would shadow
 /// the `Dyn` allocator impls).
-fn snapshot_interp(m: &InterpretedModel, x: &[f64], p: &[f64], t: f64, sw: u64, s: &[f64]) -> Vec<(String, Vec<f64>)> {
+fn snapshot_interp(
+    m: &InterpretedModel,
+    x: &[f64],
+    p: &[f64],
+    t: f64,
+    sw: u64,
+    s: &[f64],
+) -> Vec<(String, Vec<f64>)> {
     snapshot(m, x, p, t, sw, s)
 }
 
@@ -158,7 +175,11 @@ where
     let mut compared = 0usize;
     for _ in 0..50 {
         let x: Vec<f64> = (0..n).map(|_| rng.range(-3.0, 3.0)).collect();
-        let th: Vec<f64> = info.param_defaults.iter().map(|&d| d * rng.range(0.5, 1.5) + rng.range(-0.1, 0.1)).collect();
+        let th: Vec<f64> = info
+            .param_defaults
+            .iter()
+            .map(|&d| d * rng.range(0.5, 1.5) + rng.range(-0.1, 0.1))
+            .collect();
         let s: Vec<f64> = (0..n * p).map(|_| rng.range(-2.0, 2.0)).collect();
         let t = rng.range(0.0, 3.0);
         let sw = (rng.next() * 2f64.powi(info.switches.min(52) as i32)) as u64;
@@ -169,7 +190,9 @@ where
             assert_eq!(ka, kb);
             assert_eq!(va.len(), vb.len(), "{} {ka}: length", info.name);
             for (u, v) in va.iter().zip(vb) {
-                let same = (u.is_nan() && v.is_nan()) || (u - v).abs() <= 1e-14 * u.abs().max(v.abs()) || u == v;
+                let same = (u.is_nan() && v.is_nan())
+                    || (u - v).abs() <= 1e-14 * u.abs().max(v.abs())
+                    || u == v;
                 assert!(same, "{} {ka}: compiled {u:e} vs interpreted {v:e} (x={x:?}, θ={th:?}, t={t}, sw={sw})", info.name);
                 compared += 1;
             }
@@ -180,7 +203,9 @@ where
 
 #[test]
 fn compiled_and_interpreted_models_agree() {
-    let m = |f: &str| std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f);
+    let m = |f: &str| {
+        std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f)
+    };
     agree(&compiled::BouncingBall::new(), &m("bouncing_ball.hyb"), 1);
     agree(&compiled::Ceiling::new(), &m("ceiling.hyb"), 2);
     agree(&compiled::E2Sweep::new(), &m("e2_sweep.hyb"), 3);
@@ -218,4 +243,64 @@ fn params_struct_round_trips() {
     assert_eq!(v2, v);
     assert_eq!(compiled::Sink::NSTATES, 3);
     assert_eq!(compiled::Sink::NPARAMS, 3);
+}
+
+/// Wall time per call of `f`, best of several batches (robust on a shared machine).
+fn best_time(mut f: impl FnMut(), reps: usize) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..7 {
+        let start = std::time::Instant::now();
+        for _ in 0..reps {
+            f();
+        }
+        best = best.min(start.elapsed().as_secs_f64() / reps as f64);
+    }
+    best
+}
+
+/// The loaded model's gradient costs at most 5× the compiled one's (run in release:
+/// `cargo test --release -p mvad-tests --test macro_vs_interp -- --ignored --nocapture`).
+#[test]
+#[ignore = "timing; meaningful only in release on a quiet machine"]
+fn loaded_gradient_within_5x_of_compiled() {
+    let opts = mvad::solution::Options { rtol: 1e-10, atol: 1e-12, ..Default::default() };
+    let m = |f: &str| std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f);
+    let mut worst: f64 = 0.0;
+    for (file, compiled_grad) in [
+        ("bouncing_ball.hyb", grad_time(&compiled::BouncingBall::new(), &opts)),
+        ("thermostat.hyb", grad_time(&compiled::Thermostat::new(), &opts)),
+        ("stiff_relay.hyb", grad_time(&compiled::StiffRelay::new(), &opts)),
+    ] {
+        let i = InterpretedModel::from_source(&m(file)).expect("loads");
+        let loaded = grad_time_interp(&i, &opts);
+        let (tc, gc) = compiled_grad;
+        let (tl, gl) = loaded;
+        for (a, b) in gc.iter().zip(&gl) {
+            assert!((a - b).abs() <= 1e-9 * a.abs().max(1.0), "{file}: gradients differ {a} vs {b}");
+        }
+        let ratio = tl / tc;
+        println!("{file}: compiled {:.1} µs, loaded {:.1} µs, ratio {ratio:.2}", tc * 1e6, tl * 1e6);
+        worst = worst.max(ratio);
+    }
+    assert!(worst <= 5.0, "loaded/compiled gradient time ratio {worst:.2} > 5");
+}
+
+fn grad_time<M: HybridModel>(m: &M, opts: &mvad::solution::Options) -> (f64, Vec<f64>)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let p = OVector::<f64, M::P>::from_iterator_generic(m.nparams(), Const::<1>, m.info().param_defaults.iter().copied());
+    let sol = mvad::solve::solve(m, &p, opts).expect("solves");
+    let t = best_time(
+        || {
+            let s = mvad::solve::solve(m, &p, opts).expect("solves");
+            std::hint::black_box(s.gradient);
+        },
+        20,
+    );
+    (t, sol.gradient)
+}
+
+fn grad_time_interp(m: &InterpretedModel, opts: &mvad::solution::Options) -> (f64, Vec<f64>) {
+    grad_time(m, opts)
 }

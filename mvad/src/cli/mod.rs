@@ -229,8 +229,6 @@ where
     pub opts: Options,
     /// Indices of the parameters to report derivatives for (`--wrt`, default all).
     pub wrt: Vec<usize>,
-    /// The final time the run will use (`--t-end` or the model's horizon at θ).
-    pub t_end: f64,
 }
 
 /// Parses a finite number.
@@ -298,7 +296,7 @@ where
         }
         opts.grazing_tol = tau;
     }
-    let t_end = match common.t_end {
+    match common.t_end {
         Some(t) => {
             if !(t.is_finite() && t > 0.0) {
                 return Err(CliError::Input(format!(
@@ -306,7 +304,6 @@ where
                 )));
             }
             opts.t_end = Some(t);
-            t
         }
         None => match model.horizon(&params) {
             None => {
@@ -322,15 +319,10 @@ where
                     info.name
                 )))
             }
-            Some(t) => t,
+            Some(_) => {}
         },
-    };
-    Ok(Setup {
-        params,
-        opts,
-        wrt,
-        t_end,
-    })
+    }
+    Ok(Setup { params, opts, wrt })
 }
 
 /// θ: the declared parameter values with every `--set NAME=VALUE` applied.
@@ -373,14 +365,6 @@ pub fn solve_err(e: SolveError) -> CliError {
         | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}")),
         _ => CliError::Run(format!("error: the run failed: {e}")),
     }
-}
-
-/// A vector of the model's parameter dimension from a slice.
-pub fn pvec<M: HybridModel>(model: &M, values: &[f64]) -> OVector<f64, M::P>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    OVector::<f64, M::P>::from_iterator_generic(model.nparams(), Const::<1>, values.iter().copied())
 }
 
 /// A vector of the model's state dimension from a slice.
@@ -455,7 +439,6 @@ mod tests {
         let s = setup(&ball, &common(&["--wrt", "v0,e,v0", "--rtol", "1e-6"])).expect("ok");
         assert_eq!(s.wrt, vec![3, 0]);
         assert_eq!(s.opts.rtol, 1e-6);
-        assert_eq!(s.t_end, 2.0);
         for bad in [
             &["--wrt", "x"][..],
             &["--wrt", ","],
@@ -469,7 +452,6 @@ mod tests {
             assert_eq!(err.status(), 2, "{bad:?}");
         }
         let s = setup(&ball, &common(&["--t-end", "3.5", "--method", "verner9"])).expect("ok");
-        assert_eq!(s.t_end, 3.5);
         assert_eq!(s.opts.t_end, Some(3.5));
         assert_eq!(s.opts.method, Method::Verner9);
     }

@@ -1,8 +1,8 @@
 //! Pictures with plotters, as SVG or PNG (chosen by the file extension).
 //!
-//! PNG text is drawn by the pure-Rust `ab_glyph` rasteriser with DejaVu Sans Mono,
-//! shipped in `mvad/assets/` (plotters' bitmap backend has no font of its own). SVG text
-//! is left to the viewer's fonts.
+//! Text is laid out (both formats) and, in PNG, drawn by the pure-Rust `ab_glyph`
+//! rasteriser with DejaVu Sans Mono, shipped in `mvad/assets/` (plotters' bitmap
+//! backend has no font of its own and would panic without one).
 //!
 //! Two pictures: [`figure1`] (what the paper's Figure 1 shows: the trajectory with its
 //! events, the density with the atoms as stems, MV-AD against FD) and [`workprec`]
@@ -128,6 +128,7 @@ pub fn figure1(path: &Path, fig: &Figure1) -> Result<(), CliError> {
     let size = (1200, 900);
     match fmt {
         Format::Svg => {
+            ensure_font()?;
             let root = SVGBackend::new(path, size).into_drawing_area();
             draw_figure1(&root, fig).map_err(|e| fail(path, e))?;
             root.present().map_err(|e| fail(path, e))
@@ -291,6 +292,7 @@ pub fn workprec(path: &Path, title: &str, panels: &[(String, Vec<Curve>)]) -> Re
     let size = (600 * panels.len().max(1) as u32, 500);
     match fmt {
         Format::Svg => {
+            ensure_font()?;
             let root = SVGBackend::new(path, size).into_drawing_area();
             draw_workprec(&root, title, panels).map_err(|e| fail(path, e))?;
             root.present().map_err(|e| fail(path, e))

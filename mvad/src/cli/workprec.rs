@@ -255,7 +255,7 @@ where
     ]);
     for r in &rows {
         t.row(vec![
-            g(r.rtol, 2),
+            format!("{:.0e}", r.rtol),
             format!("{} s", g(r.mvad.seconds, 3)),
             g(r.mvad.cost_err, 2),
             g(r.mvad.grad_err, 2),

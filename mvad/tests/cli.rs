@@ -1,0 +1,462 @@
+//! End-to-end tests of the `mvad` binary: every command, the JSON keys of the spec, the
+//! tables, the exit statuses (0 ok, 1 the run failed, 2 bad input), and located errors
+//! for malformed models (empty, binary, deeply nested, every semantic error class),
+//! none of which may panic.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use approx::assert_relative_eq;
+use serde_json::Value;
+
+/// The workspace root (the models are under `models/`).
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn mvad(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mvad"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("the binary runs")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs and asserts the exit status, and that nothing panicked.
+fn run_status(args: &[&str], status: i32) -> Output {
+    let o = mvad(args);
+    let err = stderr(&o);
+    assert!(!err.contains("panicked"), "panic for {args:?}: {err}");
+    assert_eq!(
+        o.status.code(),
+        Some(status),
+        "exit status of {args:?}\nstdout: {}\nstderr: {err}",
+        stdout(&o)
+    );
+    o
+}
+
+fn json(o: &Output) -> Value {
+    serde_json::from_str(&stdout(o)).unwrap_or_else(|e| panic!("not JSON ({e}): {}", stdout(o)))
+}
+
+/// A scratch file holding `contents`.
+fn scratch(name: &str, contents: &[u8]) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mvad-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join(name);
+    std::fs::write(&path, contents).expect("write");
+    path
+}
+
+const BALL: &str = "models/bouncing_ball.hyb";
+const E1_COST: f64 = 1.8905137123173506;
+const E1_DCDE: f64 = 2.8314408141470055;
+const E1_T1: f64 = 0.63855085681410093;
+const E1_T2: f64 = 1.6602322277166624;
+
+#[test]
+fn grad_json_has_the_spec_keys_and_the_e1_values() {
+    let o = run_status(&["grad", BALL, "--json", "--rtol", "1e-10", "--atol", "1e-12"], 0);
+    let v = json(&o);
+    for key in ["model", "t_end", "params", "cost", "gradient", "events", "diagnostics", "stats"] {
+        assert!(v.get(key).is_some(), "missing key {key}");
+    }
+    assert_eq!(v["model"], "BouncingBall");
+    assert_eq!(v["t_end"], 2.0);
+    assert_eq!(v["params"]["e"], 0.8);
+    assert_eq!(v["params"]["g"], 9.81);
+    assert_relative_eq!(v["cost"].as_f64().expect("cost"), E1_COST, max_relative = 1e-9);
+    assert_relative_eq!(v["gradient"]["e"].as_f64().expect("dC/de"), E1_DCDE, max_relative = 1e-9);
+    let events = v["events"].as_array().expect("events");
+    assert_eq!(events.len(), 2);
+    for (k, (ev, t)) in events.iter().zip([E1_T1, E1_T2]).enumerate() {
+        for key in [
+            "index", "name", "t", "mode_before", "mode_after", "guard_slope", "transversal", "dt", "jump", "atoms",
+        ] {
+            assert!(ev.get(key).is_some(), "event {k} lacks {key}");
+        }
+        assert_eq!(ev["index"], k);
+        assert_eq!(ev["name"], "impact");
+        assert_eq!(ev["mode_before"], "main");
+        assert_eq!(ev["mode_after"], "main");
+        assert_eq!(ev["transversal"], true);
+        assert_relative_eq!(ev["t"].as_f64().expect("t"), t, max_relative = 1e-10);
+        for key in ["h", "v", "height", "velocity"] {
+            assert!(ev["jump"][key].is_number(), "jump lacks {key}");
+        }
+        for obs in ["height", "velocity"] {
+            for p in ["e", "g", "h0", "v0"] {
+                assert!(ev["atoms"][obs][p].is_number(), "atoms lack {obs}/{p}");
+            }
+        }
+    }
+    // First impact: v⁻ = −g t₁, slope ∇g·f = v⁻, J_v = (1 + e) g t₁, t₁' w.r.t. h0 = 1/(g t₁).
+    let ev = &events[0];
+    assert_relative_eq!(ev["guard_slope"].as_f64().expect("n"), -9.81 * E1_T1, max_relative = 1e-9);
+    assert_relative_eq!(ev["jump"]["v"].as_f64().expect("n"), 1.8 * 9.81 * E1_T1, max_relative = 1e-9);
+    assert_relative_eq!(ev["dt"]["h0"].as_f64().expect("n"), 1.0 / (9.81 * E1_T1), max_relative = 1e-8);
+    // α = −J t' for velocity and h0: −(1.8 g t₁)(1/(g t₁)) = −1.8.
+    assert_relative_eq!(ev["atoms"]["velocity"]["h0"].as_f64().expect("n"), -1.8, max_relative = 1e-8);
+    assert_eq!(ev["jump"]["height"].as_f64().map(f64::abs), Some(0.0));
+    for key in ["steps", "rejected_steps", "events", "wall_seconds"] {
+        assert!(v["stats"][key].is_number(), "stats lack {key}");
+    }
+    assert_eq!(v["stats"]["events"], 2);
+    assert!(v["diagnostics"].as_array().expect("array").is_empty());
+}
+
+#[test]
+fn grad_wrt_set_and_t_end() {
+    let o = run_status(&["grad", BALL, "--json", "--wrt", "e", "--set", "e=0.5", "--t-end", "1"], 0);
+    let v = json(&o);
+    assert_eq!(v["params"]["e"], 0.5);
+    assert_eq!(v["t_end"], 1.0);
+    assert_eq!(v["gradient"].as_object().map(|g| g.len()), Some(1));
+    assert_eq!(v["events"][0]["dt"].as_object().map(|g| g.len()), Some(1));
+    assert_eq!(v["events"][0]["atoms"]["velocity"].as_object().map(|g| g.len()), Some(1));
+    assert_eq!(v["events"].as_array().map(Vec::len), Some(1));
+}
+
+#[test]
+fn grad_text_table() {
+    let o = run_status(&["grad", BALL], 0);
+    let out = stdout(&o);
+    assert!(out.contains("cost C = 1.89051371"), "{out}");
+    assert!(out.lines().any(|l| l.starts_with("e ") && l.contains("2.83144081")), "{out}");
+    assert!(out.contains("events (2):"), "{out}");
+    assert!(out.contains("guard slope"), "{out}");
+}
+
+#[test]
+fn grad_adjoint_is_reported_unsupported() {
+    let o = run_status(&["grad", BALL, "--mode", "adjoint"], 2);
+    assert!(stderr(&o).contains("adjoint"), "{}", stderr(&o));
+}
+
+#[test]
+fn zeno_ball_reports_a_zeno_diagnostic_and_finishes() {
+    let o = run_status(&["grad", "models/zeno_ball.hyb", "--json"], 0);
+    let v = json(&o);
+    let kinds: Vec<&str> = v["diagnostics"]
+        .as_array()
+        .expect("array")
+        .iter()
+        .filter_map(|d| d["kind"].as_str())
+        .collect();
+    assert!(kinds.contains(&"zeno"), "{kinds:?}");
+    for d in v["diagnostics"].as_array().expect("array") {
+        assert!(d["t"].is_number() && d["message"].is_string());
+    }
+    // e = 0.5, h0 = 2: the bounces accumulate at t* = t₁ (1 + 2e/(1 − e)) = 3 t₁.
+    let zeno = v["diagnostics"]
+        .as_array()
+        .expect("array")
+        .iter()
+        .find(|d| d["kind"] == "zeno")
+        .expect("zeno");
+    assert_relative_eq!(zeno["t"].as_f64().expect("t"), 3.0 * E1_T1, max_relative = 1e-6);
+}
+
+#[test]
+fn check_every_bundled_model() {
+    for name in ["bouncing_ball", "e2_sweep", "thermostat", "stiff_relay", "zeno_ball", "ceiling"] {
+        let path = format!("models/{name}.hyb");
+        let o = run_status(&["check", &path], 0);
+        assert!(stdout(&o).contains("is valid"), "{}", stdout(&o));
+        let v = json(&run_status(&["check", &path, "--json"], 0));
+        assert!(v["states"].as_array().is_some_and(|s| !s.is_empty()));
+    }
+    let v = json(&run_status(&["check", "models/thermostat.hyb", "--json"], 0));
+    assert_eq!(v["modes"], serde_json::json!(["heating", "cooling"]));
+    assert_eq!(v["events"][0]["target"], "cooling");
+}
+
+#[test]
+fn every_bundled_model_runs_grad() {
+    for name in ["bouncing_ball", "e2_sweep", "thermostat", "stiff_relay", "zeno_ball", "ceiling"] {
+        let path = format!("models/{name}.hyb");
+        let v = json(&run_status(&["grad", &path, "--json"], 0));
+        assert!(v["cost"].is_number(), "{name}");
+        assert!(
+            v["gradient"].as_object().expect("gradient").values().all(Value::is_number),
+            "{name}: {}",
+            v["gradient"]
+        );
+    }
+}
+
+#[test]
+fn simulate_csv_to_stdout_and_file() {
+    let o = run_status(&["simulate", BALL, "--points", "21"], 0);
+    let out = stdout(&o);
+    assert!(out.starts_with("t,mode,h,v,height,velocity\n"), "{out}");
+    assert_eq!(out.lines().count(), 1 + 21 + 4);
+    assert!(stderr(&o).contains("impact"), "event table on stderr: {}", stderr(&o));
+    let path = scratch("traj.csv", b"");
+    let p = path.to_string_lossy().to_string();
+    let o = run_status(&["simulate", BALL, "--out", &p], 0);
+    assert!(stdout(&o).contains("impact"), "{}", stdout(&o));
+    let csv = std::fs::read_to_string(&path).expect("csv written");
+    let last = csv.lines().last().expect("rows");
+    assert!(last.starts_with("2.0,main,"), "{last}");
+    let v = json(&run_status(&["simulate", BALL, "--json", "--points", "3"], 0));
+    assert_eq!(v["columns"][0], "t");
+    assert_eq!(v["rows"].as_array().map(Vec::len), Some(3 + 4));
+}
+
+#[test]
+fn measure_json_and_plots() {
+    let v = json(&run_status(
+        &["measure", BALL, "--observable", "height", "--wrt", "e", "--json", "--rtol", "1e-10", "--atol", "1e-12"],
+        0,
+    ));
+    for key in ["observable", "grid", "density", "atoms", "integral_derivative"] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_relative_eq!(
+        v["integral_derivative"]["e"]["total"].as_f64().expect("n"),
+        E1_DCDE,
+        max_relative = 1e-8
+    );
+    for ext in ["svg", "png"] {
+        let path = scratch(&format!("fig1.{ext}"), b"");
+        let p = path.to_string_lossy().to_string();
+        let o = run_status(&["measure", BALL, "--observable", "velocity", "--wrt", "e", "--plot", &p], 0);
+        assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
+        let bytes = std::fs::read(&path).expect("picture");
+        assert!(bytes.len() > 1000, "{ext}: {} bytes", bytes.len());
+        if ext == "png" {
+            assert_eq!(&bytes[..4], b"\x89PNG");
+        } else {
+            assert!(bytes.starts_with(b"<svg"));
+        }
+    }
+    let o = run_status(&["measure", BALL, "--observable", "nope"], 2);
+    assert!(stderr(&o).contains("known observables: height, velocity"), "{}", stderr(&o));
+    run_status(&["measure", BALL], 2); // --observable is required
+}
+
+#[test]
+fn fdcheck_table_one() {
+    let o = run_status(&["fdcheck", BALL, "--wrt", "e"], 0);
+    let out = stdout(&o);
+    for word in ["MV-AD", "FD", "abs err", "rel err", "cosine similarity", "0.638551; 1.66023"] {
+        assert!(out.contains(word), "{word}: {out}");
+    }
+    let v = json(&run_status(&["fdcheck", BALL, "--json", "--step", "1e-5", "--rtol", "1e-12", "--atol", "1e-14"], 0));
+    let row = &v["rows"][0];
+    for key in ["param", "mvad", "fd", "abs_err", "rel_err"] {
+        assert!(row.get(key).is_some(), "row lacks {key}");
+    }
+    assert!(row["rel_err"].as_f64().expect("n") < 1e-6, "{row}");
+    assert_relative_eq!(v["cosine_similarity"].as_f64().expect("n"), 1.0, max_relative = 1e-9);
+    assert_eq!(v["events"], 2);
+}
+
+#[test]
+fn sweep_table_two_on_e2() {
+    let o = run_status(&["sweep", "models/e2_sweep.hyb", "--over", "v0=-0.5:-5:10"], 0);
+    let out = stdout(&o);
+    assert!(out.contains("guard slope"), "{out}");
+    assert_eq!(out.lines().filter(|l| l.contains("True")).count(), 10, "{out}");
+    let v = json(&run_status(
+        &["sweep", "models/e2_sweep.hyb", "--over", "v0=-0.5:-5:10", "--json", "--rtol", "1e-10", "--atol", "1e-12"],
+        0,
+    ));
+    let rows = v["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 10);
+    assert_relative_eq!(rows[0]["guard_slope"].as_f64().expect("n"), 4.457577817604534, max_relative = 1e-9);
+    assert_relative_eq!(rows[0]["event_time"].as_f64().expect("n"), 0.40342281525020734, max_relative = 1e-9);
+    assert_relative_eq!(rows[9]["guard_slope"].as_f64().expect("n"), 6.679820356865894, max_relative = 1e-9);
+    assert_relative_eq!(rows[9]["event_time"].as_f64().expect("n"), 0.17123551038388318, max_relative = 1e-9);
+    for r in rows {
+        assert_eq!(r["atom_magnitude"], 0.0, "position is continuous: no atom");
+        assert_eq!(r["transversal"], true);
+    }
+    run_status(&["sweep", "models/e2_sweep.hyb", "--over", "v0=1:2"], 2);
+    run_status(&["sweep", "models/e2_sweep.hyb", "--over", "zz=1:2:3"], 2);
+}
+
+#[test]
+fn workprec_table_and_plot() {
+    let path = scratch("wp.svg", b"");
+    let p = path.to_string_lossy().to_string();
+    let o = run_status(
+        &["workprec", BALL, "--wrt", "e", "--reference", "C=1.8905137123173506", "--reference", "e=2.8314408141470055", "--plot", &p],
+        0,
+    );
+    let out = stdout(&o);
+    assert!(out.contains("MV-AD err dC"), "{out}");
+    assert_eq!(out.lines().filter(|l| l.starts_with("1e-")).count(), 10, "{out}");
+    assert!(std::fs::read_to_string(&path).expect("plot").contains("MV-AD"));
+}
+
+#[test]
+fn unknown_set_lists_the_known_params() {
+    for cmd in ["check", "simulate", "grad", "fdcheck", "workprec"] {
+        let o = run_status(&[cmd, BALL, "--set", "q=1"], 2);
+        assert!(stderr(&o).contains("known parameters: e, g, h0, v0"), "{cmd}: {}", stderr(&o));
+    }
+    run_status(&["grad", BALL, "--wrt", "nope"], 2);
+    run_status(&["grad", BALL, "--set", "e=abc"], 2);
+}
+
+#[test]
+fn bad_options_and_usage_errors_exit_2() {
+    run_status(&["grad", BALL, "--bogus"], 2);
+    run_status(&["frobnicate", BALL], 2);
+    run_status(&[], 2);
+    run_status(&["grad"], 2);
+    run_status(&["grad", BALL, "--method", "euler"], 2);
+    run_status(&["grad", BALL, "--rtol", "-1"], 2);
+    run_status(&["grad", BALL, "--rtol", "x"], 2);
+    run_status(&["grad", BALL, "--t-end", "0"], 2);
+    run_status(&["grad", BALL, "--grazing-tol", "nan"], 2);
+    run_status(&["grad", "/nonexistent/model.hyb"], 2);
+    run_status(&["measure", BALL, "--observable", "height", "--plot", "x.pdf"], 2);
+    let o = run_status(&["--help"], 0);
+    assert!(stdout(&o).contains("workprec"));
+    run_status(&["grad", "--help"], 0);
+    run_status(&["--version"], 0);
+    // Every method parses and runs.
+    for m in ["auto", "tsit5", "verner9", "rosenbrock"] {
+        run_status(&["grad", BALL, "--method", m], 0);
+    }
+}
+
+#[test]
+fn a_model_without_horizon_needs_t_end() {
+    let path = scratch("nohorizon.hyb", b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n");
+    let p = path.to_string_lossy().to_string();
+    let o = run_status(&["grad", &p], 2);
+    assert!(stderr(&o).contains("--t-end"), "{}", stderr(&o));
+    run_status(&["grad", &p, "--t-end", "1"], 0);
+}
+
+#[test]
+fn a_failed_run_exits_1_with_an_error_object() {
+    let path = scratch(
+        "nan.hyb",
+        b"model M {\n  state x = -1;\n  flow { der(x) = log(x); }\n  cost = integral(x);\n  horizon 1;\n}\n",
+    );
+    let p = path.to_string_lossy().to_string();
+    let o = run_status(&["grad", &p, "--json"], 1);
+    let v = json(&o);
+    assert!(v["error"].as_str().is_some_and(|m| m.contains("non-finite")), "{v}");
+    assert!(stderr(&o).contains("non-finite"), "{}", stderr(&o));
+    let o = run_status(&["grad", &p], 1);
+    assert!(stdout(&o).is_empty());
+    // A solution that blows up in finite time.
+    let path = scratch(
+        "blowup.hyb",
+        b"model M {\n  state x = 1;\n  flow { der(x) = x^2; }\n  cost = integral(x);\n  horizon 2;\n}\n",
+    );
+    let p = path.to_string_lossy().to_string();
+    let v = json(&run_status(&["grad", &p, "--json"], 1));
+    assert!(v["error"].is_string());
+}
+
+/// Asserts a located error: exit 2, first stderr line `FILE:LINE:COL: error: ...` with the
+/// expected line and a message containing `fragment`, the line quoted, a caret.
+fn assert_located(name: &str, contents: &[u8], line: usize, fragment: &str) {
+    let path = scratch(name, contents);
+    let p = path.to_string_lossy().to_string();
+    for cmd in ["check", "grad"] {
+        let o = run_status(&[cmd, &p], 2);
+        let err = stderr(&o);
+        let first = err.lines().next().unwrap_or_default();
+        let prefix = format!("{p}:{line}:");
+        assert!(first.starts_with(&prefix), "{name}: expected {prefix}…, got: {err}");
+        let rest = &first[prefix.len()..];
+        let (col, msg) = rest.split_once(": error: ").unwrap_or_else(|| panic!("{name}: {first}"));
+        assert!(col.parse::<usize>().is_ok_and(|c| c >= 1), "{name}: column in {first}");
+        assert!(msg.contains(fragment), "{name}: `{fragment}` not in {first}");
+        assert!(err.lines().any(|l| l.trim_start().starts_with(&format!("{line} |"))), "{name}: no quoted line: {err}");
+        assert!(err.contains('^'), "{name}: no caret: {err}");
+        assert!(stdout(&o).is_empty(), "{name}: stdout not empty");
+    }
+    // Under --json the failure is also an object with an "error" key.
+    let v = json(&run_status(&["grad", &p, "--json"], 2));
+    assert!(v["error"].is_string());
+}
+
+#[test]
+fn empty_blank_and_binary_files_are_located_errors() {
+    assert_located("empty.hyb", b"", 1, "empty model file");
+    assert_located("blank.hyb", b"  \n\n \t\n", 1, "empty model file");
+    assert_located("nul.hyb", b"model M {\n  state \x00\x01 x = 1;\n}", 2, "U+0000");
+    assert_located("latin1.hyb", b"model M {\n  // caf\xe9\n}", 2, "not valid UTF-8");
+    // Pseudo-random bytes (a fixed xorshift stream) in several sizes.
+    let mut s = 0x2545_f491_4f6c_dd1du64;
+    for size in [1usize, 7, 100, 4096] {
+        let bytes: Vec<u8> = (0..size)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 24) as u8
+            })
+            .collect();
+        let path = scratch(&format!("garbage{size}.hyb"), &bytes);
+        let p = path.to_string_lossy().to_string();
+        let o = run_status(&["grad", &p], 2);
+        assert!(stderr(&o).starts_with(&format!("{p}:")), "{}", stderr(&o));
+    }
+}
+
+#[test]
+fn deep_nesting_is_an_error_not_a_crash() {
+    let depth = 100_000;
+    let src = format!(
+        "model M {{\n  state x = {}1{};\n  flow {{ der(x) = 1; }}\n}}\n",
+        "(".repeat(depth),
+        ")".repeat(depth)
+    );
+    assert_located("deep.hyb", src.as_bytes(), 2, "nested too deeply");
+    let src = format!("model M {{\n  state x = 1;\n  flow {{ der(x) = {}x; }}\n}}\n", "-".repeat(depth));
+    let p = scratch("deepneg.hyb", src.as_bytes()).to_string_lossy().to_string();
+    run_status(&["check", &p], 2);
+    let src = format!("model M {{\n  state x = 1;\n  flow {{ der(x) = x{}; }}\n}}\n", "^x".repeat(depth));
+    let p = scratch("deeppow.hyb", src.as_bytes()).to_string_lossy().to_string();
+    run_status(&["check", &p], 2);
+}
+
+#[test]
+fn every_semantic_error_class_is_located() {
+    let cases: &[(&str, &str, usize, &str)] = &[
+        ("undefined", "model M {\n    state x = 1;\n    flow { der(x) = -k * x; }\n}\n", 3, "undefined name `k`"),
+        ("duplicate", "model M {\n    param a = 1;\n    param a = 2;\n    state x = 1;\n    flow { der(x) = -a * x; }\n}\n", 3, "duplicate"),
+        ("missing-der", "model M {\n    state x = 1;\n    state y = 2;\n    flow { der(x) = -x; }\n}\n", 4, "`y`"),
+        ("der-of-param", "model M {\n    param a = 1;\n    state x = 1;\n    flow { der(x) = -x; der(a) = 1; }\n}\n", 4, "not a state"),
+        ("der-twice", "model M {\n    state x = 1;\n    flow { der(x) = -x; der(x) = 1; }\n}\n", 3, "twice"),
+        ("reset-non-state", "model M {\n    param a = 1;\n    state x = 1;\n    flow { der(x) = -x; }\n    event hit when x <= 0 { a = 2; }\n}\n", 5, "not a state"),
+        ("unknown-mode", "model M {\n    state x = 1;\n    mode up { der(x) = 1; event e when x >= 2 -> down; }\n}\n", 3, "unknown mode `down`"),
+        ("unknown-initial", "model M {\n    state x = 1;\n    initial mode nowhere;\n    mode up { der(x) = 1; }\n}\n", 3, "unknown mode"),
+        ("unknown-event", "model M {\n    state x = 1;\n    flow { der(x) = -x; }\n    event hit when x <= 0.5 { x = 1; }\n    cost = sum(miss, x);\n    horizon 1;\n}\n", 5, "unknown event `miss`"),
+        ("unknown-function", "model M {\n    state x = 1;\n    flow { der(x) = foo(x); }\n}\n", 3, "unknown function `foo`"),
+        ("wrong-arity", "model M {\n    state x = 1;\n    flow { der(x) = sin(x, 2); }\n}\n", 3, "argument"),
+        ("guard-not-comparison", "model M {\n    state x = 1;\n    flow { der(x) = -x; }\n    event hit when x + 1 { x = 1; }\n}\n", 4, "not a comparison"),
+        ("const-uses-param", "model M {\n    param a = 1;\n    const c = 2 * a;\n    state x = 1;\n    flow { der(x) = -c * x; }\n}\n", 3, "param `a`"),
+        ("no-states", "model M {\n    param a = 1;\n    horizon 1;\n}\n", 1, "no states"),
+        ("reserved-name", "model M {\n    param sin = 1;\n    state x = 1;\n    flow { der(x) = -x; }\n}\n", 2, "reserved"),
+        ("flow-and-modes", "model M {\n    state x = 1;\n    flow { der(x) = -x; }\n    mode up { der(x) = 1; }\n}\n", 4, "both"),
+        ("no-flow", "model M {\n    state x = 1;\n    horizon 1;\n}\n", 1, "no `flow`"),
+        ("param-not-constant", "model M {\n    param a = sin(t);\n    state x = 1;\n    flow { der(x) = -a * x; }\n}\n", 2, "param `a`"),
+        ("param-uses-state", "model M {\n    param a = x;\n    state x = 1;\n    flow { der(x) = -a * x; }\n}\n", 2, "state `x`"),
+        ("syntax-missing-semicolon", "model M {\n    state x = 1\n    flow { der(x) = -x; }\n}\n", 3, "expected"),
+        ("syntax-unclosed", "model M {\n    state x = 1;\n    flow { der(x) = -x; }\n", 4, "end of input"),
+        ("syntax-bad-operator", "model M {\n    state x = 1;\n    flow { der(x) = (x + * x); }\n}\n", 3, "unexpected"),
+    ];
+    for (name, src, line, fragment) in cases {
+        assert_located(&format!("{name}.hyb"), src.as_bytes(), *line, fragment);
+    }
+}
