@@ -12,7 +12,11 @@ use mvad::solve::solve;
 fn main() {
     let model = BouncingBall::new();
     let theta = BouncingBallParams::default().to_vector();
-    let opts = Options { rtol: 1e-10, atol: 1e-12, ..Options::default() };
+    let opts = Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Options::default()
+    };
     let sol = match solve(&model, &theta, &opts) {
         Ok(s) => s,
         Err(e) => {
@@ -34,12 +38,18 @@ fn main() {
     // One parameter: the cosine similarity of two non-zero scalars of equal sign is 1.
     let cos = (mvad * fd) / (mvad.abs() * fd.abs());
     let times: Vec<String> = sol.events.iter().map(|e| format!("{:.4}", e.t)).collect();
-    let paper_times: Vec<String> = TABLE1.event_times.iter().map(|t| format!("{t:.4}")).collect();
+    let paper_times: Vec<String> = TABLE1
+        .event_times
+        .iter()
+        .map(|t| format!("{t:.4}"))
+        .collect();
 
-    println!("Table 1. E1 bouncing ball: dC/de, C = ∫₀² h dt (e = 0.8, g = 9.81, h0 = 2, v0 = 0)\n");
     println!(
-        "{:<7} {:>19} {:>19} {:>10} {:>10} {:>10} {:>3}  {}",
-        "", "MV-AD ∇", "FD ∇", "abs err", "rel err", "cos sim", "K", "event times (s)"
+        "Table 1. E1 bouncing ball: dC/de, C = ∫₀² h dt (e = 0.8, g = 9.81, h0 = 2, v0 = 0)\n"
+    );
+    println!(
+        "{:<7} {:>19} {:>19} {:>10} {:>10} {:>10} {:>3}  event times (s)",
+        "", "MV-AD ∇", "FD ∇", "abs err", "rel err", "cos sim", "K"
     );
     println!(
         "{:<7} {:>19.15} {:>19.15} {:>10.2e} {:>10.2e} {:>10.3} {:>3}  {}",

@@ -10,15 +10,34 @@ use mvad::solve::solve;
 
 fn main() {
     let model = E2Sweep::new();
-    let opts = Options { rtol: 1e-10, atol: 1e-12, ..Options::default() };
-    println!("Table 2. E2 transversality sweep: first impact, observable position (J = 0: no atom)\n");
+    let opts = Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Options::default()
+    };
+    println!(
+        "Table 2. E2 transversality sweep: first impact, observable position (J = 0: no atom)\n"
+    );
     println!(
         "{:>6} | {:>18} {:>8} {:>10} {:>18} | {:>8} {:>8} {:>6} {:>8} | {:>9}",
-        "v0", "|∇g·f| ours", "transv.", "atom |α|", "t₁ ours", "|∇g·f|", "transv.", "atom", "t₁", "exact t₁ − ours"
+        "v0",
+        "|∇g·f| ours",
+        "transv.",
+        "atom |α|",
+        "t₁ ours",
+        "|∇g·f|",
+        "transv.",
+        "atom",
+        "t₁",
+        "exact t₁ − ours"
     );
     println!("{:>6} | {:^58} | {:^35} |", "", "ours", "paper");
     for &(v0, slope_p, transv_p, atom_p, t_p) in &TABLE2 {
-        let theta = E2SweepParams { v0, ..E2SweepParams::default() }.to_vector();
+        let theta = E2SweepParams {
+            v0,
+            ..E2SweepParams::default()
+        }
+        .to_vector();
         let sol = match solve(&model, &theta, &opts) {
             Ok(s) => s,
             Err(e) => {

@@ -22,7 +22,9 @@ pub fn cost(e: f64, g: f64, v0: f64, c: f64, t_end: f64) -> f64 {
     match hit(g, v0, c) {
         Some((tc, w)) if tc < t_end => {
             let s = t_end - tc;
-            v0 * tc * tc / 2.0 - g * tc.powi(3) / 6.0 + c * s - e * w * s * s / 2.0 - g * s.powi(3) / 6.0
+            v0 * tc * tc / 2.0 - g * tc.powi(3) / 6.0 + c * s
+                - e * w * s * s / 2.0
+                - g * s.powi(3) / 6.0
         }
         _ => v0 * t_end * t_end / 2.0 - g * t_end.powi(3) / 6.0,
     }
@@ -51,11 +53,18 @@ mod tests {
     #[test]
     fn approaching_grazing_against_the_closed_form() {
         let m = Ceiling::new();
-        let opts = Options { rtol: 1e-12, atol: 1e-14, ..Options::default() };
+        let opts = Options {
+            rtol: 1e-12,
+            atol: 1e-14,
+            ..Options::default()
+        };
         let apex = 4.4f64 * 4.4 / (2.0 * 9.81);
         // Ceilings ever closer to the apex: the slope w shrinks like √(apex − c).
         for gap in [1e-1, 1e-2, 1e-3, 1e-4] {
-            let p = CeilingParams { c: apex - gap, ..CeilingParams::default() };
+            let p = CeilingParams {
+                c: apex - gap,
+                ..CeilingParams::default()
+            };
             let sol = solve(&m, &p.to_vector(), &opts).expect("runs");
             assert_eq!(sol.events.len(), 1, "gap {gap}");
             let (tc, w) = hit(p.g, p.v0, p.c).expect("hits");
@@ -63,7 +72,11 @@ mod tests {
             assert_relative_eq!(ev.t, tc, max_relative = 1e-9);
             assert_relative_eq!(ev.guard_slope, w, max_relative = 1e-6);
             assert_relative_eq!(ev.dt[3], 1.0 / w, max_relative = 1e-6);
-            assert_relative_eq!(sol.cost, cost(p.e, p.g, p.v0, p.c, 0.8), max_relative = 1e-9);
+            assert_relative_eq!(
+                sol.cost,
+                cost(p.e, p.g, p.v0, p.c, 0.8),
+                max_relative = 1e-9
+            );
             let exact = dcost_dc(p.e, p.g, p.v0, p.c, 0.8);
             if gap >= 1e-2 {
                 // Far enough from grazing for differences of the closed form to be accurate.

@@ -30,7 +30,11 @@ mod tests {
     #[test]
     fn first_impact_over_the_sweep() {
         let m = E2Sweep::new();
-        let opts = Options { rtol: 1e-10, atol: 1e-12, ..Options::default() };
+        let opts = Options {
+            rtol: 1e-10,
+            atol: 1e-12,
+            ..Options::default()
+        };
         for (v0, t_ref, slope_ref) in REFERENCE {
             let (t, slope) = first_impact(v0, 9.81, 1.0);
             assert_relative_eq!(t, t_ref, max_relative = 1e-14);
@@ -38,7 +42,10 @@ mod tests {
         }
         for i in 0..10 {
             let v0 = -0.5 - 0.5 * i as f64;
-            let p = E2SweepParams { v0, ..E2SweepParams::default() };
+            let p = E2SweepParams {
+                v0,
+                ..E2SweepParams::default()
+            };
             let sol = solve(&m, &p.to_vector(), &opts).expect("runs");
             assert_eq!(sol.events.len(), 1, "v0 = {v0}");
             let ev = &sol.events[0];
@@ -50,8 +57,16 @@ mod tests {
             assert_relative_eq!(ev.dt[0], (1.0 + v0 / slope) / p.g, max_relative = 1e-9);
             assert_relative_eq!(ev.dt[3], 1.0 / slope, max_relative = 1e-9);
             // Position is continuous: no atom; velocity jumps by (1 + e)|v⁻|.
-            assert!(ev.atoms[0].iter().all(|a| a.abs() < 1e-12), "{:?}", ev.atoms[0]);
-            assert_relative_eq!(ev.jump_observables[1], (1.0 + p.e) * slope, max_relative = 1e-10);
+            assert!(
+                ev.atoms[0].iter().all(|a| a.abs() < 1e-12),
+                "{:?}",
+                ev.atoms[0]
+            );
+            assert_relative_eq!(
+                ev.jump_observables[1],
+                (1.0 + p.e) * slope,
+                max_relative = 1e-10
+            );
         }
     }
 }

@@ -122,8 +122,16 @@ mod tests {
     #[test]
     fn ridders_derivative_of_known_functions() {
         assert_relative_eq!(central(f64::exp, 1.0), 1f64.exp(), max_relative = 1e-12);
-        assert_relative_eq!(central(|x| x.sin(), 0.3), 0.3f64.cos(), max_relative = 1e-12);
-        assert_relative_eq!(derivative(|x| (x - 1.0).sqrt(), 1.01, 1e-3), 0.5 / 0.01f64.sqrt(), max_relative = 1e-9);
+        assert_relative_eq!(
+            central(|x| x.sin(), 0.3),
+            0.3f64.cos(),
+            max_relative = 1e-12
+        );
+        assert_relative_eq!(
+            derivative(|x| (x - 1.0).sqrt(), 1.01, 1e-3),
+            0.5 / 0.01f64.sqrt(),
+            max_relative = 1e-9
+        );
     }
 
     #[test]

@@ -32,8 +32,16 @@ mod tests {
     fn auto_solves_the_stiff_relay_with_exact_switch_times_and_sensitivities() {
         let m = StiffRelay::new();
         let p = StiffRelayParams::default();
-        let sol = solve(&m, &p.to_vector(), &Options { rtol: 1e-8, atol: 1e-10, ..Options::default() })
-            .expect("runs");
+        let sol = solve(
+            &m,
+            &p.to_vector(),
+            &Options {
+                rtol: 1e-8,
+                atol: 1e-10,
+                ..Options::default()
+            },
+        )
+        .expect("runs");
         let times = switch_times(p.tau, p.rate, p.lo, p.hi, 3.0);
         assert_eq!(sol.events.len(), times.len());
         assert!(sol.stats.steps < 20_000, "{} steps", sol.stats.steps);
@@ -41,7 +49,12 @@ mod tests {
             assert_relative_eq!(e.t, *t, max_relative = 1e-6);
             // dt_k/dθ for θ = (tau, rate, lo, hi), from the closed form.
             let kf = k as f64;
-            let exact = [2.0 * kf, -t / p.rate + 2.0 * p.tau * kf / p.rate, -kf, 1.0 + kf];
+            let exact = [
+                2.0 * kf,
+                -t / p.rate + 2.0 * p.tau * kf / p.rate,
+                -kf,
+                1.0 + kf,
+            ];
             for (a, b) in e.dt.iter().zip(exact) {
                 assert_relative_eq!(*a, b, max_relative = 1e-5, epsilon = 1e-6);
             }

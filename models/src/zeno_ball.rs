@@ -39,21 +39,53 @@ mod tests {
         let m = ZenoBall::new();
         let p = ZenoBallParams::default();
         let start = std::time::Instant::now();
-        let sol = solve(&m, &p.to_vector(), &Options { rtol: 1e-10, atol: 1e-12, ..Options::default() })
-            .expect("runs");
+        let sol = solve(
+            &m,
+            &p.to_vector(),
+            &Options {
+                rtol: 1e-10,
+                atol: 1e-12,
+                ..Options::default()
+            },
+        )
+        .expect("runs");
         assert!(start.elapsed().as_secs_f64() < 1.0);
         let zeno = sol
             .diagnostics
             .iter()
             .find(|d| d.kind == DiagnosticKind::Zeno)
             .expect("a zeno diagnostic");
-        assert_relative_eq!(zeno.t, accumulation_time(p.e, p.g, p.h0), max_relative = 1e-6);
+        assert_relative_eq!(
+            zeno.t,
+            accumulation_time(p.e, p.g, p.h0),
+            max_relative = 1e-6
+        );
         assert_relative_eq!(sol.cost, cost(p.e, p.g, p.h0), max_relative = 1e-6);
-        assert_relative_eq!(cost(p.e, p.g, p.h0), ball_closed_form(p.e, p.g, p.h0, 0.0, 3.0).0, max_relative = 1e-13);
-        assert_relative_eq!(sol.gradient[0], dcost_de(p.e, p.g, p.h0), max_relative = 1e-6);
-        assert_relative_eq!(dcost_de(p.e, p.g, p.h0), central(|e| cost(e, p.g, p.h0), p.e), max_relative = 1e-9);
-        assert_relative_eq!(sol.gradient[1], central(|g| cost(p.e, g, p.h0), p.g), max_relative = 1e-6);
-        assert_relative_eq!(sol.gradient[2], central(|h| cost(p.e, p.g, h), p.h0), max_relative = 1e-6);
+        assert_relative_eq!(
+            cost(p.e, p.g, p.h0),
+            ball_closed_form(p.e, p.g, p.h0, 0.0, 3.0).0,
+            max_relative = 1e-13
+        );
+        assert_relative_eq!(
+            sol.gradient[0],
+            dcost_de(p.e, p.g, p.h0),
+            max_relative = 1e-6
+        );
+        assert_relative_eq!(
+            dcost_de(p.e, p.g, p.h0),
+            central(|e| cost(e, p.g, p.h0), p.e),
+            max_relative = 1e-9
+        );
+        assert_relative_eq!(
+            sol.gradient[1],
+            central(|g| cost(p.e, g, p.h0), p.g),
+            max_relative = 1e-6
+        );
+        assert_relative_eq!(
+            sol.gradient[2],
+            central(|h| cost(p.e, p.g, h), p.h0),
+            max_relative = 1e-6
+        );
         // The floor holds: the final height is 0, never below.
         assert!(sol.x_final[0].abs() < 1e-9, "{:?}", sol.x_final);
     }

@@ -739,7 +739,7 @@ impl Gen<'_> {
             let (lx, lp) = (usize_lit(nobs * n), usize_lit(nobs * p));
             let jac = quote!(
                 if yx.len() < #lx || yp.len() < #lp { return; }
-                yx.fill(0.0); yp.fill(0.0);
+                yx[..#lx].fill(0.0); yp[..#lp].fill(0.0);
                 #lets #stores
             );
             (obs, jac)
@@ -1017,7 +1017,8 @@ model Sink {
                 text.len()
             );
         }
-        let kernels = crate::compile(&ball).expect("ball compiles");
+        let which = std::env::var("MVAD_DUMP_MODEL").unwrap_or_default();
+        let kernels = crate::compile(if which == "sink" { &sink } else { &ball }).expect("compiles");
         let code = generate(&kernels).to_string();
         if let Ok(path) = std::env::var("MVAD_DUMP_CODEGEN") {
             let _ = std::fs::write(path, code);

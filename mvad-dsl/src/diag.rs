@@ -199,7 +199,49 @@ pub fn from_pest(err: &pest::error::Error<Rule>, src: &str) -> Diagnostic {
     // Point at the whole offending token (at least one character), not an empty range.
     let token_len = token_len_at(src, start);
     let span = Span::new(start, end.max(start + token_len));
-    Diagnostic::new(span, message)
+    let mut diag = Diagnostic::new(span, message);
+    // A missing `;` at the end of a line is reported at the next line's first token;
+    // say where the `;` probably belongs.
+    if let ErrorVariant::ParsingError { positives, .. } = &err.variant {
+        if positives.contains(&Rule::semicolon) {
+            if let Some(prev) = previous_token_on_earlier_line(src, start) {
+                let text = &src[prev.range()];
+                diag = diag
+                    .with_label(prev, "`;` may be missing here")
+                    .with_help(format!("add `;` after `{text}`"));
+            }
+        }
+    }
+    diag
+}
+
+/// The token just before byte `pos` if only blanks (with at least one line break)
+/// separate them; `None` if there is a comment in between or nothing before.
+fn previous_token_on_earlier_line(src: &str, pos: usize) -> Option<Span> {
+    let before = src.get(..pos)?;
+    let trimmed = before.trim_end();
+    if !before[trimmed.len()..].contains('\n') || trimmed.is_empty() {
+        return None;
+    }
+    let end = trimmed.len();
+    let last = trimmed.chars().next_back()?;
+    let word = |c: char| c.is_alphanumeric() || c == '_' || c == '.';
+    let start = if word(last) {
+        trimmed
+            .char_indices()
+            .rev()
+            .take_while(|&(_, c)| word(c))
+            .last()
+            .map_or(end, |(i, _)| i)
+    } else {
+        end - last.len_utf8()
+    };
+    // A line comment on that line would make the "last token" part of the comment.
+    let line_start = trimmed[..start].rfind('\n').map_or(0, |i| i + 1);
+    if trimmed[line_start..].contains("//") || trimmed[line_start..].contains("*/") {
+        return None;
+    }
+    Some(Span::new(start, end))
 }
 
 /// Byte length of the token starting at `pos` (a word, a two-character operator or one

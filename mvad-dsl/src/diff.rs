@@ -324,6 +324,66 @@ mod tests {
         }
     }
 
+    /// A random smooth expression over x0, p0, t (and a frozen switch), from a stack program.
+    fn random_expr(ar: &mut ExprArena, ops: &[(u8, u8, u8, f64)]) -> ExprId {
+        let mut stack: Vec<ExprId> = Vec::new();
+        for &(op, i, j, c) in ops {
+            let pick = |ar: &mut ExprArena, stack: &[ExprId], k: u8| {
+                if stack.is_empty() || k.is_multiple_of(3) {
+                    match k % 4 {
+                        0 => ar.state(0),
+                        1 => ar.param(0),
+                        2 => ar.time(),
+                        _ => ar.constant(c),
+                    }
+                } else {
+                    stack[k as usize % stack.len()]
+                }
+            };
+            let a = pick(ar, &stack, i);
+            let b = pick(ar, &stack, j);
+            let e = match op % 10 {
+                0 => ar.add(a, b),
+                1 => ar.sub(a, b),
+                2 => ar.mul(a, b),
+                3 => {
+                    // a / (1 + b²): no poles.
+                    let one = ar.constant(1.0);
+                    let b2 = ar.powi(b, 2);
+                    let d = ar.add(one, b2);
+                    ar.div(a, d)
+                }
+                4 => ar.call(Func::Sin, a),
+                5 => ar.call(Func::Atan, a),
+                6 => {
+                    let s = ar.call(Func::Tanh, a);
+                    ar.call(Func::Exp, s)
+                }
+                7 => ar.powi(a, (j % 4) as i32),
+                8 => ar.switch(0, a, b),
+                _ => ar.neg(a),
+            };
+            stack.push(e);
+        }
+        stack.last().copied().unwrap_or_else(|| ar.state(0))
+    }
+
+    proptest! {
+        /// Random compositions: the chain rule through shared subexpressions matches FD.
+        #[test]
+        fn random_expressions_match_fd(
+            ops in proptest::collection::vec((0u8..10, 0u8..30, 0u8..30, -2.0f64..2.0), 1..20),
+            x in -1.0f64..1.0, p in -1.0f64..1.0, t in 0.0f64..1.0, sw in 0u64..2,
+        ) {
+            let mut ar = ExprArena::new();
+            let e = random_expr(&mut ar, &ops);
+            let xs = [x, 0.3];
+            let v = ar.eval(&[e], &Point { t, x: &xs, p: &[p], sw })[0];
+            prop_assume!(v.is_finite() && v.abs() < 1e6);
+            check(&mut ar, e, x, p, t, sw);
+        }
+    }
+
     #[test]
     fn derivative_shares_nodes() {
         let mut ar = ExprArena::new();

@@ -287,6 +287,35 @@ mod tests {
         );
     }
 
+    #[test]
+    fn whole_pipeline_fits_a_small_stack_at_the_nesting_limits() {
+        // Inputs at the parser's limits go through lowering, differentiation and
+        // scheduling too on a 1 MiB stack (recursive passes are bounded by the limits).
+        let rhs = |e: String| format!("model M {{ state x = 0; flow {{ der(x) = {e}; }} }}");
+        let k = parse::MAX_NESTING - 8;
+        let d = ast::MAX_DEPTH - 2;
+        let inputs = [
+            rhs(format!("{}x{}", "(".repeat(k), ")".repeat(k))),
+            rhs(format!("{}1", "if x < 1 then 0 else ".repeat(k))),
+            rhs(format!("{}x{}", "sin(".repeat(k), ")".repeat(k))),
+            rhs(format!("x{}", "+x".repeat(d))),
+            rhs(format!("x{}", "^x".repeat(d))),
+            rhs(format!("{}x", "-".repeat(d))),
+        ];
+        let results = std::thread::Builder::new()
+            .stack_size(1 << 20)
+            .spawn(move || {
+                inputs
+                    .iter()
+                    .map(|s| compile(s).map(|_| ()).map_err(|d| d[0].message.clone()))
+                    .collect::<Vec<_>>()
+            })
+            .expect("spawn")
+            .join()
+            .expect("no stack overflow");
+        assert_eq!(results, vec![Ok(()); 6]);
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(300))]
 

@@ -392,29 +392,26 @@ impl<'a> Lowerer<'a> {
                 };
                 let a = self.expr(then, ctx);
                 let b = self.expr(els, ctx);
-                let (pos, neg) = match cmp.op {
-                    CmpOp::Gt | CmpOp::Ge => (a, b),
-                    CmpOp::Lt | CmpOp::Le => (b, a),
+                let op = match cmp.op {
+                    CmpOp::Gt => Cmp::Gt,
+                    CmpOp::Ge => Cmp::Ge,
+                    CmpOp::Lt => Cmp::Lt,
+                    CmpOp::Le => Cmp::Le,
                 };
-                match ctx {
-                    Ctx::Pointwise => {
-                        let l = self.expr(&cmp.lhs, ctx);
-                        let r = self.expr(&cmp.rhs, ctx);
-                        let c = self.ar.sub(l, r);
-                        let op = match cmp.op {
-                            CmpOp::Gt => Cmp::Gt,
-                            CmpOp::Ge => Cmp::Ge,
-                            CmpOp::Lt => Cmp::Lt,
-                            CmpOp::Le => Cmp::Le,
-                        };
-                        self.ar.select(op, c, a, b)
-                    }
-                    Ctx::Frozen => {
-                        let lp = self.expr(&cmp.lhs, Ctx::Pointwise);
-                        let rp = self.expr(&cmp.rhs, Ctx::Pointwise);
-                        let sigma = self.ar.sub(lp, rp);
-                        self.kink(sigma, pos, neg, e.span)
-                    }
+                let (l, r) = (
+                    self.expr(&cmp.lhs, Ctx::Pointwise),
+                    self.expr(&cmp.rhs, Ctx::Pointwise),
+                );
+                let sigma = self.ar.sub(l, r);
+                if ctx == Ctx::Pointwise || self.ar.as_const(sigma).is_some() {
+                    // Pointwise (a constant σ never switches).
+                    self.ar.select(op, sigma, a, b)
+                } else {
+                    let (pos, neg) = match cmp.op {
+                        CmpOp::Gt | CmpOp::Ge => (a, b),
+                        CmpOp::Lt | CmpOp::Le => (b, a),
+                    };
+                    self.kink(sigma, pos, neg, e.span)
                 }
             }
         }
@@ -485,34 +482,37 @@ impl<'a> Lowerer<'a> {
             None
         };
         let b = b.unwrap_or(a);
-        match (name, ctx) {
-            ("pow", _) => self.ar.pow(a, b),
-            ("min" | "max", Ctx::Pointwise) => {
-                let c = self.ar.sub(a, b);
-                if name == "max" {
-                    self.ar.select(Cmp::Gt, c, a, b)
-                } else {
-                    self.ar.select(Cmp::Gt, c, b, a)
-                }
-            }
+        // In a flow or ℓ, the kink's switching function σ (lowered pointwise).
+        let sigma = match (name, ctx) {
             ("min" | "max", Ctx::Frozen) => {
                 let ap = self.expr(&args[0], Ctx::Pointwise);
                 let bp = self.expr(&args[1], Ctx::Pointwise);
-                let sigma = self.ar.sub(ap, bp);
-                if name == "max" {
-                    self.kink(sigma, a, b, e.span)
-                } else {
-                    self.kink(sigma, b, a, e.span)
-                }
+                Some(self.ar.sub(ap, bp))
             }
-            ("abs" | "sign", Ctx::Frozen) => {
-                let sigma = self.expr(&args[0], Ctx::Pointwise);
-                let (pos, neg) = if name == "abs" {
-                    (a, self.ar.neg(a))
-                } else {
-                    (self.ar.constant(1.0), self.ar.constant(-1.0))
-                };
-                self.kink(sigma, pos, neg, e.span)
+            ("abs" | "sign", Ctx::Frozen) => Some(self.expr(&args[0], Ctx::Pointwise)),
+            _ => None,
+        };
+        // A constant σ never switches: evaluate the kink pointwise (exact at σ = 0).
+        let sigma = sigma.filter(|&s| self.ar.as_const(s).is_none());
+        match (name, sigma) {
+            ("pow", _) => self.ar.pow(a, b),
+            ("max", None) => {
+                let c = self.ar.sub(a, b);
+                self.ar.select(Cmp::Gt, c, a, b)
+            }
+            ("min", None) => {
+                let c = self.ar.sub(a, b);
+                self.ar.select(Cmp::Gt, c, b, a)
+            }
+            ("max", Some(sigma)) => self.kink(sigma, a, b, e.span),
+            ("min", Some(sigma)) => self.kink(sigma, b, a, e.span),
+            ("abs", Some(sigma)) => {
+                let na = self.ar.neg(a);
+                self.kink(sigma, a, na, e.span)
+            }
+            ("sign", Some(sigma)) => {
+                let (one, minus) = (self.ar.constant(1.0), self.ar.constant(-1.0));
+                self.kink(sigma, one, minus, e.span)
             }
             _ => match Func::from_name(name) {
                 Some(f) => self.ar.call(f, a),
@@ -525,9 +525,6 @@ impl<'a> Lowerer<'a> {
     fn kink(&mut self, sigma: ExprId, pos: ExprId, neg: ExprId, span: Span) -> ExprId {
         if pos == neg {
             return pos;
-        }
-        if let Some(v) = self.ar.as_const(sigma) {
-            return if v > 0.0 { pos } else { neg };
         }
         let j = match self.switch_of.get(&sigma) {
             Some(&j) => j,
@@ -581,10 +578,18 @@ mod tests {
         // Identity for unassigned states; right-hand sides read the pre-event state.
         assert_eq!(p.events[0].reset[0], p.arena.clone().state(0));
         let x = [0.3, 1.7];
-        let at = Point { t: 0.0, x: &x, p: &[0.8], sw: 0 };
+        let at = Point {
+            t: 0.0,
+            x: &x,
+            p: &[0.8],
+            sw: 0,
+        };
         assert_eq!(p.arena.eval(&p.events[2].reset, &at), vec![1.7, 0.3]);
         // g = LHS − RHS.
-        assert_eq!(p.arena.eval(&[p.events[2].guard], &at), vec![1.0 - (0.3 - 1.7)]);
+        assert_eq!(
+            p.arena.eval(&[p.events[2].guard], &at),
+            vec![1.0 - (0.3 - 1.7)]
+        );
     }
 
     #[test]
@@ -600,7 +605,12 @@ mod tests {
         assert_eq!(p.switches.len(), 2);
         let x = [0.5, 2.0];
         let th = [1.0];
-        let at = |sw| Point { t: 0.0, x: &x, p: &th, sw };
+        let at = |sw| Point {
+            t: 0.0,
+            x: &x,
+            p: &th,
+            sw,
+        };
         // Frozen branches follow the bits, not the point: bit 0 set means x − y > 0.
         let f_pos = p.arena.eval(&p.modes[0].flow, &at(0b11));
         let f_neg = p.arena.eval(&p.modes[0].flow, &at(0b00));
@@ -619,11 +629,32 @@ mod tests {
         );
         assert_eq!(p.switches.len(), 2);
         let x = [1.0];
-        let at = |sw| Point { t: 0.0, x: &x, p: &[], sw };
+        let at = |sw| Point {
+            t: 0.0,
+            x: &x,
+            p: &[],
+            sw,
+        };
         // σ₀ = x − 2 > 0 selects the else branch of `<`; σ₁ = x − 3 > 0 the then branch of `>=`.
-        assert_eq!(p.arena.eval(&p.modes[0].flow, &at(0b01)), vec![20.0 + 200.0]);
-        assert_eq!(p.arena.eval(&p.modes[0].flow, &at(0b10)), vec![10.0 + 100.0]);
+        assert_eq!(
+            p.arena.eval(&p.modes[0].flow, &at(0b01)),
+            vec![20.0 + 200.0]
+        );
+        assert_eq!(
+            p.arena.eval(&p.modes[0].flow, &at(0b10)),
+            vec![10.0 + 100.0]
+        );
         assert_eq!(p.arena.eval(&[p.observables[0].1], &at(0)), vec![10.0]);
+    }
+
+    #[test]
+    fn constant_kinks_are_exact_and_not_switches() {
+        let p = program(
+            "model M { const c = 1; state x = 1;
+               flow { der(x) = (if c >= 1 then 5 else 7) + sign(c - 1) + max(c, 1) + abs(0 - c); } }",
+        );
+        assert!(p.switches.is_empty());
+        assert_eq!(p.arena.as_const(p.modes[0].flow[0]), Some(5.0 + 0.0 + 1.0 + 1.0));
     }
 
     #[test]
@@ -655,5 +686,35 @@ mod tests {
         many.push_str("; } }");
         let e = errors(&many);
         assert!(e.iter().any(|m| m.contains("kinks")), "{e:?}");
+    }
+}
+
+#[cfg(test)]
+mod depth_tests {
+    /// Observables chained through each other nest deeper than any one expression: the
+    /// lowering depth bound turns that into an error instead of a stack overflow.
+    #[test]
+    fn deep_observable_chains_are_errors() {
+        let mut src = String::from("model M { state x = 1; flow { der(x) = o39; } observe o0 = x;");
+        for i in 1..40 {
+            let inner = format!("{}o{}{}", "sin(".repeat(100), i - 1, ")".repeat(100));
+            src.push_str(&format!(" observe o{i} = {inner};"));
+        }
+        src.push('}');
+        let r = std::thread::Builder::new()
+            .stack_size(2 << 20)
+            .spawn(move || {
+                crate::compile(&src)
+                    .map(|_| ())
+                    .map_err(|e| e.into_iter().map(|d| d.message).collect::<Vec<_>>())
+            })
+            .expect("thread")
+            .join()
+            .expect("no stack overflow");
+        let errs = r.expect_err("too deep");
+        assert!(
+            errs.iter().any(|m| m.contains("nested too deeply")),
+            "{errs:?}"
+        );
     }
 }

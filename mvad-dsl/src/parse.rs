@@ -27,7 +27,7 @@ mod generated {
 pub use generated::{HybParser, Rule};
 
 /// The deepest nesting of brackets and `if` expressions the parser accepts.
-pub const MAX_NESTING: usize = 128;
+pub const MAX_NESTING: usize = 64;
 
 /// Parses one model. Syntax errors come back as located [`Diagnostic`]s (pest stops at the
 /// first syntax error, so that vector has one entry).
@@ -847,6 +847,25 @@ model Thermostat {
     }
 
     #[test]
+    fn missing_semicolon_hint_points_at_the_line_end() {
+        let src = "model M {\n  param g = 9.81\n  state v = 0.0;\n}";
+        let d = &parse(src).unwrap_err()[0];
+        assert_eq!(line_col(src, d.span.start), (3, 3));
+        assert!(
+            d.message.starts_with("unexpected `state`; expected `;`"),
+            "{}",
+            d.message
+        );
+        assert_eq!(d.help.as_deref(), Some("add `;` after `9.81`"));
+        assert_eq!(&src[d.labels[0].0.range()], "9.81");
+        // Same line, or a comment in between: no hint.
+        let d = &parse("model M { param g = 9.81 state v = 0.0; }").unwrap_err()[0];
+        assert!(d.help.is_none());
+        let d = &parse("model M {\n param g = 9.81 // c\n state v = 0.0; }").unwrap_err()[0];
+        assert!(d.help.is_none());
+    }
+
+    #[test]
     fn comments_of_both_styles() {
         let src = "/* header */ model M { // line\n state x = /* inline */ 1; flow { der(x) = x /* c */ / 2; } }";
         let e = rhs_of(src).unwrap();
@@ -895,6 +914,36 @@ model Thermostat {
         rhs_of(&src).expect("nesting under the limit");
         let src = model_with_rhs(&format!("x{}", "+x".repeat(ast::MAX_DEPTH - 2)));
         rhs_of(&src).expect("depth under the limit");
+    }
+
+    #[test]
+    fn nesting_at_the_limit_fits_a_small_stack() {
+        // Brackets and `if`s just under MAX_NESTING, and trees just under MAX_DEPTH,
+        // parsed and checked on a 1 MiB stack (half a test thread's, an eighth of a main
+        // thread's); this holds unoptimised too (`cargo test --profile dev`).
+        let k = MAX_NESTING - 8;
+        let parens = model_with_rhs(&format!("{}x{}", "(".repeat(k), ")".repeat(k)));
+        let ifs = model_with_rhs(&format!("{}1", "if x < 1 then 0 else ".repeat(k)));
+        let calls = model_with_rhs(&format!("{}x{}", "sin(".repeat(k), ")".repeat(k)));
+        let d = ast::MAX_DEPTH - 2;
+        let sum = model_with_rhs(&format!("x{}", "+x".repeat(d)));
+        let power = model_with_rhs(&format!("x{}", "^x".repeat(d)));
+        let negs = model_with_rhs(&format!("{}x", "-".repeat(d)));
+        let handle = std::thread::Builder::new()
+            .stack_size(1 << 20)
+            .spawn(move || {
+                [parens, ifs, calls, sum, power, negs]
+                    .iter()
+                    .map(|s| {
+                        crate::front(s)
+                            .map(|_| ())
+                            .map_err(|d| d[0].message.clone())
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .expect("spawn");
+        let results = handle.join().expect("no stack overflow");
+        assert_eq!(results, vec![Ok(()); 6]);
     }
 
     #[test]

@@ -2,7 +2,8 @@
 //! byte range of that text back to the tokens it came from, so that errors point at the
 //! user's tokens.
 //!
-//! The text is the tokens' own spelling separated by one space, except after a
+//! The text is the tokens' own spelling separated by one space (a line break where the
+//! user's next token starts a new line), except after a
 //! [`Spacing::Joint`] punct (so `<=` and `->` stay whole); group delimiters are spelled,
 //! except [`Delimiter::None`] (from `macro_rules!` captures) which adds no text. Doc
 //! comments (`///`, which reach a macro as `#[doc = ".."]`) are skipped like comments.
@@ -68,10 +69,21 @@ pub fn restring(input: TokenStream) -> (String, SourceMap) {
     let mut space = false;
     // Each level: its remaining tokens and, for a spelled group, its closing delimiter.
     let mut stack: Vec<Level> = vec![(input.into_iter().collect::<Vec<_>>().into_iter(), None)];
+    // Line of the previous token: a token on a later line is preceded by a line break
+    // instead of a space, so that the text keeps the user's line structure (which the
+    // "missing `;`" hint relies on). Spans without location information report line 0
+    // or 1 throughout and keep the text on one line.
+    let mut last_line = 0;
     let mut push = |text: &mut String, space: &mut bool, s: &str, span: Span, joint: bool| {
+        let line = span.start().line;
         if *space {
-            text.push(' ');
+            text.push(if line > last_line && !text.is_empty() {
+                '\n'
+            } else {
+                ' '
+            });
         }
+        last_line = last_line.max(line);
         let start = text.len();
         text.push_str(s);
         entries.push((start..text.len(), span));
@@ -174,6 +186,7 @@ mod tests {
         assert_eq!(text_of("{ a [b] }"), "{ a [ b ] }");
         assert_eq!(text_of("/// doc\nmodel M {}"), "model M { }");
         assert_eq!(text_of("#![doc = \"x\"] a # b"), "a # b");
+        assert_eq!(text_of("a = 1\n  b = 2;\n\n c"), "a = 1\nb = 2 ;\nc");
     }
 
     #[test]

@@ -16,8 +16,10 @@
 //! 4. At T the final terms (see [`crate::reduce`]).
 //!
 //! Zeno: after each user event the dwell times are checked for geometric shrinking (the last
-//! six ratios below 0.95 and within 5 % of each other). Once established, the run stops when
-//! an event grazes or the estimated remaining time t* − t_k is below 1e-9·max(1, t*), and
+//! six ratios below 0.999 and within 5 % of each other). Once established, the run stops when
+//! an event grazes (|∇g·f⁻| < max(τ, 1e-3)·|∇g||f⁻|, independent of a user's τ = 0, since
+//! ever smaller hops would eventually be lost in rounding) or the estimated remaining time
+//! t* − t_k is below 1e-9·max(1, t*), and
 //! event time, post-event state, its total derivative, accumulated cost and gradient are
 //! extrapolated to the accumulation point t* by Aitken's Δ² (the geometric tail). If T > t*
 //! the state is held at its limit x* on [t*, T] (the bouncing ball comes to rest), with
@@ -142,6 +144,12 @@ where
 /// How many dwell ratios must agree before a Zeno accumulation is declared.
 const ZENO_RATIOS: usize = 6;
 
+/// Dwell ratios at or above this count as periodic, not accumulating.
+const ZENO_MAX_RATIO: f64 = 0.999;
+
+/// Cosine below which an event of an established Zeno sequence ends the run.
+const ZENO_GRAZE: f64 = 1e-3;
+
 /// Dwell-time history and the last three event snapshots.
 struct Zeno<M: HybridModel>
 where
@@ -205,7 +213,7 @@ where
             (lo.min(r), hi.max(r))
         });
         let mean = ratios.iter().sum::<f64>() / ZENO_RATIOS as f64;
-        (hi < 0.95 && hi - lo <= 0.05 * mean).then_some(mean)
+        (hi < ZENO_MAX_RATIO && hi - lo <= 0.05 * mean).then_some(mean)
     }
 
     /// (t_k, t_k − t_{k−1}) of the last event.
@@ -267,6 +275,8 @@ where
     zeno: Zeno<M>,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
     zeno_stop: Option<(f64, f64)>,
+    /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
+    stuck: Option<usize>,
     rec: Option<Recorder>,
     segment_start: f64,
     segment_first_step: usize,
@@ -326,6 +336,7 @@ where
             switch_crossings: 0,
             zeno: Zeno::new(model),
             zeno_stop: None,
+            stuck: None,
             rec: opts.record.then(|| Recorder {
                 traj: Trajectory::new(n.value(), if opts.sensitivities { np.value() } else { 0 }),
             }),
@@ -738,7 +749,10 @@ where
                     let (tk, dk) = self.zeno.last_dwell();
                     let t_star = tk + dk * r / (1.0 - r);
                     let remaining = t_star - tk;
-                    if t_star < self.t_end && (grazing || remaining <= 1e-9 * t_star.abs().max(1.0))
+                    let zeno_graze =
+                        grazing || slope.abs() < ZENO_GRAZE * self.gx.norm() * self.f_minus.norm();
+                    if t_star < self.t_end
+                        && (zeno_graze || remaining <= 1e-9 * t_star.abs().max(1.0))
                     {
                         Some((t_star, r))
                     } else {
@@ -769,7 +783,12 @@ where
             jump_observables,
             atoms,
         });
-        if grazing && zeno_stop.is_none() {
+        let graze_scale = self.opts.grazing_tol * self.gx.norm() * self.f_minus.norm();
+        let stuck = zeno_stop.is_none()
+            && ev.armed_in(mode_after)
+            && t < self.t_end
+            && self.stuck_after_reset(k, t, mode_after, sw_after, slope + gt, gt);
+        if grazing && zeno_stop.is_none() && !stuck {
             self.diagnostics.push(Diagnostic {
                 kind: DiagnosticKind::Grazing,
                 t,
@@ -778,7 +797,7 @@ where
                     ev.name,
                     slope.abs(),
                     self.opts.grazing_tol,
-                    self.opts.grazing_tol * self.gx.norm() * self.f_minus.norm()
+                    graze_scale
                 ),
             });
         }
@@ -793,7 +812,49 @@ where
             self.zeno_stop = Some(z);
             return Ok(true);
         }
+        if stuck {
+            self.zeno_stop = Some((t, 0.0));
+            self.stuck = Some(k);
+            return Ok(true);
+        }
         Ok(false)
+    }
+
+    /// Whether event k's reset left the state stuck on its guard: the flow approached the
+    /// guard (d·ġ⁻ > 0), the reset stopped or reversed that approach to first order
+    /// (d·ġ⁺ ≤ 0 at x⁺) and yet a short Heun probe x⁺ + δ/2 (f⁺ + f(x⁺ + δ f⁺)),
+    /// δ = 1e-6·max(T, 1), lands on the firing side of the guard again. Without a crossing the
+    /// event cannot fire again and the state would sink through the guard (the bouncing ball
+    /// with e = 0, or a Zeno sequence too fine to resolve): events accumulate at t_k, and the
+    /// run ends there with the state held at x⁺. `rate_minus` is ∇g·f⁻ + ∂g/∂t.
+    fn stuck_after_reset(
+        &mut self,
+        k: usize,
+        t: f64,
+        mode: usize,
+        sw: Switches,
+        rate_minus: f64,
+        _gt_minus: f64,
+    ) -> bool {
+        let (model, p) = (self.model, self.p);
+        let d = model.info().events[k].direction.sign();
+        if d * rate_minus <= 0.0 {
+            return false;
+        }
+        let gt = model.guard_grad(k, t, &self.x_plus, p, &mut self.gx, &mut self.gp);
+        if d * (self.gx.dot(&self.f_plus) + gt) > 0.0 {
+            return false;
+        }
+        let delta = 1e-6 * self.t_end.max(1.0);
+        let v_plus = d * model.guard(k, t, &self.x_plus, p);
+        self.xs.copy_from(&self.x_plus);
+        self.xs.axpy(delta, &self.f_plus, 1.0);
+        model.rhs(mode, sw, t + delta, &self.xs, p, &mut self.work);
+        self.xe.copy_from(&self.x_plus);
+        self.xe.axpy(0.5 * delta, &self.f_plus, 1.0);
+        self.xe.axpy(0.5 * delta, &self.work, 1.0);
+        let v2 = d * model.guard(k, t + delta, &self.xe, p);
+        v2 > 0.0 && v2 > v_plus
     }
 
     /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump.
@@ -861,8 +922,16 @@ where
             // The segment up to the last event was closed when it fired.
             let z = &self.zeno;
             let c = z.count;
-            let s = |i: usize| &z.snaps[(c - 3 + i) % 3];
-            let lim = |f: &dyn Fn(&Snapshot<M>) -> f64| aitken(f(s(0)), f(s(1)), f(s(2)));
+            let s = |i: usize| &z.snaps[(c + i) % 3];
+            let stuck = self.stuck.is_some();
+            // Stuck on a guard: the limit is the last post-event state itself.
+            let lim = |f: &dyn Fn(&Snapshot<M>) -> f64| {
+                if stuck {
+                    f(s(2))
+                } else {
+                    aitken(f(s(0)), f(s(1)), f(s(2)))
+                }
+            };
             let t_star = {
                 let a = lim(&|s| s.t);
                 if a.is_finite() && a >= s(2).t {
@@ -921,14 +990,24 @@ where
             );
             cost += phi;
             let n = self.events.len();
-            self.diagnostics.push(Diagnostic {
-                kind: DiagnosticKind::Zeno,
-                t: t_star,
-                message: format!(
+            let message = if let Some(k) = self.stuck {
+                format!(
+                    "after event `{}` at t = {t_star} the flow carries the state straight back through \
+                     its guard: events accumulate there; the run ended at that time and the state \
+                     is held at rest on [t, T]",
+                    info.events[k].name
+                )
+            } else {
+                format!(
                     "events accumulate (dwell-time ratio {ratio:.4} over the last {ZENO_RATIOS} dwells): \
                      the run ended at the estimated accumulation time t* = {t_star} after {n} events; \
                      the tail was extrapolated (Aitken) and the state held at its limit on [t*, T]"
-                ),
+                )
+            };
+            self.diagnostics.push(Diagnostic {
+                kind: DiagnosticKind::Zeno,
+                t: t_star,
+                message,
             });
             if let Some(rec) = &mut self.rec {
                 let traj = &mut rec.traj;

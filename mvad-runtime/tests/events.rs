@@ -720,7 +720,7 @@ fn trajectory_samples_match_closed_form() {
     assert_eq!(traj.segments.len(), 3);
     assert_eq!(traj.step_times().last().copied(), Some(2.0));
     let g = 9.81;
-    let t1 = (2.0 * 2.0 / g as f64).sqrt();
+    let t1 = (2.0f64 * 2.0 / g).sqrt();
     let u1 = 0.8 * g * t1;
     // Before the first impact: h = 2 − g t²/2, ∂h/∂h0 = 1, ∂v/∂g = −t.
     for &t in &[0.1, 0.3, 0.6] {
@@ -821,4 +821,165 @@ fn parameter_dependent_horizon_and_all_cost_kinds_vs_fd() {
     assert!((fixed.cost - sol.cost).abs() < 1e-12);
     assert!((fixed.gradient[3]).abs() < 1e-12);
     assert!((sol.gradient[3] - fixed.gradient[3]).abs() > 1e-3);
+}
+
+/// Zeno balls from e = 0.3 to 0.99 run to T = 200 (far past t*): never through the floor,
+/// cost and gradient against the exact series.
+#[test]
+fn zeno_restitution_sweep() {
+    for e in [0.3, 0.9, 0.95, 0.97, 0.99] {
+        let m = AdModel::new(ZenoBall { t_end: 200.0, e });
+        let p = m.defaults();
+        let d = |i: usize| D::var(p[i], i);
+        let (c, t_star) = zeno_series(d(0), d(1), d(2), d(3));
+        let start = std::time::Instant::now();
+        let sol = solve(&m, &p, &tight()).unwrap();
+        let wall = start.elapsed().as_secs_f64();
+        let z = sol
+            .diagnostics
+            .iter()
+            .find(|d| d.kind == DiagnosticKind::Zeno)
+            .expect("zeno");
+        assert!(
+            close(z.t, t_star.v, 1e-9, 0.0),
+            "e={e}: t* {} vs {}",
+            z.t,
+            t_star.v
+        );
+        assert!(
+            close(sol.cost, c.v, 1e-9, 0.0),
+            "e={e}: C {} vs {}",
+            sol.cost,
+            c.v
+        );
+        for i in 0..4 {
+            assert!(
+                close(sol.gradient[i], c.g[i], 1e-6, 1e-9),
+                "e={e} θ{i}: {} vs {}",
+                sol.gradient[i],
+                c.g[i]
+            );
+        }
+        assert!(
+            sol.x_final[0] > -1e-9,
+            "e={e}: through the floor {:?}",
+            sol.x_final
+        );
+        assert!(wall < 1.0, "e={e}: {wall} s");
+    }
+}
+
+/// A model without parameters, and a primal-only run of the ball.
+struct Decay;
+
+impl Spec for Decay {
+    fn info(&self) -> ModelInfo {
+        let mut i = info(
+            "Decay",
+            &["x"],
+            &[],
+            &["main"],
+            vec![ev("half", Direction::Down, None, None, false)],
+            &["x"],
+            0,
+        );
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        x[0] = S::cst(1.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(2.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
+        f[0] = -x[0];
+    }
+    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0] - 0.5
+    }
+    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
+        xp[0] = x[0] * 0.5;
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+#[test]
+fn no_parameters_and_primal_only() {
+    let m = AdModel::new(Decay);
+    let sol = solve(&m, &DVector::zeros(0), &tight()).unwrap();
+    assert!(sol.gradient.is_empty());
+    assert_eq!(sol.events.len(), 1);
+    // x = e^{−t} until ln 2, then 0.25 e^{−(t − ln 2)}: ∫ = 0.5 + 0.25 (1 − e^{−(2 − ln 2)}).
+    let want = 0.5 + 0.25 * (1.0 - (-(2.0 - 2f64.ln())).exp());
+    assert!(close(sol.cost, want, 1e-9, 0.0), "{} vs {want}", sol.cost);
+    let ball = Ball::new();
+    let p = ball.default_params();
+    let primal = solve(
+        &ball,
+        &p,
+        &Options {
+            sensitivities: false,
+            ..tight()
+        },
+    )
+    .unwrap();
+    let full = solve(&ball, &p, &tight()).unwrap();
+    assert!(primal.gradient.is_empty() && primal.events[0].dt.is_empty());
+    assert_eq!(primal.events.len(), 2);
+    assert!((primal.cost - full.cost).abs() < 1e-12);
+}
+
+/// e = 0: the ball stops dead on the floor at the first impact and must stay there (the
+/// event cannot fire again, the flow would carry it through the floor).
+#[test]
+fn inelastic_ball_rests_on_the_floor() {
+    let m = AdModel::new(ZenoBall { t_end: 2.0, e: 0.0 });
+    let p = m.defaults();
+    let sol = solve(
+        &m,
+        &p,
+        &Options {
+            record: true,
+            ..tight()
+        },
+    )
+    .unwrap();
+    assert_eq!(sol.events.len(), 1);
+    assert!(
+        sol.diagnostics
+            .iter()
+            .any(|d| d.kind == DiagnosticKind::Zeno),
+        "{:?}",
+        sol.diagnostics
+    );
+    assert!(
+        sol.x_final[0].abs() < 1e-12 && sol.x_final[1].abs() < 1e-12,
+        "{:?}",
+        sol.x_final
+    );
+    // C = ∫ h over the fall = h0 t1 − g t1³/6 with t1 = √(2 h0/g); then h = 0.
+    let d = |i: usize| D::var(p[i], i);
+    let (g, h0) = (d(1), d(2));
+    let t1 = (h0 * 2.0 / g).sqrt();
+    let c = h0 * t1 - g * t1 * t1 * t1 / 6.0;
+    assert!(close(sol.cost, c.v, 1e-10, 0.0), "{} vs {}", sol.cost, c.v);
+    for i in 1..3 {
+        assert!(
+            close(sol.gradient[i], c.g[i], 1e-8, 1e-12),
+            "θ{i}: {} vs {}",
+            sol.gradient[i],
+            c.g[i]
+        );
+    }
+    let (x, _) = sol.trajectory.as_ref().unwrap().sample(1.5);
+    assert!(x[0].abs() < 1e-12);
+    // Pass-through events with identity resets are not "stuck": the dip test's `enter`
+    // event lets the state continue into the firing side.
+    let dip = AdModel::new(Dip);
+    let sol = solve(&dip, &dip.defaults(), &tight()).unwrap();
+    assert_eq!(sol.events.len(), 2);
+    assert!(sol.diagnostics.is_empty(), "{:?}", sol.diagnostics);
 }

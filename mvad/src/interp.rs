@@ -430,12 +430,18 @@ impl HybridModel for InterpretedModel {
     }
 
     fn observe(&self, t: f64, x: &X, p: &X, y: &mut [f64]) {
+        if y.len() < self.info.observables.len() {
+            return;
+        }
         let mut sc = self.scratch.borrow_mut();
         self.observe.eval(&pt(t, x, p, 0), &mut sc.regs, y);
     }
     fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
         let nobs = self.info.observables.len();
         let (n, np) = (self.n, self.p);
+        if yx.len() < nobs * n || yp.len() < nobs * np {
+            return;
+        }
         let tape = &self.observe_jac;
         self.with(tape, &pt(t, x, p, 0), |ok, regs, _| {
             let fill = if ok { 0.0 } else { f64::NAN };

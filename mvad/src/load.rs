@@ -53,7 +53,9 @@ impl LoadError {
 impl fmt::Display for LoadError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            LoadError::Io { path, reason } => write!(f, "{path}: error: cannot read file: {reason}"),
+            LoadError::Io { path, reason } => {
+                write!(f, "{path}: error: cannot read file: {reason}")
+            }
             LoadError::Model { rendered, .. } => f.write_str(rendered.trim_end()),
         }
     }
@@ -102,7 +104,11 @@ pub fn load_bytes(name: &str, bytes: &[u8]) -> Result<InterpretedModel, LoadErro
                 format!(
                     "the file is not valid UTF-8 text (byte 0x{:02X} at offset {at}{})",
                     bytes[at],
-                    if len > 1 { format!(", {len} bad bytes") } else { String::new() }
+                    if len > 1 {
+                        format!(", {len} bad bytes")
+                    } else {
+                        String::new()
+                    }
                 ),
             )
             .with_help("a `.hyb` model is UTF-8 text");
@@ -115,8 +121,11 @@ pub fn load_bytes(name: &str, bytes: &[u8]) -> Result<InterpretedModel, LoadErro
 fn precheck(src: &str) -> Option<Diagnostic> {
     if src.trim().is_empty() {
         return Some(
-            Diagnostic::new(Span::new(0, 0), "empty model file; expected `model NAME { ... }`")
-                .with_help("a model starts with `model NAME {` and declares at least one `state`"),
+            Diagnostic::new(
+                Span::new(0, 0),
+                "empty model file; expected `model NAME { ... }`",
+            )
+            .with_help("a model starts with `model NAME {` and declares at least one `state`"),
         );
     }
     let (pos, c) = src
@@ -204,18 +213,23 @@ mod tests {
     #[test]
     fn empty_and_blank_files_are_located_errors() {
         for src in ["", "   \n\n  ", "\n"] {
-            let e = load_str("e.hyb", src).err().expect("error");
-            assert_eq!(first_line(&e), "e.hyb:1:1: error: empty model file; expected `model NAME { ... }`");
+            let e = load_str("e.hyb", src).map(|_| ()).expect_err("error");
+            assert_eq!(
+                first_line(&e),
+                "e.hyb:1:1: error: empty model file; expected `model NAME { ... }`"
+            );
         }
     }
 
     #[test]
     fn invalid_utf8_is_located() {
         let bytes = b"model M {\n  state x = 1;\xff\xfe\n}";
-        let e = load_bytes("u.hyb", bytes).err().expect("error");
+        let e = load_bytes("u.hyb", bytes).map(|_| ()).expect_err("error");
         let text = e.to_string();
         assert!(
-            text.starts_with("u.hyb:2:15: error: the file is not valid UTF-8 text (byte 0xFF at offset 24"),
+            text.starts_with(
+                "u.hyb:2:15: error: the file is not valid UTF-8 text (byte 0xFF at offset 24"
+            ),
             "{text}"
         );
         assert!(text.contains("state x = 1;"), "{text}");
@@ -224,26 +238,43 @@ mod tests {
 
     #[test]
     fn binary_data_is_located() {
-        let e = load_str("b.hyb", "model M {\n\u{0}\u{1}\u{2}").err().expect("error");
-        assert!(first_line(&e).starts_with("b.hyb:2:1: error: unexpected character U+0000"), "{e}");
+        let e = load_str("b.hyb", "model M {\n\u{0}\u{1}\u{2}")
+            .map(|_| ())
+            .expect_err("error");
+        assert!(
+            first_line(&e).starts_with("b.hyb:2:1: error: unexpected character U+0000"),
+            "{e}"
+        );
     }
 
     #[test]
     fn missing_file_and_directory_are_io_errors() {
-        let e = load(Path::new("/nonexistent/model.hyb")).err().expect("error");
+        let e = load(Path::new("/nonexistent/model.hyb"))
+            .map(|_| ())
+            .expect_err("error");
         assert!(matches!(e, LoadError::Io { .. }));
-        assert!(e.to_string().starts_with("/nonexistent/model.hyb: error: cannot read file"), "{e}");
-        let e = load(Path::new(env!("CARGO_MANIFEST_DIR"))).err().expect("error");
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent/model.hyb: error: cannot read file"),
+            "{e}"
+        );
+        let e = load(Path::new(env!("CARGO_MANIFEST_DIR")))
+            .map(|_| ())
+            .expect_err("error");
         assert!(e.to_string().ends_with("is a directory"), "{e}");
     }
 
     #[test]
     fn semantic_errors_are_rendered_with_the_line_and_a_caret() {
         let src = BALL.replace("der(v) = -g;", "der(v) = -gg;");
-        let e = load_str("m.hyb", &src).err().expect("error");
+        let e = load_str("m.hyb", &src).map(|_| ()).expect_err("error");
         let text = e.to_string();
         let mut lines = text.lines();
-        assert_eq!(lines.next(), Some("m.hyb:12:19: error: undefined name `gg`"), "{text}");
+        assert_eq!(
+            lines.next(),
+            Some("m.hyb:12:19: error: undefined name `gg`"),
+            "{text}"
+        );
         assert!(text.contains("der(v) = -gg;"), "{text}");
         let caret = text.lines().find(|l| l.contains('^')).expect("caret line");
         let col = caret.find('^').expect("caret");
@@ -259,9 +290,12 @@ mod tests {
             "(".repeat(depth),
             ")".repeat(depth)
         );
-        let e = load_str("deep.hyb", &src).err().expect("error");
+        let e = load_str("deep.hyb", &src).map(|_| ()).expect_err("error");
         assert!(first_line(&e).starts_with("deep.hyb:1:"), "{e}");
-        let src = format!("model M {{ state x = {}1; flow {{ der(x) = 1; }} }}", "-".repeat(depth));
+        let src = format!(
+            "model M {{ state x = {}1; flow {{ der(x) = 1; }} }}",
+            "-".repeat(depth)
+        );
         assert!(load_str("deep.hyb", &src).is_err());
     }
 

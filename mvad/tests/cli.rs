@@ -60,27 +60,56 @@ fn scratch(name: &str, contents: &[u8]) -> PathBuf {
 const BALL: &str = "models/bouncing_ball.hyb";
 const E1_COST: f64 = 1.8905137123173506;
 const E1_DCDE: f64 = 2.8314408141470055;
-const E1_T1: f64 = 0.63855085681410093;
+const E1_T1: f64 = 0.638_550_856_814_101;
 const E1_T2: f64 = 1.6602322277166624;
 
 #[test]
 fn grad_json_has_the_spec_keys_and_the_e1_values() {
-    let o = run_status(&["grad", BALL, "--json", "--rtol", "1e-10", "--atol", "1e-12"], 0);
+    let o = run_status(
+        &["grad", BALL, "--json", "--rtol", "1e-10", "--atol", "1e-12"],
+        0,
+    );
     let v = json(&o);
-    for key in ["model", "t_end", "params", "cost", "gradient", "events", "diagnostics", "stats"] {
+    for key in [
+        "model",
+        "t_end",
+        "params",
+        "cost",
+        "gradient",
+        "events",
+        "diagnostics",
+        "stats",
+    ] {
         assert!(v.get(key).is_some(), "missing key {key}");
     }
     assert_eq!(v["model"], "BouncingBall");
     assert_eq!(v["t_end"], 2.0);
     assert_eq!(v["params"]["e"], 0.8);
     assert_eq!(v["params"]["g"], 9.81);
-    assert_relative_eq!(v["cost"].as_f64().expect("cost"), E1_COST, max_relative = 1e-9);
-    assert_relative_eq!(v["gradient"]["e"].as_f64().expect("dC/de"), E1_DCDE, max_relative = 1e-9);
+    assert_relative_eq!(
+        v["cost"].as_f64().expect("cost"),
+        E1_COST,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        v["gradient"]["e"].as_f64().expect("dC/de"),
+        E1_DCDE,
+        max_relative = 1e-9
+    );
     let events = v["events"].as_array().expect("events");
     assert_eq!(events.len(), 2);
     for (k, (ev, t)) in events.iter().zip([E1_T1, E1_T2]).enumerate() {
         for key in [
-            "index", "name", "t", "mode_before", "mode_after", "guard_slope", "transversal", "dt", "jump", "atoms",
+            "index",
+            "name",
+            "t",
+            "mode_before",
+            "mode_after",
+            "guard_slope",
+            "transversal",
+            "dt",
+            "jump",
+            "atoms",
         ] {
             assert!(ev.get(key).is_some(), "event {k} lacks {key}");
         }
@@ -101,11 +130,27 @@ fn grad_json_has_the_spec_keys_and_the_e1_values() {
     }
     // First impact: v⁻ = −g t₁, slope ∇g·f = v⁻, J_v = (1 + e) g t₁, t₁' w.r.t. h0 = 1/(g t₁).
     let ev = &events[0];
-    assert_relative_eq!(ev["guard_slope"].as_f64().expect("n"), -9.81 * E1_T1, max_relative = 1e-9);
-    assert_relative_eq!(ev["jump"]["v"].as_f64().expect("n"), 1.8 * 9.81 * E1_T1, max_relative = 1e-9);
-    assert_relative_eq!(ev["dt"]["h0"].as_f64().expect("n"), 1.0 / (9.81 * E1_T1), max_relative = 1e-8);
+    assert_relative_eq!(
+        ev["guard_slope"].as_f64().expect("n"),
+        -9.81 * E1_T1,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        ev["jump"]["v"].as_f64().expect("n"),
+        1.8 * 9.81 * E1_T1,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        ev["dt"]["h0"].as_f64().expect("n"),
+        1.0 / (9.81 * E1_T1),
+        max_relative = 1e-8
+    );
     // α = −J t' for velocity and h0: −(1.8 g t₁)(1/(g t₁)) = −1.8.
-    assert_relative_eq!(ev["atoms"]["velocity"]["h0"].as_f64().expect("n"), -1.8, max_relative = 1e-8);
+    assert_relative_eq!(
+        ev["atoms"]["velocity"]["h0"].as_f64().expect("n"),
+        -1.8,
+        max_relative = 1e-8
+    );
     assert_eq!(ev["jump"]["height"].as_f64().map(f64::abs), Some(0.0));
     for key in ["steps", "rejected_steps", "events", "wall_seconds"] {
         assert!(v["stats"][key].is_number(), "stats lack {key}");
@@ -116,13 +161,23 @@ fn grad_json_has_the_spec_keys_and_the_e1_values() {
 
 #[test]
 fn grad_wrt_set_and_t_end() {
-    let o = run_status(&["grad", BALL, "--json", "--wrt", "e", "--set", "e=0.5", "--t-end", "1"], 0);
+    let o = run_status(
+        &[
+            "grad", BALL, "--json", "--wrt", "e", "--set", "e=0.5", "--t-end", "1",
+        ],
+        0,
+    );
     let v = json(&o);
     assert_eq!(v["params"]["e"], 0.5);
     assert_eq!(v["t_end"], 1.0);
     assert_eq!(v["gradient"].as_object().map(|g| g.len()), Some(1));
     assert_eq!(v["events"][0]["dt"].as_object().map(|g| g.len()), Some(1));
-    assert_eq!(v["events"][0]["atoms"]["velocity"].as_object().map(|g| g.len()), Some(1));
+    assert_eq!(
+        v["events"][0]["atoms"]["velocity"]
+            .as_object()
+            .map(|g| g.len()),
+        Some(1)
+    );
     assert_eq!(v["events"].as_array().map(Vec::len), Some(1));
 }
 
@@ -131,7 +186,11 @@ fn grad_text_table() {
     let o = run_status(&["grad", BALL], 0);
     let out = stdout(&o);
     assert!(out.contains("cost C = 1.89051371"), "{out}");
-    assert!(out.lines().any(|l| l.starts_with("e ") && l.contains("2.83144081")), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("e ") && l.contains("2.83144081")),
+        "{out}"
+    );
     assert!(out.contains("events (2):"), "{out}");
     assert!(out.contains("guard slope"), "{out}");
 }
@@ -163,31 +222,56 @@ fn zeno_ball_reports_a_zeno_diagnostic_and_finishes() {
         .iter()
         .find(|d| d["kind"] == "zeno")
         .expect("zeno");
-    assert_relative_eq!(zeno["t"].as_f64().expect("t"), 3.0 * E1_T1, max_relative = 1e-6);
+    assert_relative_eq!(
+        zeno["t"].as_f64().expect("t"),
+        3.0 * E1_T1,
+        max_relative = 1e-6
+    );
 }
 
 #[test]
 fn check_every_bundled_model() {
-    for name in ["bouncing_ball", "e2_sweep", "thermostat", "stiff_relay", "zeno_ball", "ceiling"] {
+    for name in [
+        "bouncing_ball",
+        "e2_sweep",
+        "thermostat",
+        "stiff_relay",
+        "zeno_ball",
+        "ceiling",
+    ] {
         let path = format!("models/{name}.hyb");
         let o = run_status(&["check", &path], 0);
         assert!(stdout(&o).contains("is valid"), "{}", stdout(&o));
         let v = json(&run_status(&["check", &path, "--json"], 0));
         assert!(v["states"].as_array().is_some_and(|s| !s.is_empty()));
     }
-    let v = json(&run_status(&["check", "models/thermostat.hyb", "--json"], 0));
+    let v = json(&run_status(
+        &["check", "models/thermostat.hyb", "--json"],
+        0,
+    ));
     assert_eq!(v["modes"], serde_json::json!(["heating", "cooling"]));
     assert_eq!(v["events"][0]["target"], "cooling");
 }
 
 #[test]
 fn every_bundled_model_runs_grad() {
-    for name in ["bouncing_ball", "e2_sweep", "thermostat", "stiff_relay", "zeno_ball", "ceiling"] {
+    for name in [
+        "bouncing_ball",
+        "e2_sweep",
+        "thermostat",
+        "stiff_relay",
+        "zeno_ball",
+        "ceiling",
+    ] {
         let path = format!("models/{name}.hyb");
         let v = json(&run_status(&["grad", &path, "--json"], 0));
         assert!(v["cost"].is_number(), "{name}");
         assert!(
-            v["gradient"].as_object().expect("gradient").values().all(Value::is_number),
+            v["gradient"]
+                .as_object()
+                .expect("gradient")
+                .values()
+                .all(Value::is_number),
             "{name}: {}",
             v["gradient"]
         );
@@ -200,7 +284,11 @@ fn simulate_csv_to_stdout_and_file() {
     let out = stdout(&o);
     assert!(out.starts_with("t,mode,h,v,height,velocity\n"), "{out}");
     assert_eq!(out.lines().count(), 1 + 21 + 4);
-    assert!(stderr(&o).contains("impact"), "event table on stderr: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains("impact"),
+        "event table on stderr: {}",
+        stderr(&o)
+    );
     let path = scratch("traj.csv", b"");
     let p = path.to_string_lossy().to_string();
     let o = run_status(&["simulate", BALL, "--out", &p], 0);
@@ -208,7 +296,10 @@ fn simulate_csv_to_stdout_and_file() {
     let csv = std::fs::read_to_string(&path).expect("csv written");
     let last = csv.lines().last().expect("rows");
     assert!(last.starts_with("2.0,main,"), "{last}");
-    let v = json(&run_status(&["simulate", BALL, "--json", "--points", "3"], 0));
+    let v = json(&run_status(
+        &["simulate", BALL, "--json", "--points", "3"],
+        0,
+    ));
     assert_eq!(v["columns"][0], "t");
     assert_eq!(v["rows"].as_array().map(Vec::len), Some(3 + 4));
 }
@@ -216,10 +307,28 @@ fn simulate_csv_to_stdout_and_file() {
 #[test]
 fn measure_json_and_plots() {
     let v = json(&run_status(
-        &["measure", BALL, "--observable", "height", "--wrt", "e", "--json", "--rtol", "1e-10", "--atol", "1e-12"],
+        &[
+            "measure",
+            BALL,
+            "--observable",
+            "height",
+            "--wrt",
+            "e",
+            "--json",
+            "--rtol",
+            "1e-10",
+            "--atol",
+            "1e-12",
+        ],
         0,
     ));
-    for key in ["observable", "grid", "density", "atoms", "integral_derivative"] {
+    for key in [
+        "observable",
+        "grid",
+        "density",
+        "atoms",
+        "integral_derivative",
+    ] {
         assert!(v.get(key).is_some(), "missing {key}");
     }
     assert_relative_eq!(
@@ -230,7 +339,19 @@ fn measure_json_and_plots() {
     for ext in ["svg", "png"] {
         let path = scratch(&format!("fig1.{ext}"), b"");
         let p = path.to_string_lossy().to_string();
-        let o = run_status(&["measure", BALL, "--observable", "velocity", "--wrt", "e", "--plot", &p], 0);
+        let o = run_status(
+            &[
+                "measure",
+                BALL,
+                "--observable",
+                "velocity",
+                "--wrt",
+                "e",
+                "--plot",
+                &p,
+            ],
+            0,
+        );
         assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
         let bytes = std::fs::read(&path).expect("picture");
         assert!(bytes.len() > 1000, "{ext}: {} bytes", bytes.len());
@@ -241,7 +362,11 @@ fn measure_json_and_plots() {
         }
     }
     let o = run_status(&["measure", BALL, "--observable", "nope"], 2);
-    assert!(stderr(&o).contains("known observables: height, velocity"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("known observables: height, velocity"),
+        "{}",
+        stderr(&o)
+    );
     run_status(&["measure", BALL], 2); // --observable is required
 }
 
@@ -249,35 +374,84 @@ fn measure_json_and_plots() {
 fn fdcheck_table_one() {
     let o = run_status(&["fdcheck", BALL, "--wrt", "e"], 0);
     let out = stdout(&o);
-    for word in ["MV-AD", "FD", "abs err", "rel err", "cosine similarity", "0.638551; 1.66023"] {
+    for word in [
+        "MV-AD",
+        "FD",
+        "abs err",
+        "rel err",
+        "cosine similarity",
+        "0.638551; 1.66023",
+    ] {
         assert!(out.contains(word), "{word}: {out}");
     }
-    let v = json(&run_status(&["fdcheck", BALL, "--json", "--step", "1e-5", "--rtol", "1e-12", "--atol", "1e-14"], 0));
+    let v = json(&run_status(
+        &[
+            "fdcheck", BALL, "--json", "--step", "1e-5", "--rtol", "1e-12", "--atol", "1e-14",
+        ],
+        0,
+    ));
     let row = &v["rows"][0];
     for key in ["param", "mvad", "fd", "abs_err", "rel_err"] {
         assert!(row.get(key).is_some(), "row lacks {key}");
     }
     assert!(row["rel_err"].as_f64().expect("n") < 1e-6, "{row}");
-    assert_relative_eq!(v["cosine_similarity"].as_f64().expect("n"), 1.0, max_relative = 1e-9);
+    assert_relative_eq!(
+        v["cosine_similarity"].as_f64().expect("n"),
+        1.0,
+        max_relative = 1e-9
+    );
     assert_eq!(v["events"], 2);
 }
 
 #[test]
 fn sweep_table_two_on_e2() {
-    let o = run_status(&["sweep", "models/e2_sweep.hyb", "--over", "v0=-0.5:-5:10"], 0);
+    let o = run_status(
+        &["sweep", "models/e2_sweep.hyb", "--over", "v0=-0.5:-5:10"],
+        0,
+    );
     let out = stdout(&o);
     assert!(out.contains("guard slope"), "{out}");
-    assert_eq!(out.lines().filter(|l| l.contains("True")).count(), 10, "{out}");
+    assert_eq!(
+        out.lines().filter(|l| l.contains("True")).count(),
+        10,
+        "{out}"
+    );
     let v = json(&run_status(
-        &["sweep", "models/e2_sweep.hyb", "--over", "v0=-0.5:-5:10", "--json", "--rtol", "1e-10", "--atol", "1e-12"],
+        &[
+            "sweep",
+            "models/e2_sweep.hyb",
+            "--over",
+            "v0=-0.5:-5:10",
+            "--json",
+            "--rtol",
+            "1e-10",
+            "--atol",
+            "1e-12",
+        ],
         0,
     ));
     let rows = v["rows"].as_array().expect("rows");
     assert_eq!(rows.len(), 10);
-    assert_relative_eq!(rows[0]["guard_slope"].as_f64().expect("n"), 4.457577817604534, max_relative = 1e-9);
-    assert_relative_eq!(rows[0]["event_time"].as_f64().expect("n"), 0.40342281525020734, max_relative = 1e-9);
-    assert_relative_eq!(rows[9]["guard_slope"].as_f64().expect("n"), 6.679820356865894, max_relative = 1e-9);
-    assert_relative_eq!(rows[9]["event_time"].as_f64().expect("n"), 0.17123551038388318, max_relative = 1e-9);
+    assert_relative_eq!(
+        rows[0]["guard_slope"].as_f64().expect("n"),
+        4.457577817604534,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        rows[0]["event_time"].as_f64().expect("n"),
+        0.40342281525020734,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        rows[9]["guard_slope"].as_f64().expect("n"),
+        6.679820356865894,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        rows[9]["event_time"].as_f64().expect("n"),
+        0.17123551038388318,
+        max_relative = 1e-9
+    );
     for r in rows {
         assert_eq!(r["atom_magnitude"], 0.0, "position is continuous: no atom");
         assert_eq!(r["transversal"], true);
@@ -291,20 +465,41 @@ fn workprec_table_and_plot() {
     let path = scratch("wp.svg", b"");
     let p = path.to_string_lossy().to_string();
     let o = run_status(
-        &["workprec", BALL, "--wrt", "e", "--reference", "C=1.8905137123173506", "--reference", "e=2.8314408141470055", "--plot", &p],
+        &[
+            "workprec",
+            BALL,
+            "--wrt",
+            "e",
+            "--reference",
+            "C=1.8905137123173506",
+            "--reference",
+            "e=2.8314408141470055",
+            "--plot",
+            &p,
+        ],
         0,
     );
     let out = stdout(&o);
     assert!(out.contains("MV-AD err dC"), "{out}");
-    assert_eq!(out.lines().filter(|l| l.starts_with("1e-")).count(), 10, "{out}");
-    assert!(std::fs::read_to_string(&path).expect("plot").contains("MV-AD"));
+    assert_eq!(
+        out.lines().filter(|l| l.starts_with("1e-")).count(),
+        10,
+        "{out}"
+    );
+    assert!(std::fs::read_to_string(&path)
+        .expect("plot")
+        .contains("MV-AD"));
 }
 
 #[test]
 fn unknown_set_lists_the_known_params() {
     for cmd in ["check", "simulate", "grad", "fdcheck", "workprec"] {
         let o = run_status(&[cmd, BALL, "--set", "q=1"], 2);
-        assert!(stderr(&o).contains("known parameters: e, g, h0, v0"), "{cmd}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains("known parameters: e, g, h0, v0"),
+            "{cmd}: {}",
+            stderr(&o)
+        );
     }
     run_status(&["grad", BALL, "--wrt", "nope"], 2);
     run_status(&["grad", BALL, "--set", "e=abc"], 2);
@@ -322,7 +517,10 @@ fn bad_options_and_usage_errors_exit_2() {
     run_status(&["grad", BALL, "--t-end", "0"], 2);
     run_status(&["grad", BALL, "--grazing-tol", "nan"], 2);
     run_status(&["grad", "/nonexistent/model.hyb"], 2);
-    run_status(&["measure", BALL, "--observable", "height", "--plot", "x.pdf"], 2);
+    run_status(
+        &["measure", BALL, "--observable", "height", "--plot", "x.pdf"],
+        2,
+    );
     let o = run_status(&["--help"], 0);
     assert!(stdout(&o).contains("workprec"));
     run_status(&["grad", "--help"], 0);
@@ -335,7 +533,10 @@ fn bad_options_and_usage_errors_exit_2() {
 
 #[test]
 fn a_model_without_horizon_needs_t_end() {
-    let path = scratch("nohorizon.hyb", b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n");
+    let path = scratch(
+        "nohorizon.hyb",
+        b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
+    );
     let p = path.to_string_lossy().to_string();
     let o = run_status(&["grad", &p], 2);
     assert!(stderr(&o).contains("--t-end"), "{}", stderr(&o));
@@ -351,7 +552,12 @@ fn a_failed_run_exits_1_with_an_error_object() {
     let p = path.to_string_lossy().to_string();
     let o = run_status(&["grad", &p, "--json"], 1);
     let v = json(&o);
-    assert!(v["error"].as_str().is_some_and(|m| m.contains("non-finite")), "{v}");
+    assert!(
+        v["error"]
+            .as_str()
+            .is_some_and(|m| m.contains("non-finite")),
+        "{v}"
+    );
     assert!(stderr(&o).contains("non-finite"), "{}", stderr(&o));
     let o = run_status(&["grad", &p], 1);
     assert!(stdout(&o).is_empty());
@@ -375,12 +581,27 @@ fn assert_located(name: &str, contents: &[u8], line: usize, fragment: &str) {
         let err = stderr(&o);
         let first = err.lines().next().unwrap_or_default();
         let prefix = format!("{p}:{line}:");
-        assert!(first.starts_with(&prefix), "{name}: expected {prefix}…, got: {err}");
+        assert!(
+            first.starts_with(&prefix),
+            "{name}: expected {prefix}…, got: {err}"
+        );
         let rest = &first[prefix.len()..];
-        let (col, msg) = rest.split_once(": error: ").unwrap_or_else(|| panic!("{name}: {first}"));
-        assert!(col.parse::<usize>().is_ok_and(|c| c >= 1), "{name}: column in {first}");
-        assert!(msg.contains(fragment), "{name}: `{fragment}` not in {first}");
-        assert!(err.lines().any(|l| l.trim_start().starts_with(&format!("{line} |"))), "{name}: no quoted line: {err}");
+        let (col, msg) = rest
+            .split_once(": error: ")
+            .unwrap_or_else(|| panic!("{name}: {first}"));
+        assert!(
+            col.parse::<usize>().is_ok_and(|c| c >= 1),
+            "{name}: column in {first}"
+        );
+        assert!(
+            msg.contains(fragment),
+            "{name}: `{fragment}` not in {first}"
+        );
+        assert!(
+            err.lines()
+                .any(|l| l.trim_start().starts_with(&format!("{line} |"))),
+            "{name}: no quoted line: {err}"
+        );
         assert!(err.contains('^'), "{name}: no caret: {err}");
         assert!(stdout(&o).is_empty(), "{name}: stdout not empty");
     }
@@ -393,8 +614,18 @@ fn assert_located(name: &str, contents: &[u8], line: usize, fragment: &str) {
 fn empty_blank_and_binary_files_are_located_errors() {
     assert_located("empty.hyb", b"", 1, "empty model file");
     assert_located("blank.hyb", b"  \n\n \t\n", 1, "empty model file");
-    assert_located("nul.hyb", b"model M {\n  state \x00\x01 x = 1;\n}", 2, "U+0000");
-    assert_located("latin1.hyb", b"model M {\n  // caf\xe9\n}", 2, "not valid UTF-8");
+    assert_located(
+        "nul.hyb",
+        b"model M {\n  state \x00\x01 x = 1;\n}",
+        2,
+        "U+0000",
+    );
+    assert_located(
+        "latin1.hyb",
+        b"model M {\n  // caf\xe9\n}",
+        2,
+        "not valid UTF-8",
+    );
     // Pseudo-random bytes (a fixed xorshift stream) in several sizes.
     let mut s = 0x2545_f491_4f6c_dd1du64;
     for size in [1usize, 7, 100, 4096] {
@@ -422,11 +653,21 @@ fn deep_nesting_is_an_error_not_a_crash() {
         ")".repeat(depth)
     );
     assert_located("deep.hyb", src.as_bytes(), 2, "nested too deeply");
-    let src = format!("model M {{\n  state x = 1;\n  flow {{ der(x) = {}x; }}\n}}\n", "-".repeat(depth));
-    let p = scratch("deepneg.hyb", src.as_bytes()).to_string_lossy().to_string();
+    let src = format!(
+        "model M {{\n  state x = 1;\n  flow {{ der(x) = {}x; }}\n}}\n",
+        "-".repeat(depth)
+    );
+    let p = scratch("deepneg.hyb", src.as_bytes())
+        .to_string_lossy()
+        .to_string();
     run_status(&["check", &p], 2);
-    let src = format!("model M {{\n  state x = 1;\n  flow {{ der(x) = x{}; }}\n}}\n", "^x".repeat(depth));
-    let p = scratch("deeppow.hyb", src.as_bytes()).to_string_lossy().to_string();
+    let src = format!(
+        "model M {{\n  state x = 1;\n  flow {{ der(x) = x{}; }}\n}}\n",
+        "^x".repeat(depth)
+    );
+    let p = scratch("deeppow.hyb", src.as_bytes())
+        .to_string_lossy()
+        .to_string();
     run_status(&["check", &p], 2);
 }
 

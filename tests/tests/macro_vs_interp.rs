@@ -18,6 +18,8 @@ mod compiled {
     mvad::hybrid!(include "../models/thermostat.hyb");
     mvad::hybrid!(include "../models/zeno_ball.hyb");
     mvad::hybrid!(include "tests/sink.hyb");
+    // The smallest model: no params, no events, no observables, no cost, no horizon.
+    mvad::hybrid! { model Tiny { state x = 1; flow { der(x) = -x * t; } } }
 }
 
 /// Splitmix64, uniform in [0, 1).
@@ -213,6 +215,11 @@ fn compiled_and_interpreted_models_agree() {
     agree(&compiled::Thermostat::new(), &m("thermostat.hyb"), 5);
     agree(&compiled::ZenoBall::new(), &m("zeno_ball.hyb"), 6);
     agree(&compiled::Sink::new(), include_str!("sink.hyb"), 7);
+    agree(
+        &compiled::Tiny::new(),
+        "model Tiny { state x = 1; flow { der(x) = -x * t; } }",
+        8,
+    );
 }
 
 #[test]
@@ -263,33 +270,62 @@ fn best_time(mut f: impl FnMut(), reps: usize) -> f64 {
 #[test]
 #[ignore = "timing; meaningful only in release on a quiet machine"]
 fn loaded_gradient_within_5x_of_compiled() {
-    let opts = mvad::solution::Options { rtol: 1e-10, atol: 1e-12, ..Default::default() };
-    let m = |f: &str| std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f);
+    let opts = mvad::solution::Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Default::default()
+    };
+    let m = |f: &str| {
+        std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f)
+    };
     let mut worst: f64 = 0.0;
     for (file, compiled_grad) in [
-        ("bouncing_ball.hyb", grad_time(&compiled::BouncingBall::new(), &opts)),
-        ("thermostat.hyb", grad_time(&compiled::Thermostat::new(), &opts)),
-        ("stiff_relay.hyb", grad_time(&compiled::StiffRelay::new(), &opts)),
+        (
+            "bouncing_ball.hyb",
+            grad_time(&compiled::BouncingBall::new(), &opts),
+        ),
+        (
+            "thermostat.hyb",
+            grad_time(&compiled::Thermostat::new(), &opts),
+        ),
+        (
+            "stiff_relay.hyb",
+            grad_time(&compiled::StiffRelay::new(), &opts),
+        ),
     ] {
         let i = InterpretedModel::from_source(&m(file)).expect("loads");
         let loaded = grad_time_interp(&i, &opts);
         let (tc, gc) = compiled_grad;
         let (tl, gl) = loaded;
         for (a, b) in gc.iter().zip(&gl) {
-            assert!((a - b).abs() <= 1e-9 * a.abs().max(1.0), "{file}: gradients differ {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+                "{file}: gradients differ {a} vs {b}"
+            );
         }
         let ratio = tl / tc;
-        println!("{file}: compiled {:.1} µs, loaded {:.1} µs, ratio {ratio:.2}", tc * 1e6, tl * 1e6);
+        println!(
+            "{file}: compiled {:.1} µs, loaded {:.1} µs, ratio {ratio:.2}",
+            tc * 1e6,
+            tl * 1e6
+        );
         worst = worst.max(ratio);
     }
-    assert!(worst <= 5.0, "loaded/compiled gradient time ratio {worst:.2} > 5");
+    assert!(
+        worst <= 5.0,
+        "loaded/compiled gradient time ratio {worst:.2} > 5"
+    );
 }
 
 fn grad_time<M: HybridModel>(m: &M, opts: &mvad::solution::Options) -> (f64, Vec<f64>)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let p = OVector::<f64, M::P>::from_iterator_generic(m.nparams(), Const::<1>, m.info().param_defaults.iter().copied());
+    let p = OVector::<f64, M::P>::from_iterator_generic(
+        m.nparams(),
+        Const::<1>,
+        m.info().param_defaults.iter().copied(),
+    );
     let sol = mvad::solve::solve(m, &p, opts).expect("solves");
     let t = best_time(
         || {

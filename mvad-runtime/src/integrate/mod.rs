@@ -22,8 +22,10 @@
 //! - [`Method::Rosenbrock`]: Rodas5P, a stiffly accurate linearly implicit method of order 5(4)
 //!   with a 4th-order dense output that uses the model's symbolic Jacobian (`rosenbrock.rs`).
 //! - [`Method::Auto`] (default): Tsit5 with Hairer's stiffness test (h·‖k₇ − k₆‖/‖y₇ − y₆‖
-//!   against the real stability boundary of Tsit5); after repeated stiff steps it switches to
-//!   Rodas5P, and back when h·‖f_x‖_∞ shows the explicit method would be stable again.
+//!   against the real stability boundary of Tsit5) and, every 20 steps, h·ρ(f_x) from a power
+//!   iteration on the symbolic Jacobian (this catches steps held near 1/ρ by something other
+//!   than stability, e.g. sensitivity error control); after repeated stiff steps it switches to
+//!   Rodas5P, and back when h·ρ(f_x) < 0.4 shows the explicit method would be stable again.
 //!
 //! ## Error control and step size
 //! The local error estimate e of the embedded pair is measured in the weighted RMS norm
@@ -308,6 +310,13 @@ const TSIT5_STIFF_BOUND: f64 = 3.25;
 /// Accepted stiff-looking Tsit5 steps (with fewer than 6 non-stiff ones in between) before
 /// `auto` switches to Rodas5P.
 const STIFF_STEPS_TO_SWITCH: usize = 15;
+/// Accepted Tsit5 steps between two Jacobian-based stiffness checks under `auto`.
+const JAC_CHECK_EVERY: usize = 20;
+/// h·ρ(f_x) above which a Tsit5 step counts as stiff in the Jacobian check (three checks in
+/// a row switch to Rodas5P).
+const JAC_STIFF_HRHO: f64 = 0.8;
+/// h·ρ(f_x) below which a Rodas5P step counts as non-stiff.
+const JAC_NONSTIFF_HRHO: f64 = 0.4;
 /// Consecutive non-stiff Rodas5P steps before `auto` switches back to Tsit5.
 const NONSTIFF_STEPS_TO_SWITCH: usize = 20;
 
@@ -361,6 +370,9 @@ where
     stiff_ratio: f64,
     stiff_count: usize,
     nonstiff_count: usize,
+    /// Accepted Tsit5 steps since the last Jacobian check, and consecutive stiff checks.
+    jac_check_count: usize,
+    jac_stiff_count: usize,
     stats: Stats,
     ros: RosenbrockWork<M::N, M::P>,
 }
@@ -422,6 +434,8 @@ where
             stiff_ratio: 0.0,
             stiff_count: 0,
             nonstiff_count: 0,
+            jac_check_count: 0,
+            jac_stiff_count: 0,
             stats: Stats::default(),
             ros: RosenbrockWork::new(
                 n,
@@ -661,7 +675,23 @@ where
                         self.stiff_count = 0;
                     }
                 }
-                if self.stiff_count >= STIFF_STEPS_TO_SWITCH {
+                // Second test (for steps held small by something other than the stability
+                // bound, where Hairer's ratio stays low): every JAC_CHECK_EVERY steps compare
+                // h with the spectral radius of the symbolic Jacobian.
+                self.jac_check_count += 1;
+                if self.jac_check_count >= JAC_CHECK_EVERY {
+                    self.jac_check_count = 0;
+                    let rho = self.ros.spectral_radius_at(&self.rhs, self.t, &self.y.x);
+                    self.stats.jac_evals += 1;
+                    if self.dense_h * rho > JAC_STIFF_HRHO {
+                        self.jac_stiff_count += 1;
+                    } else {
+                        self.jac_stiff_count = 0;
+                    }
+                }
+                if self.stiff_count >= STIFF_STEPS_TO_SWITCH || self.jac_stiff_count >= 3 {
+                    self.jac_stiff_count = 0;
+                    self.jac_check_count = 0;
                     self.active = Method::Rosenbrock;
                     self.stiff_count = 0;
                     self.nonstiff_count = 0;
@@ -670,10 +700,10 @@ where
                 }
             }
             Method::Rosenbrock => {
-                // ‖f_x‖_∞ bounds the spectral radius; explicit is stable if h·ρ is inside
-                // Tsit5's region with margin.
-                let rho = self.ros.jac_inf_norm();
-                if self.h * rho < 0.5 * TSIT5_STIFF_BOUND {
+                // Back to explicit when the step Rodas5P proposes is well inside Tsit5's
+                // stability region (hysteresis against the forward tests).
+                let rho = self.ros.jac_spectral_radius();
+                if self.h * rho < JAC_NONSTIFF_HRHO {
                     self.nonstiff_count += 1;
                 } else {
                     self.nonstiff_count = 0;

@@ -45,7 +45,10 @@ where
         }
         m.insert("params".into(), Value::Object(p));
         m.insert("modes".into(), Value::from(info.modes.clone()));
-        m.insert("initial_mode".into(), Value::from(mode_name(info.initial_mode)));
+        m.insert(
+            "initial_mode".into(),
+            Value::from(mode_name(info.initial_mode)),
+        );
         let events: Vec<Value> = info
             .events
             .iter()
@@ -100,7 +103,11 @@ where
     s.push_str(&format!(
         "params ({}):       {}\n",
         info.params.len(),
-        if plist.is_empty() { "-".to_string() } else { plist.join(", ") }
+        if plist.is_empty() {
+            "-".to_string()
+        } else {
+            plist.join(", ")
+        }
     ));
     s.push_str(&format!(
         "modes ({}):        {} (initial: {})\n",
@@ -124,7 +131,11 @@ where
     s.push_str(&format!(
         "observables ({}):  {}\n",
         info.observables.len(),
-        if info.observables.is_empty() { "-".to_string() } else { info.observables.join(", ") }
+        if info.observables.is_empty() {
+            "-".to_string()
+        } else {
+            info.observables.join(", ")
+        }
     ));
     let mut cost = Vec::new();
     if info.has_running_cost {
@@ -138,7 +149,11 @@ where
     }
     s.push_str(&format!(
         "cost:             {}\n",
-        if cost.is_empty() { "none (C = 0)".to_string() } else { cost.join(" + ") }
+        if cost.is_empty() {
+            "none (C = 0)".to_string()
+        } else {
+            cost.join(" + ")
+        }
     ));
     s.push_str(&format!(
         "horizon:          {}\n",
@@ -147,7 +162,10 @@ where
             None => "none (pass --t-end T to run)".to_string(),
         }
     ));
-    s.push_str(&format!("switches:         {} (kinks of abs/min/max/sign/if in flows)\n", info.switches));
+    s.push_str(&format!(
+        "switches:         {} (kinks of abs/min/max/sign/if in flows)\n",
+        info.switches
+    ));
     let n = info.states.len();
     s.push_str("sparsity of df/dx:\n");
     for (mi, entries) in info.jacobian_sparsity.iter().enumerate() {
@@ -192,7 +210,10 @@ mod tests {
     #[test]
     fn text_lists_the_declarations() {
         let out = run(&Ball::new(), "ball.hyb", &args(&[])).expect("ok");
-        assert!(out.starts_with("ball.hyb: model `BouncingBall` is valid\n"), "{out}");
+        assert!(
+            out.starts_with("ball.hyb: model `BouncingBall` is valid\n"),
+            "{out}"
+        );
         assert!(out.contains("states (2):       h, v"), "{out}");
         assert!(out.contains("e = 0.8, g = 9.81, h0 = 2, v0 = 0"), "{out}");
         assert!(out.contains("impact"), "{out}");
@@ -202,7 +223,12 @@ mod tests {
 
     #[test]
     fn json_has_the_structure() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--json", "--set", "e=0.5"])).expect("ok");
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--json", "--set", "e=0.5"]),
+        )
+        .expect("ok");
         let v: Value = serde_json::from_str(&out).expect("json");
         assert_eq!(v["model"], "BouncingBall");
         assert_eq!(v["params"]["e"], 0.5);

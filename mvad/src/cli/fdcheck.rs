@@ -32,7 +32,10 @@ where
 {
     let s = setup(model, &args.common)?;
     if !(args.step.is_finite() && args.step > 0.0 && args.step < 1.0) {
-        return Err(CliError::Input(format!("error: --step must be in (0, 1), got {}", args.step)));
+        return Err(CliError::Input(format!(
+            "error: --step must be in (0, 1), got {}",
+            args.step
+        )));
     }
     let info = model.info();
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
@@ -69,7 +72,10 @@ where
         m.insert("rows".into(), Value::Array(rows));
         m.insert("cosine_similarity".into(), num(cos));
         m.insert("events".into(), Value::from(sol.events.len()));
-        m.insert("event_times".into(), Value::from(times.iter().map(|&t| num(t)).collect::<Vec<_>>()));
+        m.insert(
+            "event_times".into(),
+            Value::from(times.iter().map(|&t| num(t)).collect::<Vec<_>>()),
+        );
         m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
         return Ok(json_text(&Value::Object(m)));
     }
@@ -97,7 +103,11 @@ where
         if times.is_empty() {
             "-".to_string()
         } else {
-            times.iter().map(|&t| g(t, 6)).collect::<Vec<_>>().join("; ")
+            times
+                .iter()
+                .map(|&t| g(t, 6))
+                .collect::<Vec<_>>()
+                .join("; ")
         }
     ));
     out.push_str(&diagnostics_text(&sol.diagnostics));
@@ -126,25 +136,46 @@ mod tests {
         let out = run(
             &Ball::new(),
             "ball.hyb",
-            &args(&["--json", "--rtol", "1e-12", "--atol", "1e-14", "--step", "1e-5"]),
+            &args(&[
+                "--json", "--rtol", "1e-12", "--atol", "1e-14", "--step", "1e-5",
+            ]),
         )
         .expect("runs");
         let v: Value = serde_json::from_str(&out).expect("json");
         let row = &v["rows"][0];
         assert_eq!(row["param"], "e");
-        assert_relative_eq!(row["mvad"].as_f64().expect("n"), 2.8314408141470055, max_relative = 1e-9);
-        assert_relative_eq!(row["fd"].as_f64().expect("n"), 2.8314408141470055, max_relative = 1e-6);
+        assert_relative_eq!(
+            row["mvad"].as_f64().expect("n"),
+            2.8314408141470055,
+            max_relative = 1e-9
+        );
+        assert_relative_eq!(
+            row["fd"].as_f64().expect("n"),
+            2.8314408141470055,
+            max_relative = 1e-6
+        );
         assert!(row["rel_err"].as_f64().expect("n") < 1e-6);
-        assert_relative_eq!(v["cosine_similarity"].as_f64().expect("n"), 1.0, max_relative = 1e-9);
+        assert_relative_eq!(
+            v["cosine_similarity"].as_f64().expect("n"),
+            1.0,
+            max_relative = 1e-9
+        );
         assert_eq!(v["events"], 2);
-        assert_relative_eq!(v["event_times"][1].as_f64().expect("n"), 1.6602322277166624, max_relative = 1e-9);
+        assert_relative_eq!(
+            v["event_times"][1].as_f64().expect("n"),
+            1.6602322277166624,
+            max_relative = 1e-9
+        );
     }
 
     #[test]
     fn text_table_and_bad_step() {
         let out = run(&Ball::new(), "ball.hyb", &args(&["--wrt", "e"])).expect("runs");
         assert!(out.contains("param  MV-AD"), "{out}");
-        assert!(out.contains("event times (s)    0.638551; 1.66023"), "{out}");
+        assert!(
+            out.contains("event times (s)    0.638551; 1.66023"),
+            "{out}"
+        );
         let err = run(&Ball::new(), "ball.hyb", &args(&["--step", "0"])).err();
         assert_eq!(err.map(|e| e.status()), Some(2));
     }

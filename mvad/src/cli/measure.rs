@@ -71,7 +71,10 @@ where
         )));
     }
     if !(args.step.is_finite() && args.step > 0.0 && args.step < 1.0) {
-        return Err(CliError::Input(format!("error: --step must be in (0, 1), got {}", args.step)));
+        return Err(CliError::Input(format!(
+            "error: --step must be in (0, 1), got {}",
+            args.step
+        )));
     }
     if let Some(p) = &args.plot {
         format_of(p)?;
@@ -98,13 +101,23 @@ where
     if args.common.json {
         let mut m = Map::new();
         m.insert("model".into(), Value::from(info.name.clone()));
-        m.insert("observable".into(), Value::from(info.observables[obs].clone()));
+        m.insert(
+            "observable".into(),
+            Value::from(info.observables[obs].clone()),
+        );
         m.insert("t_end".into(), num(t_end));
         m.insert(
             "wrt".into(),
-            Value::from(wrt.iter().map(|&k| info.params[k].clone()).collect::<Vec<_>>()),
+            Value::from(
+                wrt.iter()
+                    .map(|&k| info.params[k].clone())
+                    .collect::<Vec<_>>(),
+            ),
         );
-        m.insert("grid".into(), Value::from(grid.iter().map(|&t| num(t)).collect::<Vec<_>>()));
+        m.insert(
+            "grid".into(),
+            Value::from(grid.iter().map(|&t| num(t)).collect::<Vec<_>>()),
+        );
         let mut d = Map::new();
         for &k in wrt {
             d.insert(
@@ -160,7 +173,11 @@ where
     out.push_str("density (h_x S + h_θ) dt plus atoms α_k δ(t − t_k), α_k = −J_k t_k'\n\n");
     let mut t = Table::new(
         &std::iter::once("param".to_string())
-            .chain(["d/dθ ∫y dt".into(), "density part".into(), "atoms part".into()])
+            .chain([
+                "d/dθ ∫y dt".into(),
+                "density part".into(),
+                "atoms part".into(),
+            ])
             .collect::<Vec<_>>(),
     );
     for &k in wrt {
@@ -202,7 +219,10 @@ where
     }
     out.push_str(&t.render());
     if stride > 1 {
-        out.push_str(&format!("(every {stride}th of {} points; --json prints all)\n", grid.len()));
+        out.push_str(&format!(
+            "(every {stride}th of {} points; --json prints all)\n",
+            grid.len()
+        ));
     }
     if let (Some(p), Some(note)) = (&args.plot, plot_note) {
         out.push_str(&format!("\nwrote {}: {note}\n", p.display()));
@@ -292,11 +312,18 @@ where
             ..opts.clone()
         };
         let s = solve(model, &p, &o).map_err(solve_err)?;
-        Ok((cumulative(&ts, &observable_on(model, &p, &s, obs, &ts)), p[k]))
+        Ok((
+            cumulative(&ts, &observable_on(model, &p, &s, obs, &ts)),
+            p[k],
+        ))
     };
     let (plus, vp) = run_at(h)?;
     let (minus, vm) = run_at(-h)?;
-    let fd: Vec<f64> = plus.iter().zip(&minus).map(|(a, b)| (a - b) / (vp - vm)).collect();
+    let fd: Vec<f64> = plus
+        .iter()
+        .zip(&minus)
+        .map(|(a, b)| (a - b) / (vp - vm))
+        .collect();
     let mvad_total = mu.pair(|_| 1.0)[k];
     let fd_total = fd.last().copied().unwrap_or(f64::NAN);
     let abs = (mvad_total - fd_total).abs();
@@ -309,7 +336,10 @@ where
         g(rel, 3)
     );
     Ok(Figure1 {
-        title: format!("{}: d{}/d{} as a measure", info.name, info.observables[obs], info.params[k]),
+        title: format!(
+            "{}: d{}/d{} as a measure",
+            info.name, info.observables[obs], info.params[k]
+        ),
         observable: info.observables[obs].clone(),
         param: info.params[k].clone(),
         trajectory: ts.iter().copied().zip(y).collect(),
@@ -344,7 +374,17 @@ mod tests {
         let out = run(
             &Ball::new(),
             "ball.hyb",
-            &args(&["--observable", "height", "--wrt", "e", "--json", "--rtol", "1e-10", "--atol", "1e-12"]),
+            &args(&[
+                "--observable",
+                "height",
+                "--wrt",
+                "e",
+                "--json",
+                "--rtol",
+                "1e-10",
+                "--atol",
+                "1e-12",
+            ]),
         )
         .expect("runs");
         let v: Value = serde_json::from_str(&out).expect("json");
@@ -355,9 +395,14 @@ mod tests {
         assert_eq!(v["density"]["e"][10], 0.0);
         // Height is continuous: its atoms vanish.
         assert_eq!(v["atoms"].as_array().map(Vec::len), Some(2));
-        assert_eq!(v["atoms"][1]["values"]["e"].as_f64().map(f64::abs), Some(0.0));
+        assert_eq!(
+            v["atoms"][1]["values"]["e"].as_f64().map(f64::abs),
+            Some(0.0)
+        );
         // ⟨μ_height, 1⟩ = d/de ∫h dt = dC/de of the E1 reference.
-        let total = v["integral_derivative"]["e"]["total"].as_f64().expect("number");
+        let total = v["integral_derivative"]["e"]["total"]
+            .as_f64()
+            .expect("number");
         assert_relative_eq!(total, 2.8314408141470055, max_relative = 1e-7);
     }
 
@@ -369,7 +414,15 @@ mod tests {
         let out = run(
             &Ball::new(),
             "ball.hyb",
-            &args(&["--observable", "velocity", "--wrt", "e", "--plot", &svg, "--json"]),
+            &args(&[
+                "--observable",
+                "velocity",
+                "--wrt",
+                "e",
+                "--plot",
+                &svg,
+                "--json",
+            ]),
         )
         .expect("runs");
         let v: Value = serde_json::from_str(&out).expect("json");
@@ -378,15 +431,29 @@ mod tests {
         assert!(a < -1.0, "{a}");
         let text = std::fs::read_to_string(&svg).expect("plot written");
         assert!(text.contains("MV-AD"));
-        assert!(v["plot"]["comparison"].as_str().expect("note").contains("FD"));
+        assert!(v["plot"]["comparison"]
+            .as_str()
+            .expect("note")
+            .contains("FD"));
     }
 
     #[test]
     fn bad_observable_lists_the_known_ones() {
-        let err = run(&Ball::new(), "b", &args(&["--observable", "x"])).err().expect("error");
+        let err = run(&Ball::new(), "b", &args(&["--observable", "x"]))
+            .map(|_| ())
+            .expect_err("error");
         assert_eq!(err.status(), 2);
-        assert!(err.message().contains("known observables: height, velocity"), "{err:?}");
-        let err = run(&Ball::new(), "b", &args(&["--observable", "height", "--plot", "a.pdf"])).err();
+        assert!(
+            err.message()
+                .contains("known observables: height, velocity"),
+            "{err:?}"
+        );
+        let err = run(
+            &Ball::new(),
+            "b",
+            &args(&["--observable", "height", "--plot", "a.pdf"]),
+        )
+        .err();
         assert_eq!(err.map(|e| e.status()), Some(2));
     }
 

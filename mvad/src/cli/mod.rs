@@ -79,7 +79,11 @@ pub struct Common {
     #[arg(long, default_value = "auto", value_parser = ["auto", "tsit5", "verner9", "rosenbrock"])]
     pub method: String,
     /// τ of the grazing test |∇ₓg·f| < τ |∇ₓg| |f|.
-    #[arg(long = "grazing-tol", value_name = "TAU", allow_negative_numbers = true)]
+    #[arg(
+        long = "grazing-tol",
+        value_name = "TAU",
+        allow_negative_numbers = true
+    )]
     pub grazing_tol: Option<f64>,
     /// Print one JSON object instead of tables.
     #[arg(long)]
@@ -207,7 +211,9 @@ where
 /// Writes to stdout; false if that failed (a closed pipe is not a panic).
 fn write_stdout(text: &str) -> bool {
     let mut out = std::io::stdout().lock();
-    out.write_all(text.as_bytes()).and_then(|_| out.flush()).is_ok()
+    out.write_all(text.as_bytes())
+        .and_then(|_| out.flush())
+        .is_ok()
 }
 
 /// Writes to stderr, ignoring failures.
@@ -235,7 +241,9 @@ where
 pub fn parse_number(text: &str, what: &str) -> Result<f64, CliError> {
     match text.trim().parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(CliError::Input(format!("{what}: `{text}` is not a finite number"))),
+        Ok(_) => Err(CliError::Input(format!(
+            "{what}: `{text}` is not a finite number"
+        ))),
         Err(_) => Err(CliError::Input(format!("{what}: `{text}` is not a number"))),
     }
 }
@@ -424,9 +432,14 @@ mod tests {
         let ball = Ball::new();
         let s = setup(&ball, &common(&["--set", "e=0.5", "--set", "h0 = 3"])).expect("ok");
         assert_eq!(s.params.as_slice(), &[0.5, 9.81, 3.0, 0.0]);
-        let err = setup(&ball, &common(&["--set", "q=1"])).err().expect("unknown param");
+        let err = setup(&ball, &common(&["--set", "q=1"]))
+            .err()
+            .expect("unknown param");
         assert_eq!(err.status(), 2);
-        assert!(err.message().contains("known parameters: e, g, h0, v0"), "{err:?}");
+        assert!(
+            err.message().contains("known parameters: e, g, h0, v0"),
+            "{err:?}"
+        );
         for bad in ["e", "e=abc", "e=nan", "e=inf"] {
             let err = setup(&ball, &common(&["--set", bad])).err().expect(bad);
             assert_eq!(err.status(), 2, "{bad}");

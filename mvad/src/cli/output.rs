@@ -35,7 +35,10 @@ pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
         .unwrap_or_else(|| format!("event_{}", ev.event));
     let mut jump = Map::new();
     for (i, s) in info.states.iter().enumerate() {
-        jump.insert(s.clone(), num(ev.jump_states.get(i).copied().unwrap_or(f64::NAN)));
+        jump.insert(
+            s.clone(),
+            num(ev.jump_states.get(i).copied().unwrap_or(f64::NAN)),
+        );
     }
     for (i, o) in info.observables.iter().enumerate() {
         jump.insert(
@@ -94,7 +97,8 @@ pub fn stats_json(s: &Stats) -> Value {
 
 /// Pretty JSON text with a final newline.
 pub fn json_text(v: &Value) -> String {
-    let mut s = serde_json::to_string_pretty(v).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+    let mut s =
+        serde_json::to_string_pretty(v).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
     s.push('\n');
     s
 }

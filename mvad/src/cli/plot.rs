@@ -56,7 +56,9 @@ fn ensure_font() -> Result<(), CliError> {
     if ok {
         Ok(())
     } else {
-        Err(CliError::Run("error: the shipped font could not be loaded".into()))
+        Err(CliError::Run(
+            "error: the shipped font could not be loaded".into(),
+        ))
     }
 }
 
@@ -77,7 +79,11 @@ pub fn span(values: impl IntoIterator<Item = f64>) -> Range<f64> {
     if !lo.is_finite() || !hi.is_finite() {
         return -1.0..1.0;
     }
-    let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 * lo.abs().max(1e-12) };
+    let pad = if hi > lo {
+        0.05 * (hi - lo)
+    } else {
+        0.5 * lo.abs().max(1e-12)
+    };
     (lo - pad)..(hi + pad)
 }
 
@@ -145,9 +151,7 @@ pub fn figure1(path: &Path, fig: &Figure1) -> Result<(), CliError> {
 fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1) -> DrawResult {
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
     root.fill(&WHITE).map_err(e)?;
-    let root = root
-        .titled(&fig.title, ("sans-serif", 24))
-        .map_err(e)?;
+    let root = root.titled(&fig.title, ("sans-serif", 24)).map_err(e)?;
     let (top, bottom) = root.split_vertically(root.dim_in_pixel().1 / 2);
     let (tl, tr) = top.split_horizontally(top.dim_in_pixel().0 / 2);
 
@@ -156,7 +160,10 @@ fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1
     let y_range = span(fig.trajectory.iter().map(|p| p.1));
     {
         let mut chart = ChartBuilder::on(&tl)
-            .caption(format!("{}(t) and events", fig.observable), ("sans-serif", 18))
+            .caption(
+                format!("{}(t) and events", fig.observable),
+                ("sans-serif", 18),
+            )
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(60)
@@ -169,7 +176,10 @@ fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1
             .draw()
             .map_err(e)?;
         chart
-            .draw_series(LineSeries::new(fig.trajectory.iter().copied(), BLUE.stroke_width(2)))
+            .draw_series(LineSeries::new(
+                fig.trajectory.iter().copied(),
+                BLUE.stroke_width(2),
+            ))
             .map_err(e)?;
         for &tk in &fig.events {
             chart
@@ -204,7 +214,10 @@ fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1
             .map_err(e)?;
         chart.configure_mesh().x_desc("t").draw().map_err(e)?;
         chart
-            .draw_series(LineSeries::new(fig.density.iter().copied(), BLUE.stroke_width(2)))
+            .draw_series(LineSeries::new(
+                fig.density.iter().copied(),
+                BLUE.stroke_width(2),
+            ))
             .map_err(e)?
             .label("density")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE));
@@ -214,7 +227,11 @@ fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1
                 .map_err(e)?;
         }
         chart
-            .draw_series(fig.atoms.iter().map(|&(tk, a)| Circle::new((tk, a), 5, RED.filled())))
+            .draw_series(
+                fig.atoms
+                    .iter()
+                    .map(|&(tk, a)| Circle::new((tk, a), 5, RED.filled())),
+            )
             .map_err(e)?
             .label("atoms")
             .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
@@ -351,7 +368,9 @@ fn draw_workprec<DB: DrawingBackend>(
                 .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
                 .map_err(e)?
                 .label(c.label.as_str())
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2))
+                });
             chart
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
                 .map_err(e)?;
@@ -418,15 +437,24 @@ mod tests {
                 points: vec![(2e-4, 1e-2), (4e-4, 1e-5), (f64::NAN, 1.0)],
             },
         ];
-        let panels = vec![("C".to_string(), curves.clone()), ("dC/de".to_string(), curves)];
+        let panels = vec![
+            ("C".to_string(), curves.clone()),
+            ("dC/de".to_string(), curves),
+        ];
         workprec(&tmp("wp.svg"), "wp", &panels).expect("svg");
         workprec(&tmp("wp.png"), "wp", &panels).expect("png");
     }
 
     #[test]
     fn bad_paths_are_errors_not_panics() {
-        assert_eq!(format_of(Path::new("a.pdf")).err().map(|e| e.status()), Some(2));
-        assert_eq!(format_of(Path::new("noext")).err().map(|e| e.status()), Some(2));
+        assert_eq!(
+            format_of(Path::new("a.pdf")).err().map(|e| e.status()),
+            Some(2)
+        );
+        assert_eq!(
+            format_of(Path::new("noext")).err().map(|e| e.status()),
+            Some(2)
+        );
         let fig = sample_figure();
         let err = figure1(Path::new("/nonexistent-dir/x/fig.png"), &fig).err();
         assert_eq!(err.map(|e| e.status()), Some(1));

@@ -104,7 +104,11 @@ where
     match &args.out {
         Some(path) => {
             write_file(path, &csv(info, &rows))?;
-            Ok(format!("wrote {} rows to {}\n{table}", rows.len(), path.display()))
+            Ok(format!(
+                "wrote {} rows to {}\n{table}",
+                rows.len(),
+                path.display()
+            ))
         }
         None => {
             write_stderr(&table);
@@ -254,16 +258,27 @@ where
         for e in &sol.events {
             let mut row = vec![
                 e.index.to_string(),
-                info.events.get(e.event).map(|x| x.name.clone()).unwrap_or_default(),
+                info.events
+                    .get(e.event)
+                    .map(|x| x.name.clone())
+                    .unwrap_or_default(),
                 g(e.t, 12),
                 if e.mode_before == e.mode_after {
                     mode_name(info, e.mode_before)
                 } else {
-                    format!("{} -> {}", mode_name(info, e.mode_before), mode_name(info, e.mode_after))
+                    format!(
+                        "{} -> {}",
+                        mode_name(info, e.mode_before),
+                        mode_name(info, e.mode_after)
+                    )
                 },
             ];
             for (a, b) in e.x_before.iter().zip(&e.x_after) {
-                row.push(if a == b { g(*a, 8) } else { format!("{} -> {}", g(*a, 8), g(*b, 8)) });
+                row.push(if a == b {
+                    g(*a, 8)
+                } else {
+                    format!("{} -> {}", g(*a, 8), g(*b, 8))
+                });
             }
             t.row(row);
         }
@@ -293,11 +308,17 @@ mod tests {
     /// Closed form of the E1 ball's height before the first impact: h0 − g t²/2.
     #[test]
     fn csv_follows_the_closed_form_and_shows_both_sides_of_events() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--points", "11", "--rtol", "1e-10"]))
-            .expect("runs");
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--points", "11", "--rtol", "1e-10"]),
+        )
+        .expect("runs");
         let mut lines = out.lines();
         assert_eq!(lines.next(), Some("t,mode,h,v,height,velocity"));
-        let rows: Vec<Vec<String>> = lines.map(|l| l.split(',').map(String::from).collect()).collect();
+        let rows: Vec<Vec<String>> = lines
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect();
         // 11 grid rows + 2 rows per impact.
         assert_eq!(rows.len(), 11 + 4);
         let num = |s: &str| s.parse::<f64>().expect("number");
@@ -306,8 +327,11 @@ mod tests {
         assert_relative_eq!(num(&r[2]), 2.0 - 0.5 * 9.81 * 0.16, max_relative = 1e-8);
         assert_relative_eq!(num(&r[3]), -9.81 * 0.4, max_relative = 1e-8);
         // The first impact's two rows: v⁻ = −g t₁, v⁺ = −0.8 v⁻.
-        let t1 = 0.63855085681410093;
-        let pre = rows.iter().position(|r| (num(&r[0]) - t1).abs() < 1e-9).expect("event row");
+        let t1 = 0.638_550_856_814_101;
+        let pre = rows
+            .iter()
+            .position(|r| (num(&r[0]) - t1).abs() < 1e-9)
+            .expect("event row");
         assert_relative_eq!(num(&rows[pre][3]), -9.81 * t1, max_relative = 1e-8);
         assert_relative_eq!(num(&rows[pre + 1][3]), 0.8 * 9.81 * t1, max_relative = 1e-8);
         assert_eq!(rows[pre][1], "main");
@@ -336,13 +360,28 @@ mod tests {
         assert!(out.contains("impact"), "{out}");
         let text = std::fs::read_to_string(&path).expect("written");
         assert!(text.starts_with("t,mode,h,v"));
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--json", "--points", "5"])).expect("runs");
+        let out = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--json", "--points", "5"]),
+        )
+        .expect("runs");
         let v: Value = serde_json::from_str(&out).expect("json");
         assert_eq!(v["columns"][2], "h");
         assert_eq!(v["rows"].as_array().map(Vec::len), Some(5 + 4));
         assert_eq!(v["events"][0]["name"], "impact");
-        let err = run(&Ball::new(), "ball.hyb", &args(&["--out", "/nonexistent/dir/x.csv"])).err();
+        let err = run(
+            &Ball::new(),
+            "ball.hyb",
+            &args(&["--out", "/nonexistent/dir/x.csv"]),
+        )
+        .err();
         assert_eq!(err.map(|e| e.status()), Some(1));
-        assert_eq!(run(&Ball::new(), "b", &args(&["--points", "1"])).err().map(|e| e.status()), Some(2));
+        assert_eq!(
+            run(&Ball::new(), "b", &args(&["--points", "1"]))
+                .err()
+                .map(|e| e.status()),
+            Some(2)
+        );
     }
 }

@@ -121,10 +121,28 @@ where
                 let mut m = Map::new();
                 m.insert("value".into(), num(*value));
                 let first = sol.events.first();
-                m.insert("guard_slope".into(), first.map(|e| num(e.guard_slope.abs())).unwrap_or(Value::Null));
-                m.insert("transversal".into(), first.map(|e| Value::from(e.transversal)).unwrap_or(Value::Null));
-                m.insert("atom_magnitude".into(), first.map(|e| num(atom_norm(&e.atoms))).unwrap_or(Value::Null));
-                m.insert("event_time".into(), first.map(|e| num(e.t)).unwrap_or(Value::Null));
+                m.insert(
+                    "guard_slope".into(),
+                    first
+                        .map(|e| num(e.guard_slope.abs()))
+                        .unwrap_or(Value::Null),
+                );
+                m.insert(
+                    "transversal".into(),
+                    first
+                        .map(|e| Value::from(e.transversal))
+                        .unwrap_or(Value::Null),
+                );
+                m.insert(
+                    "atom_magnitude".into(),
+                    first
+                        .map(|e| num(atom_norm(&e.atoms)))
+                        .unwrap_or(Value::Null),
+                );
+                m.insert(
+                    "event_time".into(),
+                    first.map(|e| num(e.t)).unwrap_or(Value::Null),
+                );
                 m.insert("run".into(), grad_json(info, sol, &s.wrt, "forward"));
                 Value::Object(m)
             })
@@ -134,13 +152,20 @@ where
         m.insert("param".into(), Value::from(pname.clone()));
         m.insert(
             "observable".into(),
-            info.observables.get(obs).map(|o| Value::from(o.clone())).unwrap_or(Value::Null),
+            info.observables
+                .get(obs)
+                .map(|o| Value::from(o.clone()))
+                .unwrap_or(Value::Null),
         );
         m.insert("rows".into(), Value::Array(rows));
         return Ok(json_text(&Value::Object(m)));
     }
 
-    let obs_name = info.observables.get(obs).cloned().unwrap_or_else(|| "-".into());
+    let obs_name = info
+        .observables
+        .get(obs)
+        .cloned()
+        .unwrap_or_else(|| "-".into());
     let mut out = format!(
         "model {} ({file}): sweep of {pname} over {} values; first event of each run, atoms of `{obs_name}`\n\n",
         info.name,
@@ -215,8 +240,20 @@ mod tests {
         assert_relative_eq!(o.values[9], -5.0);
         assert_relative_eq!(o.values[1], -1.0);
         assert_eq!(parse_over(&names, "a=1:2:1").expect("ok").values, vec![1.0]);
-        for bad in ["v0", "v0=1:2", "v0=1:2:x", "v0=1:2:0", "q=1:2:3", "v0=a:2:3", "v0=1:2:3:4"] {
-            assert_eq!(parse_over(&names, bad).err().map(|e| e.status()), Some(2), "{bad}");
+        for bad in [
+            "v0",
+            "v0=1:2",
+            "v0=1:2:x",
+            "v0=1:2:0",
+            "q=1:2:3",
+            "v0=a:2:3",
+            "v0=1:2:3:4",
+        ] {
+            assert_eq!(
+                parse_over(&names, bad).err().map(|e| e.status()),
+                Some(2),
+                "{bad}"
+            );
         }
     }
 
@@ -228,8 +265,17 @@ mod tests {
             &Ball::new(),
             "ball.hyb",
             &args(&[
-                "--over", "v0=-0.5:-5:10", "--set", "h0=1", "--observable", "height", "--json", "--rtol",
-                "1e-10", "--atol", "1e-12",
+                "--over",
+                "v0=-0.5:-5:10",
+                "--set",
+                "h0=1",
+                "--observable",
+                "height",
+                "--json",
+                "--rtol",
+                "1e-10",
+                "--atol",
+                "1e-12",
             ]),
         )
         .expect("runs");
@@ -239,19 +285,39 @@ mod tests {
         for r in rows {
             let v0 = r["value"].as_f64().expect("v0");
             let speed = (v0 * v0 + 2.0 * 9.81).sqrt();
-            assert_relative_eq!(r["guard_slope"].as_f64().expect("n"), speed, max_relative = 1e-8);
-            assert_relative_eq!(r["event_time"].as_f64().expect("n"), (v0 + speed) / 9.81, max_relative = 1e-8);
+            assert_relative_eq!(
+                r["guard_slope"].as_f64().expect("n"),
+                speed,
+                max_relative = 1e-8
+            );
+            assert_relative_eq!(
+                r["event_time"].as_f64().expect("n"),
+                (v0 + speed) / 9.81,
+                max_relative = 1e-8
+            );
             assert_eq!(r["transversal"], true);
             assert!(r["atom_magnitude"].as_f64().expect("n") < 1e-12);
         }
-        assert_relative_eq!(rows[0]["guard_slope"].as_f64().expect("n"), 4.457577817604534, max_relative = 1e-9);
-        assert_relative_eq!(rows[9]["event_time"].as_f64().expect("n"), 0.17123551038388318, max_relative = 1e-9);
+        assert_relative_eq!(
+            rows[0]["guard_slope"].as_f64().expect("n"),
+            4.457577817604534,
+            max_relative = 1e-9
+        );
+        assert_relative_eq!(
+            rows[9]["event_time"].as_f64().expect("n"),
+            0.17123551038388318,
+            max_relative = 1e-9
+        );
     }
 
     #[test]
     fn text_table() {
         let out = run(&Ball::new(), "ball.hyb", &args(&["--over", "e=0.5:0.9:3"])).expect("runs");
         assert!(out.contains("guard slope |∇g·f|"), "{out}");
-        assert_eq!(out.lines().filter(|l| l.contains("True")).count(), 3, "{out}");
+        assert_eq!(
+            out.lines().filter(|l| l.contains("True")).count(),
+            3,
+            "{out}"
+        );
     }
 }

@@ -49,7 +49,9 @@ pub struct WorkprecArgs {
 }
 
 /// The tolerances of the diagram.
-pub const TOLERANCES: [f64; 10] = [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12];
+pub const TOLERANCES: [f64; 10] = [
+    1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12,
+];
 
 /// One row: tolerance, and for MV-AD and FD the wall time, C and its error, dC/dθ and its error.
 #[derive(Clone, Debug)]
@@ -84,7 +86,11 @@ fn timed<T>(mut f: impl FnMut() -> Result<T, SolveError>) -> Result<(f64, T), So
 
 /// The error measure of a gradient: max_i |a_i − r_i| / max_i |r_i|.
 fn grad_error(a: &[f64], r: &[f64]) -> f64 {
-    let diff = a.iter().zip(r).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    let diff = a
+        .iter()
+        .zip(r)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
     let scale = r.iter().map(|y| y.abs()).fold(0.0, f64::max);
     if scale > 0.0 {
         diff / scale
@@ -113,7 +119,9 @@ where
     }
     if let Some(h) = args.step {
         if !(h.is_finite() && h > 0.0 && h < 1.0) {
-            return Err(CliError::Input(format!("error: --step must be in (0, 1), got {h}")));
+            return Err(CliError::Input(format!(
+                "error: --step must be in (0, 1), got {h}"
+            )));
         }
     }
     if !(args.atol_ratio.is_finite() && args.atol_ratio > 0.0) {
@@ -129,13 +137,19 @@ where
     let mut ref_grad: Vec<Option<f64>> = vec![None; info.params.len()];
     for item in &args.reference {
         let (name, value) = item.split_once('=').ok_or_else(|| {
-            CliError::Input(format!("error: --reference expects NAME=VALUE, got `{item}`"))
+            CliError::Input(format!(
+                "error: --reference expects NAME=VALUE, got `{item}`"
+            ))
         })?;
         let value = parse_number(value, &format!("error: --reference {}", name.trim()))?;
         match name.trim() {
             "C" | "cost" => ref_cost = Some(value),
             other => {
-                let k = param_index(&info.params, other, "--reference (use C=VALUE for the cost)")?;
+                let k = param_index(
+                    &info.params,
+                    other,
+                    "--reference (use C=VALUE for the cost)",
+                )?;
                 ref_grad[k] = Some(value);
             }
         }
@@ -153,10 +167,17 @@ where
         for &k in wrt {
             ref_grad[k].get_or_insert(sol.gradient[k]);
         }
-        source = if args.reference.is_empty() { "MV-AD at rtol 1e-13" } else { "given, the rest MV-AD at rtol 1e-13" };
+        source = if args.reference.is_empty() {
+            "MV-AD at rtol 1e-13"
+        } else {
+            "given, the rest MV-AD at rtol 1e-13"
+        };
     }
     let ref_cost = ref_cost.unwrap_or(f64::NAN);
-    let ref_g: Vec<f64> = wrt.iter().map(|&k| ref_grad[k].unwrap_or(f64::NAN)).collect();
+    let ref_g: Vec<f64> = wrt
+        .iter()
+        .map(|&k| ref_grad[k].unwrap_or(f64::NAN))
+        .collect();
 
     let progress = Progress::new(TOLERANCES.len(), "workprec");
     let mut rows = Vec::new();
@@ -170,7 +191,12 @@ where
         let mv = mvad_point(model, &s.params, &o, wrt, ref_cost, &ref_g).map_err(solve_err)?;
         let step = args.step.unwrap_or_else(|| rtol.cbrt());
         let fd = fd_point(model, &s.params, &o, wrt, step, ref_cost, &ref_g).map_err(solve_err)?;
-        rows.push(Row { rtol, atol, mvad: mv, fd });
+        rows.push(Row {
+            rtol,
+            atol,
+            mvad: mv,
+            fd,
+        });
         progress.inc();
     }
     progress.finish();
@@ -185,7 +211,9 @@ where
                 "relative error of C".to_string(),
                 vec![
                     curve("MV-AD", &|r| (r.mvad.seconds, r.mvad.cost_err)),
-                    curve("central FD (primal run)", &|r| (r.fd.seconds, r.fd.cost_err)),
+                    curve("central FD (primal run)", &|r| {
+                        (r.fd.seconds, r.fd.cost_err)
+                    }),
                 ],
             ),
             (
@@ -196,7 +224,11 @@ where
                 ],
             ),
         ];
-        plot_workprec(path, &format!("{}: error against wall time", info.name), &panels)?;
+        plot_workprec(
+            path,
+            &format!("{}: error against wall time", info.name),
+            &panels,
+        )?;
     }
 
     let names: Vec<String> = wrt.iter().map(|&k| info.params[k].clone()).collect();
@@ -251,7 +283,14 @@ where
         ref_g.iter().map(|&v| g(v, 15)).collect::<Vec<_>>().join(", ")
     );
     let mut t = Table::new(&[
-        "rtol", "MV-AD time", "MV-AD err C", "MV-AD err dC", "FD time", "FD err C", "FD err dC", "FD step",
+        "rtol",
+        "MV-AD time",
+        "MV-AD err C",
+        "MV-AD err dC",
+        "FD time",
+        "FD err C",
+        "FD err dC",
+        "FD step",
     ]);
     for r in &rows {
         t.row(vec![
@@ -358,7 +397,15 @@ mod tests {
         let out = run(
             &Ball::new(),
             "ball.hyb",
-            &args(&["--json", "--wrt", "e", "--reference", "C=1.8905137123173506", "--reference", "e=2.8314408141470055"]),
+            &args(&[
+                "--json",
+                "--wrt",
+                "e",
+                "--reference",
+                "C=1.8905137123173506",
+                "--reference",
+                "e=2.8314408141470055",
+            ]),
         )
         .expect("runs");
         let v: Value = serde_json::from_str(&out).expect("json");
@@ -371,7 +418,10 @@ mod tests {
         assert!(err(9, "mvad", "cost_error") < 1e-8, "{out}");
         assert!(err(9, "mvad", "gradient_error") < err(0, "mvad", "gradient_error").max(1e-14));
         // MV-AD beats FD at the same tolerance from 1e-6 on.
-        assert!(err(5, "mvad", "gradient_error") < err(5, "fd", "gradient_error"), "{out}");
+        assert!(
+            err(5, "mvad", "gradient_error") < err(5, "fd", "gradient_error"),
+            "{out}"
+        );
         assert!(rows[0]["mvad"]["wall_seconds"].as_f64().expect("t") > 0.0);
     }
 
@@ -379,8 +429,17 @@ mod tests {
     fn text_and_bad_references() {
         let out = run(&Ball::new(), "ball.hyb", &args(&["--wrt", "e"])).expect("runs");
         assert!(out.contains("MV-AD at rtol 1e-13"), "{out}");
-        assert_eq!(out.lines().filter(|l| l.contains(" s ")).count(), TOLERANCES.len(), "{out}");
-        for bad in [&["--reference", "x=1"][..], &["--reference", "C"], &["--reference", "C=q"], &["--step", "2"]] {
+        assert_eq!(
+            out.lines().filter(|l| l.contains(" s ")).count(),
+            TOLERANCES.len(),
+            "{out}"
+        );
+        for bad in [
+            &["--reference", "x=1"][..],
+            &["--reference", "C"],
+            &["--reference", "C=q"],
+            &["--step", "2"],
+        ] {
             let err = run(&Ball::new(), "ball.hyb", &args(bad)).err();
             assert_eq!(err.map(|e| e.status()), Some(2), "{bad:?}");
         }
