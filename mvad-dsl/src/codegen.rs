@@ -1018,7 +1018,8 @@ model Sink {
             );
         }
         let which = std::env::var("MVAD_DUMP_MODEL").unwrap_or_default();
-        let kernels = crate::compile(if which == "sink" { &sink } else { &ball }).expect("compiles");
+        let kernels =
+            crate::compile(if which == "sink" { &sink } else { &ball }).expect("compiles");
         let code = generate(&kernels).to_string();
         if let Ok(path) = std::env::var("MVAD_DUMP_CODEGEN") {
             let _ = std::fs::write(path, code);

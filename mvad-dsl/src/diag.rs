@@ -271,32 +271,37 @@ fn token_len_at(src: &str, pos: usize) -> usize {
 
 /// Renders `diags` for a terminal: for each, the line `FILE:LINE:COL: error: MESSAGE`
 /// (1-based line and column of the span's start), the offending source line quoted with
-/// `^` carets under the span, each label's line with `-` under its span and the note, and
+/// `^` carets under the span and each label's line with `-` under its span and the note
+/// (all in source order), and
 /// `= help: ...` if there is a hint. Diagnostics are separated by a blank line.
 pub fn render(file_name: &str, src: &str, diags: &[Diagnostic]) -> String {
-    let starts = crate::span::line_starts(src);
+    let file = crate::span::SourceFile::new(file_name, src);
     let mut out = String::new();
     for (k, d) in diags.iter().enumerate() {
         if k > 0 {
             out.push('\n');
         }
-        let (line, col) = crate::span::line_col(src, d.span.start);
+        let (line, col) = file.line_col(d.span.start);
         out.push_str(&format!("{file_name}:{line}:{col}: error: {}\n", d.message));
-        // The primary snippet first, then each label in order.
         let mut snippets: Vec<(Span, char, Option<&str>)> = vec![(d.span, '^', None)];
         snippets.extend(d.labels.iter().map(|(s, n)| (*s, '-', Some(n.as_str()))));
+        // In source order, as rustc shows them (the sort is stable: the primary span
+        // stays first among equals).
+        snippets.sort_by_key(|(s, _, _)| s.start);
         let width = snippets
             .iter()
-            .map(|(s, _, _)| crate::span::line_col(src, s.start).0.to_string().len())
+            .map(|(s, _, _)| file.line_col(s.start).0.to_string().len())
             .max()
             .unwrap_or(1);
         let gutter = " ".repeat(width);
         out.push_str(&format!("{gutter} |\n"));
-        let mut previous_line = 0;
+        // The line shown last, and the window of its characters that was shown.
+        let mut shown: Option<(usize, Window)> = None;
         for (span, mark, note) in snippets {
-            let (l, c) = crate::span::line_col(src, span.start);
+            let (l, c) = file.line_col(span.start);
             // Control characters would garble the terminal: show them as U+FFFD.
-            let text: String = line_text(src, &starts, l)
+            let text: Vec<char> = file
+                .line_text(l)
                 .chars()
                 .map(|ch| {
                     if ch.is_control() && ch != '\t' {
@@ -306,22 +311,22 @@ pub fn render(file_name: &str, src: &str, diags: &[Diagnostic]) -> String {
                     }
                 })
                 .collect();
-            if l != previous_line {
-                out.push_str(&format!("{l:>width$} | {text}\n"));
-                previous_line = l;
-            }
-            // Prefix up to the column (tabs kept so carets align), then the marks.
-            let prefix: String = text
-                .chars()
-                .take(c - 1)
-                .map(|ch| if ch == '\t' { '\t' } else { ' ' })
-                .collect();
-            let (end_line, end_col) = crate::span::line_col(src, span.end);
-            let len = if end_line == l {
-                end_col.saturating_sub(c)
-            } else {
-                text.chars().count().saturating_sub(c - 1)
+            let window = match shown {
+                Some((sl, w)) if sl == l => w,
+                _ => {
+                    let w = Window::around(text.len(), c - 1);
+                    out.push_str(&format!("{l:>width$} | {}\n", w.show(&text)));
+                    shown = Some((l, w));
+                    w
+                }
             };
+            let (end_line, end_col) = file.line_col(span.end);
+            let end = if end_line == l {
+                end_col - 1
+            } else {
+                text.len()
+            };
+            let (prefix, len) = window.marks(&text, c - 1, end);
             let marks = mark.to_string().repeat(len.max(1));
             match note {
                 Some(n) => out.push_str(&format!("{gutter} | {prefix}{marks} {n}\n")),
@@ -335,12 +340,64 @@ pub fn render(file_name: &str, src: &str, diags: &[Diagnostic]) -> String {
     out
 }
 
-fn line_text<'a>(src: &'a str, starts: &[usize], line: usize) -> &'a str {
-    let Some(&start) = starts.get(line - 1) else {
-        return "";
-    };
-    let end = starts.get(line).map_or(src.len(), |&e| e - 1);
-    src[start..end].trim_end_matches('\r')
+/// The part of a long source line that is quoted: characters `start..end`, with `...`
+/// marking what was cut on either side.
+#[derive(Clone, Copy)]
+struct Window {
+    start: usize,
+    end: usize,
+    len: usize,
+}
+
+impl Window {
+    /// Lines up to this many characters are quoted whole.
+    const MAX: usize = 120;
+
+    /// A window of a line of `len` characters that shows column `col` (0-based).
+    fn around(len: usize, col: usize) -> Window {
+        if len <= Self::MAX {
+            return Window {
+                start: 0,
+                end: len,
+                len,
+            };
+        }
+        let start = col.saturating_sub(Self::MAX / 2).min(len - Self::MAX);
+        Window {
+            start,
+            end: start + Self::MAX,
+            len,
+        }
+    }
+
+    fn show(self, text: &[char]) -> String {
+        let mut s = String::new();
+        if self.start > 0 {
+            s.push_str("...");
+        }
+        s.extend(&text[self.start..self.end]);
+        if self.end < self.len {
+            s.push_str("...");
+        }
+        s
+    }
+
+    /// The blank prefix (tabs kept so marks align) up to column `from`, and the number of
+    /// marks for columns `from..to`, both clipped to the window.
+    fn marks(self, text: &[char], from: usize, to: usize) -> (String, usize) {
+        let from = from.clamp(self.start, self.end);
+        let to = to.clamp(from, self.end);
+        let mut prefix = String::new();
+        if self.start > 0 {
+            prefix.push_str("   ");
+        }
+        prefix.extend(
+            text[self.start..from]
+                .iter()
+                .map(|&ch| if ch == '\t' { '\t' } else { ' ' }),
+        );
+        (prefix, to - from)
+    }
 }
 
 /// Converts `d` into a `syn::Error` spanning the user's tokens that produced `d.span`

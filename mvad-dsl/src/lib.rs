@@ -283,7 +283,7 @@ mod tests {
         let text = diag::render("m.hyb", src, &front(src).unwrap_err());
         assert_eq!(
             text,
-            "m.hyb:3:9: error: duplicate declaration of `a`\n  |\n3 |   param a = 2;\n  |         ^\n2 |   param a = 1;\n  |         - first declared here\n"
+            "m.hyb:3:9: error: duplicate declaration of `a`\n  |\n2 |   param a = 1;\n  |         - first declared here\n3 |   param a = 2;\n  |         ^\n"
         );
     }
 
@@ -314,6 +314,25 @@ mod tests {
             .join()
             .expect("no stack overflow");
         assert_eq!(results, vec![Ok(()); 6]);
+    }
+
+    #[test]
+    fn render_clips_long_lines_around_the_error() {
+        let pad = "+ x ".repeat(80);
+        let src = format!("model M {{ state x = 0; flow {{ der(x) = x {pad}+ vv {pad}; }} }}");
+        let text = diag::render("m.hyb", &src, &front(&src).unwrap_err());
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[0].starts_with("m.hyb:1:"), "{text}");
+        let quoted = lines[2].strip_prefix("1 | ").expect("quoted line");
+        let marks = lines[3].strip_prefix("  | ").expect("mark line");
+        assert!(
+            quoted.starts_with("...") && quoted.ends_with("..."),
+            "{text}"
+        );
+        assert!(quoted.chars().count() <= 126, "{text}");
+        let caret = marks.find('^').expect("caret");
+        assert_eq!(&quoted[caret..caret + 2], "vv", "{text}");
+        assert_eq!(marks.trim(), "^^");
     }
 
     proptest! {

@@ -3,7 +3,7 @@
 //! Names resolve in the order state, param, const, observable; consts are folded to
 //! numbers and observables used inside other expressions are inlined. Expressions of a
 //! flow or of the running cost ℓ are lowered *frozen*: each `abs`, `min`, `max`, `sign`
-//! and `if` becomes a [`Node::Switch`](crate::ir::Node::Switch) on bit j of the switch
+//! and `if` becomes a [`Node::Switch`] on bit j of the switch
 //! word, with its switching function σ_j recorded (lowered pointwise, deduplicated by
 //! hash-consing):
 //!
@@ -17,8 +17,9 @@
 //! | if L <(=) R then A else B | L − R | B | A |
 //!
 //! Everywhere else (guards, resets, observables, x₀, horizon, event and final costs) the
-//! same functions are lowered pointwise ([`Node::Select`](crate::ir::Node::Select) and
-//! `abs`/`sign` calls), with the derivative of the side actually taken.
+//! same functions are lowered pointwise ([`Node::Select`] and
+//! `abs`/`sign` calls), with the derivative of the side actually taken. A kink whose σ
+//! is constant never switches and is lowered pointwise wherever it appears.
 
 use std::collections::HashMap;
 
@@ -654,7 +655,10 @@ mod tests {
                flow { der(x) = (if c >= 1 then 5 else 7) + sign(c - 1) + max(c, 1) + abs(0 - c); } }",
         );
         assert!(p.switches.is_empty());
-        assert_eq!(p.arena.as_const(p.modes[0].flow[0]), Some(5.0 + 0.0 + 1.0 + 1.0));
+        assert_eq!(
+            p.arena.as_const(p.modes[0].flow[0]),
+            Some(5.0 + 0.0 + 1.0 + 1.0)
+        );
     }
 
     #[test]

@@ -954,4 +954,145 @@ model Thermostat {
         );
         parse(&src).expect("comment parens are not nesting");
     }
+
+    /// A random expression tree (spans are irrelevant here).
+    fn arb_expr() -> impl proptest::strategy::Strategy<Value = Expr> {
+        use proptest::prelude::*;
+        let e = |kind| Expr {
+            kind,
+            span: Span::default(),
+        };
+        let name = |n: &str| Ident {
+            name: n.to_string(),
+            span: Span::default(),
+        };
+        let leaf = prop_oneof![
+            prop::sample::select(vec![0.5, 2.0, 3.0, 1e-7, 10.0])
+                .prop_map(move |v| e(ExprKind::Number(v))),
+            prop::sample::select(vec!["a", "b", "x"]).prop_map(move |n| e(ExprKind::Name(name(n)))),
+            Just(e(ExprKind::Time)),
+        ];
+        leaf.prop_recursive(6, 48, 3, move |inner| {
+            let bin = prop::sample::select(vec![
+                BinOp::Add,
+                BinOp::Sub,
+                BinOp::Mul,
+                BinOp::Div,
+                BinOp::Pow,
+            ]);
+            let cmp = prop::sample::select(vec![CmpOp::Lt, CmpOp::Le, CmpOp::Gt, CmpOp::Ge]);
+            prop_oneof![
+                inner
+                    .clone()
+                    .prop_map(move |x| e(ExprKind::Neg(Box::new(x)))),
+                (bin, inner.clone(), inner.clone()).prop_map(move |(op, l, r)| e(
+                    ExprKind::Binary {
+                        op,
+                        op_span: Span::default(),
+                        lhs: Box::new(l),
+                        rhs: Box::new(r),
+                    }
+                )),
+                inner.clone().prop_map(move |x| e(ExprKind::Call {
+                    func: name("sin"),
+                    args: vec![x]
+                })),
+                (inner.clone(), inner.clone()).prop_map(move |(x, y)| e(ExprKind::Call {
+                    func: name("max"),
+                    args: vec![x, y],
+                })),
+                (cmp, inner.clone(), inner.clone(), inner.clone(), inner).prop_map(
+                    move |(op, l, r, a, b)| e(ExprKind::If {
+                        cond: Box::new(ast::Condition::Compare(Box::new(ast::Comparison {
+                            lhs: l,
+                            op,
+                            op_span: Span::default(),
+                            rhs: r,
+                            span: Span::default(),
+                        }))),
+                        then: Box::new(a),
+                        els: Box::new(b),
+                    })
+                ),
+            ]
+        })
+    }
+
+    /// Binding strength of the expression's top node (atoms bind tightest, `if` loosest).
+    fn strength(e: &Expr) -> u8 {
+        match &e.kind {
+            ExprKind::If { .. } => 0,
+            ExprKind::Binary {
+                op: BinOp::Add | BinOp::Sub,
+                ..
+            } => 1,
+            ExprKind::Binary {
+                op: BinOp::Mul | BinOp::Div,
+                ..
+            } => 2,
+            ExprKind::Neg(_) => 3,
+            ExprKind::Binary { op: BinOp::Pow, .. } => 4,
+            _ => 5,
+        }
+    }
+
+    /// Prints `e` with as few parentheses as the spec's precedence allows
+    /// (`full`: parenthesise every operator node instead).
+    fn print(e: &Expr, full: bool) -> String {
+        let wrap = |x: &Expr, need: bool| {
+            let s = print(x, full);
+            if need || (full && strength(x) < 5) {
+                format!("({s})")
+            } else {
+                s
+            }
+        };
+        match &e.kind {
+            ExprKind::Number(v) => format!("{v:?}"),
+            ExprKind::Name(id) => id.name.clone(),
+            ExprKind::Time => "t".into(),
+            ExprKind::Neg(x) => format!("-{}", wrap(x, strength(x) < 3)),
+            ExprKind::Binary { op, lhs, rhs, .. } => {
+                let p = strength(e);
+                let (l, r) = if *op == BinOp::Pow {
+                    (strength(lhs) <= p, strength(rhs) < p)
+                } else {
+                    (strength(lhs) < p, strength(rhs) <= p)
+                };
+                format!("{} {} {}", wrap(lhs, l), op.as_str(), wrap(rhs, r))
+            }
+            ExprKind::Call { func, args } => {
+                let a: Vec<String> = args.iter().map(|x| print(x, full)).collect();
+                format!("{}({})", func.name, a.join(", "))
+            }
+            ExprKind::If { cond, then, els } => {
+                let c = cond.comparison().expect("generated conditions compare");
+                format!(
+                    "if {} {} {} then {} else {}",
+                    print(&c.lhs, full),
+                    c.op.as_str(),
+                    print(&c.rhs, full),
+                    print(then, full),
+                    print(els, full)
+                )
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+
+        /// Printing a tree with minimal or with full parentheses and parsing it back gives
+        /// the same tree: the precedence pass implements the spec's table.
+        #[test]
+        fn print_parse_round_trip(e in arb_expr()) {
+            let want = sexpr(&e);
+            for full in [false, true] {
+                let text = print(&e, full);
+                let got = rhs_of(&model_with_rhs(&text))
+                    .map_err(|d| proptest::test_runner::TestCaseError::fail(format!("{text}: {d:?}")))?;
+                proptest::prop_assert_eq!(sexpr(&got), want.clone(), "{}", text);
+            }
+        }
+    }
 }

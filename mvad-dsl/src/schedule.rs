@@ -365,3 +365,37 @@ pub fn kernels(program: &Program) -> ModelKernels {
         arena: ar,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// A 40-state, 20-param chain: scheduling stays fast and the Jacobian sparse.
+    #[test]
+    fn large_model_schedules_quickly() {
+        let (n, p) = (40, 20);
+        let mut src = String::from("model Big {");
+        for j in 0..p {
+            src.push_str(&format!(" param k{j} = {}.5;", j + 1));
+        }
+        for i in 0..n {
+            src.push_str(&format!(" state x{i} = k{};", i % p));
+        }
+        src.push_str(" flow {");
+        for i in 0..n {
+            let prev = (i + n - 1) % n;
+            src.push_str(&format!(
+                " der(x{i}) = -k{} * x{i} + sin(x{prev}) * k{} + abs(x{i} - x{prev});",
+                i % p,
+                (i + 1) % p
+            ));
+        }
+        src.push_str(" } event hit when x0 <= 0 { x0 = -x0; } cost = integral(x1^2); horizon 1; }");
+        let start = std::time::Instant::now();
+        let k = crate::compile(&src).expect("compiles");
+        let dt = start.elapsed().as_secs_f64();
+        assert_eq!(k.modes[0].sparsity.len(), 2 * n);
+        assert_eq!(k.switches.len(), n);
+        let code = crate::codegen::generate(&k).to_string();
+        assert!(!code.is_empty());
+        assert!(dt < 5.0, "scheduling took {dt} s");
+    }
+}

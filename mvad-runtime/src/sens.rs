@@ -193,9 +193,9 @@ mod tests {
         assert_relative_eq!(tot[(1, 0)], e * g * dtk_dh0, max_relative = 1e-14);
     }
 
-    /// ẋ = |x − θ|... as a switch: σ = x − c, flow f = −1 for σ > 0, f = −2 below; start x0,
-    /// θ = (x0, c). Crossing at t* = (x0 − c); after it x(t) = c − 2 (t − t*), so
-    /// ∂x/∂x0 = 2·(−1)·(−1)… computed: x = c − 2(t − x0 + c) ⇒ ∂x/∂x0 = 2, ∂x/∂c = −1.
+    /// A kink: σ = x − c, flow f = −1 for σ > 0 and f = −2 below; θ = (x0, c), x(0) = x0.
+    /// The crossing is at t* = x0 − c (t*' = (1, −1)); after it x(t) = c − 2 (t − t*)
+    /// = 2 x0 − c − 2t, so ∂x/∂x0 = 2 and ∂x/∂c = −1.
     #[test]
     fn switch_saltation_matches_closed_form() {
         let s_minus = nalgebra::Matrix1x2::new(1.0, 0.0); // x = x0 − t before: ∂/∂x0 = 1

@@ -622,6 +622,16 @@ where
         model.rhs(self.mode, self.sw, t, &self.y.x, p, &mut self.f_minus);
         self.nonfinite_x(t, &self.f_minus, || "flow".into())?;
         let gt = model.guard_grad(k, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        if !(gt.is_finite()
+            && self.gx.iter().all(|v| v.is_finite())
+            && self.gp.iter().all(|v| v.is_finite())
+            && model.guard(k, t, &self.y.x, p).is_finite())
+        {
+            return Err(SolveError::NonFinite {
+                t,
+                what: format!("guard of event `{}`", ev.name),
+            });
+        }
         let grazing = sens::is_grazing(&self.gx, &self.f_minus, gt, self.opts.grazing_tol);
         let (slope, denom) = if sens {
             sens::event_time_sensitivity(

@@ -56,6 +56,7 @@ fn allocations_do_not_grow_with_steps() {
         };
         let (a_loose, s_loose, e_loose) = count(&loose);
         let (a_tight, s_tight, e_tight) = count(&tight);
+        eprintln!("{method:?}: {a_loose} allocations");
         assert_eq!(e_loose, e_tight);
         assert!(s_tight > s_loose, "{s_tight} vs {s_loose} steps");
         assert_eq!(

@@ -820,7 +820,11 @@ fn auto_switches_to_rosenbrock_on_the_stiff_lag() {
     itsec.restart(0.0, &y0, 0, 0);
     while itsec.t() < t_end {
         itsec.step(t_end).unwrap();
-        assert!(itsec.stats().steps < 3000, "auto did not switch: {:?}", itsec.stats());
+        assert!(
+            itsec.stats().steps < 3000,
+            "auto did not switch: {:?}",
+            itsec.stats()
+        );
     }
     assert_eq!(itsec.active_method(), Method::Rosenbrock);
     while it.t() < t_end {
@@ -859,7 +863,7 @@ fn auto_switches_to_rosenbrock_on_the_stiff_lag() {
     for (i, si) in s.iter().enumerate() {
         for (j, sij) in si.iter().enumerate() {
             assert_relative_eq!(y.s[(i, j)], *sij, max_relative = 1e-6);
-            assert_relative_eq!(itsec.y().s[(i, j)], *sij, max_relative = 1e-6);
+            assert_relative_eq!(itsec.y().s[(i, j)], *sij, max_relative = 2e-7);
         }
     }
 }
@@ -979,12 +983,6 @@ fn print_ball_stats() {
         let mut switched = None;
         while it.t() < 3.0 {
             it.step(3.0).unwrap();
-            if it.stats().steps % 2000 == 0 {
-                println!("  {:?} t={:e} h={:e} {:?}", it.active_method(), it.t(), it.t() - it.t_prev(), it.stats());
-            }
-            if it.stats().steps > 40000 {
-                break;
-            }
             if switched.is_none() && it.active_method() == Method::Rosenbrock {
                 switched = Some((it.stats().steps, it.t()));
             }
@@ -1008,7 +1006,12 @@ fn stepping_allocates_nothing_for_static_sizes() {
     // takes its matrix by value) and nothing else.
     let ball = Ball::new();
     let p = ball.default_params();
-    for method in [Method::Tsit5, Method::Verner9, Method::Rosenbrock, Method::Auto] {
+    for method in [
+        Method::Tsit5,
+        Method::Verner9,
+        Method::Rosenbrock,
+        Method::Auto,
+    ] {
         let o = opts(method, 1e-10, 1e-10);
         let mut it = Integrator::new(&ball, &p, &o);
         let mut y0 = AugState::zeros(Const::<2>, Const::<4>);
@@ -1039,40 +1042,91 @@ fn stepping_allocates_nothing_for_static_sizes() {
     }
 }
 
+/// ẋ = −a x⁵, θ = (a, x0): x = (x0⁻⁴ + 4at)^(−1/4), ∂x/∂a = −t (x0⁻⁴ + 4at)^(−5/4),
+/// ∂x/∂x0 = x0⁻⁵ (x0⁻⁴ + 4at)^(−5/4). f_x S + f_θ is cubic in x, so the Rosenbrock
+/// method's directional difference for ∂_x(f_x S + f_θ) has a truncation error here.
+fn quintic() -> Closures {
+    Closures::new(
+        1,
+        2,
+        Box::new(|_, _, x, p, f| f[0] = -p[0] * x[0].powi(5)),
+        Box::new(|_, _, x, p, fx| fx[0] = -5.0 * p[0] * x[0].powi(4)),
+        Box::new(|_, _, x, _, fp| {
+            fp[0] = -x[0].powi(5);
+            fp[1] = 0.0;
+        }),
+        zero_ft(),
+        None,
+    )
+}
+
 #[test]
-#[ignore = "experiment"]
-fn experiment_stiff_lag_tolerance() {
-    let m = stiff_lag();
-    for tau in [1e-8, 1e-3, 0.1] {
-        let p = DVector::from_vec(vec![tau, 0.5]);
-        let mut y0 = AugState::zeros(Dyn(2), Dyn(2));
-        y0.x[1] = 1.0;
-        for (method, sec, rtol) in [
-            (Method::Rosenbrock, true, 1e-8),
-            (Method::Rosenbrock, true, 1e-10),
-            (Method::Rosenbrock, false, 1e-10),
-            (Method::Tsit5, true, 1e-10),
-        ] {
-            if method == Method::Tsit5 && tau < 1e-4 {
-                continue;
-            }
-            let mut o = opts(method, rtol, rtol * 1e-2);
-            o.sens_error_control = sec;
-            let mut it = Integrator::new(&m, &p, &o);
-            it.restart(0.0, &y0, 0, 0);
-            while it.t() < 3.0 {
-                it.step(3.0).unwrap();
-            }
-            let (x, s) = stiff_lag_exact(tau, 0.5, 3.0);
-            let y = it.y();
-            println!(
-                "tau {tau:e} {method:?} sec={sec} rtol={rtol:e}: steps {} err x {:.1e} S_tau {:.1e} {:.1e} S_k {:.1e}",
-                it.stats().steps,
-                ((y.x[1] - x[1]) / x[1]).abs(),
-                ((y.s[(0, 0)] - s[0][0]) / s[0][0]).abs(),
-                ((y.s[(1, 0)] - s[1][0]) / s[1][0]).abs(),
-                ((y.s[(0, 1)] - s[0][1]) / s[0][1]).abs()
-            );
+fn nonlinear_sensitivities_all_methods() {
+    let (a, x0, t_end) = (0.7, 1.5, 2.0);
+    let m = quintic();
+    let p = DVector::from_vec(vec![a, x0]);
+    let mut y0 = AugState::zeros(Dyn(1), Dyn(2));
+    y0.x[0] = x0;
+    y0.s[(0, 1)] = 1.0;
+    let base = x0.powi(-4) + 4.0 * a * t_end;
+    let ex = [
+        base.powf(-0.25),
+        -t_end * base.powf(-1.25),
+        x0.powi(-5) * base.powf(-1.25),
+    ];
+    for method in [
+        Method::Tsit5,
+        Method::Verner9,
+        Method::Rosenbrock,
+        Method::Auto,
+    ] {
+        let mut o = opts(method, 1e-11, 1e-13);
+        o.sens_error_control = true;
+        let mut it = Integrator::new(&m, &p, &o);
+        it.restart(0.0, &y0, 0, 0);
+        while it.t() < t_end {
+            it.step(t_end).unwrap();
         }
+        let y = it.y();
+        let got = [y.x[0], y.s[(0, 0)], y.s[(0, 1)]];
+        for i in 0..3 {
+            assert_relative_eq!(got[i], ex[i], max_relative = 1e-9);
+        }
+    }
+}
+
+#[test]
+fn zero_absolute_tolerance_with_an_identically_zero_component() {
+    // x1 ≡ 0 with atol = 0: its error scale is 0, which must not poison the error norm.
+    let m = Closures::new(
+        2,
+        1,
+        Box::new(|_, _, x, p, f| {
+            f[0] = -p[0] * x[0];
+            f[1] = 0.0;
+        }),
+        Box::new(|_, _, _, p, fx| {
+            fx.fill(0.0);
+            fx[0] = -p[0];
+        }),
+        Box::new(|_, _, x, _, fp| {
+            fp[0] = -x[0];
+            fp[1] = 0.0;
+        }),
+        zero_ft(),
+        None,
+    );
+    let p = DVector::from_vec(vec![0.9]);
+    let mut y0 = AugState::zeros(Dyn(2), Dyn(1));
+    y0.x[0] = 1.0;
+    for method in [Method::Tsit5, Method::Verner9, Method::Rosenbrock] {
+        let mut it = Integrator::new(&m, &p, &opts(method, 1e-9, 0.0));
+        it.restart(0.0, &y0, 0, 0);
+        while it.t() < 1.0 {
+            it.step(1.0).unwrap();
+        }
+        assert_relative_eq!(it.y().x[0], (-0.9f64).exp(), max_relative = 1e-8);
+        assert_relative_eq!(it.y().s[(0, 0)], -(-0.9f64).exp(), max_relative = 1e-7);
+        assert_eq!(it.y().x[1], 0.0);
     }
 }

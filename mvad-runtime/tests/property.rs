@@ -15,6 +15,8 @@ use proptest::prelude::*;
 /// ẋ0 = x1, ẋ1 = −k x0 − d x1 + u sin(ω t); event `hit` when x0 ≥ c: x1 ← −r x1 (Up);
 /// C = ∫ (x0² + q x1) dt + Σ_hit x1² + x0(T). θ = (k, d, u, c, r); ω, q, v0, T fixed per case.
 struct Wall {
+    /// Moving wall: guard x0 − c − 0.2 sin(t) and reset x1 ← −r x1 + 0.3 r cos(t) (g_t, R_t ≠ 0).
+    moving: bool,
     omega: f64,
     q: f64,
     v0: f64,
@@ -47,12 +49,19 @@ impl Spec for Wall {
         f[0] = x[1];
         f[1] = -(p[0] * x[0]) - p[1] * x[1] + p[2] * (t * self.omega).sin();
     }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
-        x[0] - p[3]
+    fn guard<S: Sc>(&self, _k: usize, t: S, x: &[S], p: &[S]) -> S {
+        if self.moving {
+            x[0] - p[3] - t.sin() * 0.2
+        } else {
+            x[0] - p[3]
+        }
     }
-    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
+    fn reset<S: Sc>(&self, _k: usize, t: S, x: &[S], p: &[S], xp: &mut [S]) {
         xp[0] = x[0];
         xp[1] = -(p[4] * x[1]);
+        if self.moving {
+            xp[1] = xp[1] + p[4] * t.cos() * 0.3;
+        }
     }
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[0];
@@ -69,13 +78,14 @@ impl Spec for Wall {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, .. ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 32, .. ProptestConfig::default() })]
     #[test]
     fn random_wall_models_match_fd(
         k in 1.0..4.0f64, d in 0.0..0.5f64, u in 0.0..1.0f64, c in 0.2..0.6f64, r in 0.3..0.9f64,
         omega in 0.5..3.0f64, q in -1.0..1.0f64, v0 in 1.5..2.5f64, t_end in 2.0..5.0f64,
+        moving in proptest::bool::ANY,
     ) {
-        let spec = Wall { omega, q, v0, t_end, defaults: [k, d, u, c, r] };
+        let spec = Wall { moving, omega, q, v0, t_end, defaults: [k, d, u, c, r] };
         let m = AdModel::new(spec);
         let p = m.defaults();
         let opts = Options { rtol: 1e-11, atol: 1e-13, ..Options::default() };
@@ -97,6 +107,7 @@ proptest! {
 fn wall_model_has_events() {
     // The property above is not vacuous: the default draw hits the wall.
     let m = AdModel::new(Wall {
+        moving: true,
         omega: 1.0,
         q: 0.5,
         v0: 2.0,

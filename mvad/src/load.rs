@@ -12,12 +12,16 @@
 //! limited by the front end before any recursive pass runs.
 
 use std::fmt;
+use std::io::Read;
 use std::path::Path;
 
 use mvad_dsl::diag::{render, Diagnostic};
 use mvad_dsl::Span;
 
 use crate::interp::InterpretedModel;
+
+/// The largest model file [`load`] reads (16 MiB).
+pub const MAX_FILE_BYTES: u64 = 16 << 20;
 
 /// Why a model could not be loaded; `Display` gives the rendered text.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,10 +77,21 @@ pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
             reason: "is a directory".into(),
         });
     }
-    let bytes = std::fs::read(path).map_err(|e| LoadError::Io {
+    let io = |e: std::io::Error| LoadError::Io {
         path: name.clone(),
         reason: e.to_string(),
-    })?;
+    };
+    // Read at most one byte past the limit, so an endless source (`/dev/zero`) ends.
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes))
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(LoadError::Io {
+            path: name,
+            reason: format!("larger than {} MiB; not a model", MAX_FILE_BYTES >> 20),
+        });
+    }
     load_bytes(&name, &bytes)
 }
 
@@ -258,6 +273,10 @@ mod tests {
                 .starts_with("/nonexistent/model.hyb: error: cannot read file"),
             "{e}"
         );
+        let e = load(Path::new("/dev/zero"))
+            .map(|_| ())
+            .expect_err("endless file");
+        assert!(e.to_string().contains("larger than 16 MiB"), "{e}");
         let e = load(Path::new(env!("CARGO_MANIFEST_DIR")))
             .map(|_| ())
             .expect_err("error");

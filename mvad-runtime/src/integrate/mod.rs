@@ -726,7 +726,8 @@ where
         let mut count = 0usize;
         let mut add = |e: &[f64], y0: &[f64], y1: &[f64]| {
             for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
-                let r = ei / sc(*a, *b);
+                // An exact zero counts as zero even where the scale is 0 (atol = 0, y = 0).
+                let r = if *ei == 0.0 { 0.0 } else { ei / sc(*a, *b) };
                 sum += r * r;
             }
             count += e.len();
@@ -765,7 +766,11 @@ where
         let mut count = 0usize;
         let mut add = |e: &[f64], y0: &[f64]| {
             for (ei, a) in e.iter().zip(y0) {
-                let r = ei / (self.atol + self.rtol * a.abs());
+                let r = if *ei == 0.0 {
+                    0.0
+                } else {
+                    ei / (self.atol + self.rtol * a.abs())
+                };
                 sum += r * r;
             }
             count += e.len();

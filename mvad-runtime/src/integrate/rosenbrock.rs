@@ -31,10 +31,14 @@
 //! K_q = hγ (R_q + ℓ_x K_x), K_{q_θ} = hγ (R_{q_θ} + D K_x + K_Sᵀ ℓ_x).
 //! f_x is the model's symbolic Jacobian; the second-derivative actions B K_x and D K_x (the
 //! model has no second derivatives) are central directional differences of `rhs_sens` /
-//! `running_cost_grad` along K_x at (t₀, x₀, S₀), with relative step ε^(1/3), an O(ε^(2/3))
-//! ≈ 1e-11 relative perturbation of J that leaves the order intact at any practical
-//! tolerance. F_t: ∂f/∂t is the model's `rhs_dt`; the S and q parts of F_t are central
-//! differences in t (only when f depends on t, resp. when there is a running cost).
+//! `running_cost_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
+//! Central differences are exact when f_x S + f_θ is at most quadratic in x, and perturb J by
+//! O(1e-8) relative for cubic terms; the step is far larger than the usual ε^(1/3) because
+//! models with cancellation inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the
+//! rounding of x ± εK_x by 1/ε: with ε^(1/3) the sensitivity of the τ = 1e-8 lag had a 2e-6
+//! error floor, with 1e-4 it is 4e-8. F_t: ∂f/∂t is the model's `rhs_dt`; the S and q parts of
+//! F_t are central differences in t (only when f depends on t, resp. when there is a running
+//! cost), with step ε^(1/3)·max(|t₀|, h).
 //! The S and q_θ orders are verified empirically in the tests.
 
 use super::{combine, AugState, Integrator, Rhs};
@@ -338,7 +342,8 @@ where
         t: f64,
         x: &OVector<f64, N>,
     ) -> f64 {
-        rhs.model.rhs_jac_x(rhs.mode, rhs.sw, t, x, rhs.p, &mut self.jac);
+        rhs.model
+            .rhs_jac_x(rhs.mode, rhs.sw, t, x, rhs.p, &mut self.jac);
         self.jac_rho = self.power_iteration();
         self.jac_rho
     }
@@ -362,8 +367,9 @@ where
         for _ in 0..ITERS {
             self.pw.gemv(1.0, &self.jac, &self.pv, 0.0);
             let g = self.pw.norm();
-            if !(g > 0.0) || !g.is_finite() {
-                return if g.is_finite() { 0.0 } else { f64::INFINITY };
+            // Nilpotent (g = 0) or broken (non-finite) Jacobian: no stiffness evidence.
+            if g.is_nan() || g <= 0.0 || g.is_infinite() {
+                return 0.0;
             }
             log_growth += g.ln();
             self.pv.copy_from(&self.pw);
@@ -450,8 +456,10 @@ pub(super) fn dense_x<N: Dim, P: Dim>(
     }
 }
 
-/// Relative step of the central difference quotients (ε^(1/3)).
-const FD_REL: f64 = 6.055_454_452_393_343e-6;
+/// Relative size of the perturbation of x in the directional differences (see module doc).
+const FD_REL: f64 = 1e-4;
+/// Relative step of the central differences in t (ε^(1/3)).
+const FD_REL_T: f64 = 6.055_454_452_393_343e-6;
 
 /// Computes f_x, ℓ_x and F_t at the step start (t0, y0).
 fn prepare_base<M: HybridModel>(
@@ -474,7 +482,7 @@ fn prepare_base<M: HybridModel>(
     // F_t: exact for x; central differences in t for the S and q parts.
     let dep_t = model.rhs_depends_on_t(mode);
     if (dep_t && rhs.sens) || rhs.has_rc {
-        let dt = FD_REL * t0.abs().max(h).max(f64::MIN_POSITIVE);
+        let dt = FD_REL_T * t0.abs().max(h).max(f64::MIN_POSITIVE);
         rhs.eval(t0 + dt, y0, &mut w.fplus);
         rhs.eval(t0 - dt, y0, &mut w.fminus);
         let s = 0.5 / dt;

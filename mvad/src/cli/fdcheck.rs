@@ -40,12 +40,24 @@ where
     let info = model.info();
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let mut mvad = Vec::new();
-    let mut fd = Vec::new();
+    // A central difference can fail where the model does not (a perturbation that leaves
+    // the parameter's valid range, e.g. a negative time constant): such a row reports
+    // the failure instead of ending the check.
+    let mut fd: Vec<Result<f64, String>> = Vec::new();
     for &k in &s.wrt {
         mvad.push(sol.gradient[k]);
-        fd.push(fd_gradient(model, &s.params, &s.opts, k, args.step).map_err(solve_err)?);
+        match fd_gradient(model, &s.params, &s.opts, k, args.step).map_err(solve_err) {
+            Ok(v) => fd.push(Ok(v)),
+            Err(CliError::Run(msg)) => fd.push(Err(msg)),
+            Err(e) => return Err(e),
+        }
     }
-    let cos = cosine(&mvad, &fd);
+    let (ok_mvad, ok_fd): (Vec<f64>, Vec<f64>) = mvad
+        .iter()
+        .zip(&fd)
+        .filter_map(|(a, b)| b.as_ref().ok().map(|b| (*a, *b)))
+        .unzip();
+    let cos = cosine(&ok_mvad, &ok_fd);
     let times: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
     let rel = |a: f64, b: f64| (a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
 
@@ -54,14 +66,22 @@ where
             .wrt
             .iter()
             .enumerate()
-            .map(|(i, &k)| {
-                serde_json::json!({
+            .map(|(i, &k)| match &fd[i] {
+                Ok(f) => serde_json::json!({
                     "param": info.params[k],
                     "mvad": num(mvad[i]),
-                    "fd": num(fd[i]),
-                    "abs_err": num((mvad[i] - fd[i]).abs()),
-                    "rel_err": num(rel(mvad[i], fd[i])),
-                })
+                    "fd": num(*f),
+                    "abs_err": num((mvad[i] - f).abs()),
+                    "rel_err": num(rel(mvad[i], *f)),
+                }),
+                Err(msg) => serde_json::json!({
+                    "param": info.params[k],
+                    "mvad": num(mvad[i]),
+                    "fd": Value::Null,
+                    "abs_err": Value::Null,
+                    "rel_err": Value::Null,
+                    "fd_error": msg,
+                }),
             })
             .collect();
         let mut m = Map::new();
@@ -86,14 +106,31 @@ where
         g(args.step, 3)
     );
     let mut t = Table::new(&["param", "MV-AD", "FD", "abs err", "rel err"]);
+    let mut failures = String::new();
     for (i, &k) in s.wrt.iter().enumerate() {
-        t.row(vec![
-            info.params[k].clone(),
-            g(mvad[i], 12),
-            g(fd[i], 12),
-            g((mvad[i] - fd[i]).abs(), 3),
-            g(rel(mvad[i], fd[i]), 3),
-        ]);
+        match &fd[i] {
+            Ok(f) => t.row(vec![
+                info.params[k].clone(),
+                g(mvad[i], 12),
+                g(*f, 12),
+                g((mvad[i] - f).abs(), 3),
+                g(rel(mvad[i], *f), 3),
+            ]),
+            Err(msg) => {
+                t.row(vec![
+                    info.params[k].clone(),
+                    g(mvad[i], 12),
+                    "failed".into(),
+                    "-".into(),
+                    "-".into(),
+                ]);
+                failures.push_str(&format!(
+                    "warning: FD for `{}` failed: {}\n",
+                    info.params[k],
+                    msg.trim_start_matches("error: ")
+                ));
+            }
+        }
     }
     out.push_str(&t.render());
     out.push_str(&format!("\ncosine similarity  {}\n", g(cos, 10)));
@@ -110,6 +147,7 @@ where
                 .join("; ")
         }
     ));
+    out.push_str(&failures);
     out.push_str(&diagnostics_text(&sol.diagnostics));
     Ok(out)
 }
@@ -166,6 +204,37 @@ mod tests {
             1.6602322277166624,
             max_relative = 1e-9
         );
+    }
+
+    /// A perturbation that leaves the valid range fails for that row only: with
+    /// a = 1e-7 and h = 1e-6, a − h < 0 and √a is NaN in the perturbed run.
+    #[test]
+    fn a_failed_difference_is_reported_in_its_row() {
+        let src = "model M { param a = 1e-7; param b = 2; state x = 1; \
+                   flow { der(x) = -sqrt(a) * b * x; } cost = integral(x); horizon 1; }";
+        let m = mvad::load::load_str("m.hyb", src).expect("valid model");
+        let out = run(&m, "m.hyb", &args(&["--json"])).expect("the check itself runs");
+        let v: Value = serde_json::from_str(&out).expect("json");
+        assert_eq!(v["rows"][0]["param"], "a");
+        assert!(v["rows"][0]["fd"].is_null(), "{out}");
+        assert!(
+            v["rows"][0]["fd_error"]
+                .as_str()
+                .is_some_and(|e| e.contains("non-finite")),
+            "{out}"
+        );
+        // b's row is unaffected: C = (1 − e^{−k})/k with k = b √a, dC/db = √a dC/dk,
+        // dC/dk = −(e^k − 1 − k)/(k² e^k).
+        let k = 2.0 * 1e-7f64.sqrt();
+        let dcdk = -(k.exp() - 1.0 - k) / (k * k * k.exp());
+        assert_relative_eq!(
+            v["rows"][1]["mvad"].as_f64().expect("n"),
+            1e-7f64.sqrt() * dcdk,
+            max_relative = 1e-6
+        );
+        assert!(v["rows"][1]["rel_err"].as_f64().expect("n") < 1e-5, "{out}");
+        let text = run(&m, "m.hyb", &args(&[])).expect("runs");
+        assert!(text.contains("warning: FD for `a` failed"), "{text}");
     }
 
     #[test]

@@ -78,6 +78,12 @@ where
     }
     if let Some(p) = &args.plot {
         format_of(p)?;
+        if s.wrt.is_empty() {
+            return Err(CliError::Input(
+                "error: --plot needs a parameter to differentiate by, and the model has none"
+                    .into(),
+            ));
+        }
     }
     s.opts.record = true;
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
@@ -256,17 +262,73 @@ where
         .collect()
 }
 
-/// Cumulative trapezoid integral of `v` on `ts`.
-fn cumulative(ts: &[f64], v: &[f64]) -> Vec<f64> {
-    let mut acc = 0.0;
+/// Cumulative integrals F(t) = ∫₀ᵗ f ds at the times `ts` (sorted, from 0) for a
+/// function that is smooth except for jumps at `jumps`: Simpson's rule on every piece
+/// between consecutive points of `ts` ∪ `jumps`, with `left(t)` the value just before t
+/// and `right(t)` the value at and after t. Putting the jumps at breakpoints keeps the
+/// error O(Δt⁴) and smooth in the jump times, so finite differences of F stay accurate
+/// (a rule that straddles a jump has an O(Δt·J) error that moves with the jump).
+fn cumulative_piecewise(
+    ts: &[f64],
+    jumps: &[f64],
+    left: impl Fn(f64) -> f64,
+    right: impl Fn(f64) -> f64,
+) -> Vec<f64> {
+    let mut points: Vec<(f64, bool)> = ts.iter().map(|&t| (t, false)).collect();
+    points.extend(jumps.iter().filter(|t| t.is_finite()).map(|&t| (t, true)));
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut out = Vec::with_capacity(ts.len());
-    for i in 0..ts.len() {
-        if i > 0 {
-            acc += 0.5 * (ts[i] - ts[i - 1]) * (v[i] + v[i - 1]);
+    let mut acc = 0.0;
+    let mut next_grid = 0;
+    let mut prev: Option<f64> = None;
+    for &(t, is_jump) in &points {
+        if let Some(a) = prev {
+            if t > a {
+                let mid = 0.5 * (a + t);
+                let fb = if is_jump || jumps.contains(&t) {
+                    left(t)
+                } else {
+                    right(t)
+                };
+                acc += (t - a) / 6.0 * (right(a) + 4.0 * right(mid) + fb);
+            }
         }
-        out.push(acc);
+        prev = Some(t);
+        if !is_jump && next_grid < ts.len() && t == ts[next_grid] {
+            out.push(acc);
+            next_grid += 1;
+        }
     }
     out
+}
+
+/// ∫₀ᵗ y ds at `ts` from a recorded solution, with its events as breakpoints.
+fn observable_integral<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    sol: &Solution,
+    obs: usize,
+    ts: &[f64],
+) -> Vec<f64>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let nobs = model.info().nobservables();
+    let y_at = |t: f64, x: &[f64]| {
+        let mut y = vec![0.0; nobs];
+        model.observe(t, &xvec(model, x), params, &mut y);
+        y[obs]
+    };
+    let right = |t: f64| match sol.trajectory.as_ref() {
+        Some(traj) => y_at(t, &traj.sample(t).0),
+        None => f64::NAN,
+    };
+    let left = |t: f64| match sol.events.iter().find(|e| e.t == t) {
+        Some(e) => y_at(t, &e.x_before),
+        None => right(t),
+    };
+    let jumps: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
+    cumulative_piecewise(ts, &jumps, left, right)
 }
 
 /// The data of Figure 1 for observable `obs` and parameter `k`.
@@ -290,8 +352,15 @@ where
     let ts: Vec<f64> = (0..n).map(|i| t_end * i as f64 / (n - 1) as f64).collect();
     let y = observable_on(model, params, sol, obs, &ts);
     let dens: Vec<f64> = ts.iter().map(|&t| mu.density(t)[k]).collect();
-    // MV-AD: ∫₀ᵗ density + Σ_{t_k ≤ t} α_k.
-    let mut cum = cumulative(&ts, &dens);
+    // MV-AD: ∫₀ᵗ density + Σ_{t_k ≤ t} α_k (the density is right-continuous; its left
+    // limit at an event comes from the step that ends there).
+    let jumps: Vec<f64> = mu.atoms.iter().map(|a| a.0).collect();
+    let mut cum = cumulative_piecewise(
+        &ts,
+        &jumps,
+        |t| mu.density(t - 1e-9 * t.abs().max(f64::MIN_POSITIVE))[k],
+        |t| mu.density(t)[k],
+    );
     for (tk, a) in &mu.atoms {
         for (c, &t) in cum.iter_mut().zip(&ts) {
             if t >= *tk {
@@ -312,10 +381,7 @@ where
             ..opts.clone()
         };
         let s = solve(model, &p, &o).map_err(solve_err)?;
-        Ok((
-            cumulative(&ts, &observable_on(model, &p, &s, obs, &ts)),
-            p[k],
-        ))
+        Ok((observable_integral(model, &p, &s, obs, &ts), p[k]))
     };
     let (plus, vp) = run_at(h)?;
     let (minus, vm) = run_at(-h)?;
@@ -458,8 +524,13 @@ mod tests {
     }
 
     #[test]
-    fn cumulative_trapezoid() {
-        let ts = [0.0, 1.0, 2.0];
-        assert_eq!(cumulative(&ts, &[0.0, 2.0, 2.0]), vec![0.0, 1.0, 3.0]);
+    fn piecewise_cumulative_integral_with_a_jump() {
+        // f = t on [0, 0.5), t + 1 after: F(t) = t²/2 + max(0, t − 0.5).
+        let ts: Vec<f64> = (0..=4).map(|i| i as f64 * 0.3).collect();
+        let f = |t: f64| t + if t >= 0.5 { 1.0 } else { 0.0 };
+        let out = cumulative_piecewise(&ts, &[0.5], |t| if t == 0.5 { 0.5 } else { f(t) }, f);
+        for (t, v) in ts.iter().zip(&out) {
+            assert_relative_eq!(*v, t * t / 2.0 + (t - 0.5).max(0.0), epsilon = 1e-14);
+        }
     }
 }
