@@ -947,6 +947,18 @@ fn verner_tight_tolerance_decay() {
 #[test]
 #[ignore = "prints work counters for the report"]
 fn print_ball_stats() {
+    println!(
+        "orders tsit5 {:?}",
+        observed_orders(Method::Tsit5, &[10, 20, 40, 80])
+    );
+    println!(
+        "orders rodas5p {:?}",
+        observed_orders(Method::Rosenbrock, &[10, 20, 40, 80])
+    );
+    println!(
+        "orders verner9 {:?}",
+        observed_orders(Method::Verner9, &[4, 6, 8, 12])
+    );
     let ball = Ball::new();
     let p = ball.default_params();
     for method in [Method::Tsit5, Method::Verner9, Method::Rosenbrock] {
@@ -1129,4 +1141,41 @@ fn zero_absolute_tolerance_with_an_identically_zero_component() {
         assert_relative_eq!(it.y().s[(0, 0)], -(-0.9f64).exp(), max_relative = 1e-7);
         assert_eq!(it.y().x[1], 0.0);
     }
+}
+
+#[test]
+fn seeded_step_size_is_used_and_still_controlled() {
+    let ball = Ball::new();
+    let p = ball.default_params();
+    let mut y0 = AugState::zeros(Const::<2>, Const::<4>);
+    ball.initial_state(&p, &mut y0.x);
+    ball.initial_state_jac(&p, &mut y0.s);
+    let o = opts(Method::Tsit5, 1e-10, 1e-10);
+    // The flight is a polynomial Tsit5 integrates exactly: a seed of 0.25 is accepted as is.
+    let mut it = Integrator::new(&ball, &p, &o);
+    it.restart(0.0, &y0, 0, 0);
+    it.set_step_size(0.25);
+    it.step(0.6).unwrap();
+    assert_eq!(it.t(), 0.25);
+    assert_eq!(it.stats().rejected_steps, 0);
+    // For the decay problem a seed of 2 is far too large: rejected, then accurate anyway.
+    let m = decay();
+    let (pd, yd) = decay_start(1.3, 2.0);
+    let mut it = Integrator::new(&m, &pd, &opts(Method::Tsit5, 1e-10, 1e-12));
+    it.restart(0.0, &yd, 0, 0);
+    it.set_step_size(2.0);
+    it.step(3.0).unwrap();
+    assert!(it.stats().rejected_steps >= 1 && it.t() < 2.0);
+    while it.t() < 3.0 {
+        it.step(3.0).unwrap();
+    }
+    assert_relative_eq!(
+        it.y().x[0],
+        decay_exact(1.3, 2.0, 3.0)[0],
+        max_relative = 1e-8
+    );
+    // Garbage restores the heuristic.
+    it.restart(0.0, &yd, 0, 0);
+    it.set_step_size(f64::NAN);
+    assert_eq!(it.next_step_size(), 0.0);
 }

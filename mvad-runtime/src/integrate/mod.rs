@@ -364,6 +364,8 @@ where
     fsal_slot: Option<usize>,
     /// ‖e‖ of the previous accepted step (PI controller memory).
     err_prev: f64,
+    /// err_prev^(β₂), cached.
+    err_prev_pow: f64,
     /// The last attempt was rejected (no step growth on the next accepted one).
     last_rejected: bool,
     /// Hairer's stiffness estimate h·‖k₇ − k₆‖/‖y₇ − y₆‖ of the last Tsit5 attempt.
@@ -397,7 +399,7 @@ where
             Method::Auto => Method::Tsit5,
             m => m,
         };
-        Integrator {
+        let mut it = Integrator {
             rhs: Rhs {
                 model,
                 p,
@@ -430,6 +432,7 @@ where
             k0_valid: false,
             fsal_slot: None,
             err_prev: 1e-4,
+            err_prev_pow: f64::NAN,
             last_rejected: false,
             stiff_ratio: 0.0,
             stiff_count: 0,
@@ -442,7 +445,9 @@ where
                 np,
                 matches!(opts.method, Method::Auto | Method::Rosenbrock),
             ),
-        }
+        };
+        it.reset_controller();
+        it
     }
 
     /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at
@@ -463,7 +468,7 @@ where
         self.rhs.sw = sw;
         self.k0_valid = false;
         self.fsal_slot = None;
-        self.err_prev = 1e-4;
+        self.reset_controller();
         self.last_rejected = false;
         self.dense_method = self.active;
         self.ros.invalidate();
@@ -505,6 +510,14 @@ where
     /// The step size the controller proposes next (0 before the first step after a restart).
     pub fn next_step_size(&self) -> f64 {
         self.h
+    }
+
+    /// Seeds the size of the next step attempt, e.g. with the step size in use before an event
+    /// (call it after [`Integrator::restart`], which otherwise starts from Hairer's heuristic;
+    /// the error control still rejects and shrinks a seed that is too large). A value that is
+    /// not finite and positive restores the heuristic.
+    pub fn set_step_size(&mut self, h: f64) {
+        self.h = if h.is_finite() && h > 0.0 { h } else { 0.0 };
     }
 
     /// Take ONE accepted step, never beyond `t_stop`; lands exactly on `t_stop` when it is
@@ -558,13 +571,14 @@ where
                 let mut fac = if err == 0.0 {
                     10.0
                 } else {
-                    0.9 * err.powf(-0.7 / k) * self.err_prev.powf(0.4 / k)
+                    0.9 * err.powf(-0.7 / k) * self.err_prev_pow
                 };
                 fac = fac.clamp(0.2, 10.0);
                 if self.last_rejected {
                     fac = fac.min(1.0);
                 }
                 self.err_prev = err.max(1e-4);
+                self.err_prev_pow = self.err_prev.powf(0.4 / k);
                 self.last_rejected = false;
                 self.accept(h, landing, t_stop);
                 self.h = h * fac;
@@ -625,6 +639,12 @@ where
             Method::Verner9 => self.verner_attempt(h),
             Method::Rosenbrock => self.rosenbrock_attempt(h),
         }
+    }
+
+    /// Forgets the PI controller's memory (start, restart, method switch).
+    fn reset_controller(&mut self) {
+        self.err_prev = 1e-4;
+        self.err_prev_pow = self.err_prev.powf(0.4 / self.error_order());
     }
 
     /// Order of the error estimate + 1 (the exponent base of the controller).
@@ -696,7 +716,7 @@ where
                     self.stiff_count = 0;
                     self.nonstiff_count = 0;
                     // The FSAL stage is F(t, y) and stays valid for Rodas5P's first stage.
-                    self.err_prev = 1e-4;
+                    self.reset_controller();
                 }
             }
             Method::Rosenbrock => {
@@ -712,7 +732,7 @@ where
                     self.active = Method::Tsit5;
                     self.nonstiff_count = 0;
                     self.stiff_count = 0;
-                    self.err_prev = 1e-4;
+                    self.reset_controller();
                 }
             }
             _ => {}

@@ -162,7 +162,8 @@ where
         // tmp now holds the 6th stage argument (c₆ = 1).
         combine(&mut self.ynew, &self.y, h, &A[6], &self.k[..6], sens);
         self.rhs.eval(t + h, &self.ynew, &mut self.k[6]);
-        super::lincomb(&mut self.yerr, h, &BTILDE, &self.k[..STAGES], sens);
+        // Only the parts under error control are needed.
+        super::lincomb(&mut self.yerr, h, &BTILDE, &self.k[..STAGES], self.sens_err);
         // Hairer's stiffness estimate: both k₆ and k₇ are f at t + h, at y₆ and y₇ = y₁.
         let mut num = 0.0;
         let mut den = 0.0;

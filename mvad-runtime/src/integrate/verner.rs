@@ -933,7 +933,8 @@ where
             self.rhs.eval(t + C[i] * h, &self.tmp, &mut self.k[i]);
         }
         combine(&mut self.ynew, &self.y, h, &B, &self.k[..STAGES], sens);
-        super::lincomb(&mut self.yerr, h, &BTILDE, &self.k[..STAGES], sens);
+        // Only the parts under error control are needed.
+        super::lincomb(&mut self.yerr, h, &BTILDE, &self.k[..STAGES], self.sens_err);
         self.error_norm()
     }
 
