@@ -3,7 +3,7 @@
 //! A run that *finishes* may still carry warnings (grazing, Zeno, simultaneous events) in
 //! `Solution::diagnostics`; a `SolveError` means there is no trustworthy cost or gradient.
 //! [`SolveError::diagnostic`] turns the numerical failures into the spec's diagnostic kinds
-//! (`max_events`, `step_size_underflow`, `nonfinite`) for callers that print both alike.
+//! (`max_events`, `max_steps`, `step_size_underflow`, `nonfinite`) for callers that print both alike.
 
 use crate::integrate::StepError;
 use crate::solution::{Diagnostic, DiagnosticKind};
@@ -52,6 +52,14 @@ pub enum SolveError {
         /// The step size it would need.
         h: f64,
     },
+    /// `Options::max_steps` step attempts were used up (typically an explicit method on a
+    /// stiff model).
+    MaxSteps {
+        /// Time reached.
+        t: f64,
+        /// The limit that was hit.
+        steps: usize,
+    },
     /// More than `Options::max_events` events fired.
     MaxEvents {
         /// Time of the last event.
@@ -85,12 +93,13 @@ pub enum SolveError {
 
 impl SolveError {
     /// The spec's diagnostic for the numerical failures (`nonfinite`, `step_size_underflow`,
-    /// `max_events`); `None` for bad input.
+    /// `max_events`, `max_steps`); `None` for bad input.
     pub fn diagnostic(&self) -> Option<Diagnostic> {
         let (kind, t) = match self {
             SolveError::NonFinite { t, .. } => (DiagnosticKind::Nonfinite, *t),
             SolveError::StepSizeUnderflow { t, .. } => (DiagnosticKind::StepSizeUnderflow, *t),
             SolveError::MaxEvents { t, .. } => (DiagnosticKind::MaxEvents, *t),
+            SolveError::MaxSteps { t, .. } => (DiagnosticKind::MaxSteps, *t),
             _ => return None,
         };
         Some(Diagnostic {
@@ -121,6 +130,11 @@ impl fmt::Display for SolveError {
             SolveError::StepSizeUnderflow { t, h } => {
                 write!(f, "step size underflow at t = {t} (step {h:e})")
             }
+            SolveError::MaxSteps { t, steps } => write!(
+                f,
+                "gave up after {steps} steps at t = {t} (max_steps); the model is probably \
+                 stiff: try --method auto or --method rosenbrock"
+            ),
             SolveError::MaxEvents { t, count } => {
                 write!(f, "stopped after {count} events at t = {t} (max_events)")
             }
@@ -147,10 +161,8 @@ impl From<StepError> for SolveError {
     fn from(e: StepError) -> Self {
         match e {
             StepError::StepSizeUnderflow { t, h } => SolveError::StepSizeUnderflow { t, h },
-            StepError::NonFinite { t, what } => SolveError::NonFinite {
-                t,
-                what: format!("flow ({what})"),
-            },
+            StepError::NonFinite { t, what } => SolveError::NonFinite { t, what },
+            StepError::MaxSteps { t, steps } => SolveError::MaxSteps { t, steps },
         }
     }
 }

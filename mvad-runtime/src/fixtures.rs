@@ -98,11 +98,27 @@ impl HybridModel for Ball {
         f[0] = x[1];
         f[1] = -p[1];
     }
-    fn rhs_jac_x(&self, _m: usize, _sw: Switches, _t: f64, _x: &X, _p: &Th, fx: &mut OMatrix<f64, N, N>) {
+    fn rhs_jac_x(
+        &self,
+        _m: usize,
+        _sw: Switches,
+        _t: f64,
+        _x: &X,
+        _p: &Th,
+        fx: &mut OMatrix<f64, N, N>,
+    ) {
         fx.fill(0.0);
         fx[(0, 1)] = 1.0;
     }
-    fn rhs_jac_p(&self, _m: usize, _sw: Switches, _t: f64, _x: &X, _p: &Th, fp: &mut OMatrix<f64, N, P>) {
+    fn rhs_jac_p(
+        &self,
+        _m: usize,
+        _sw: Switches,
+        _t: f64,
+        _x: &X,
+        _p: &Th,
+        fp: &mut OMatrix<f64, N, P>,
+    ) {
         fp.fill(0.0);
         fp[(1, 1)] = -1.0;
     }
@@ -163,7 +179,15 @@ impl HybridModel for Ball {
     fn running_cost(&self, _sw: Switches, _t: f64, x: &X, _p: &Th) -> f64 {
         x[0]
     }
-    fn running_cost_grad(&self, _sw: Switches, _t: f64, x: &X, _p: &Th, lx: &mut X, lp: &mut Th) -> f64 {
+    fn running_cost_grad(
+        &self,
+        _sw: Switches,
+        _t: f64,
+        x: &X,
+        _p: &Th,
+        lx: &mut X,
+        lp: &mut Th,
+    ) -> f64 {
         lx.fill(0.0);
         lx[0] = 1.0;
         lp.fill(0.0);

@@ -168,7 +168,11 @@ where
     /// x₀(θ).
     fn initial_state(&self, p: &OVector<f64, Self::P>, x0: &mut OVector<f64, Self::N>);
     /// ∂x₀/∂θ (n×p).
-    fn initial_state_jac(&self, p: &OVector<f64, Self::P>, dx0: &mut OMatrix<f64, Self::N, Self::P>);
+    fn initial_state_jac(
+        &self,
+        p: &OVector<f64, Self::P>,
+        dx0: &mut OMatrix<f64, Self::N, Self::P>,
+    );
     /// T(θ), or `None` when the model declares no horizon.
     fn horizon(&self, p: &OVector<f64, Self::P>) -> Option<f64>;
     /// dT/dθ (zeros when there is no horizon or it is constant).
@@ -246,7 +250,13 @@ where
     // ---- events -----------------------------------------------------------------------
 
     /// g_k(t, x, θ) = LHS − RHS of event k's guard.
-    fn guard(&self, event: usize, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    fn guard(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> f64;
     /// ∇ₓg_k into `gx`, ∂θg_k into `gp`; returns ∂ₜg_k.
     fn guard_grad(
         &self,
@@ -282,7 +292,13 @@ where
     // ---- switching functions ----------------------------------------------------------
 
     /// σ_j(t, x, θ).
-    fn switch_value(&self, j: usize, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    fn switch_value(
+        &self,
+        j: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> f64;
     /// ∇ₓσ_j into `gx`, ∂θσ_j into `gp`; returns ∂ₜσ_j.
     fn switch_grad(
         &self,
@@ -311,7 +327,13 @@ where
     // ---- cost -------------------------------------------------------------------------
 
     /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors).
-    fn running_cost(&self, sw: Switches, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    fn running_cost(
+        &self,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> f64;
     /// ℓ_x into `lx`, ℓ_θ into `lp`; returns ℓ.
     fn running_cost_grad(
         &self,
@@ -323,7 +345,13 @@ where
         lp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// φ_k(t, x⁺, θ): the `sum(EVENT, ..)` terms of event k, evaluated after its reset.
-    fn event_cost(&self, event: usize, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    fn event_cost(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> f64;
     /// φ_x into `cx`, φ_θ into `cp`; returns φ_t.
     fn event_cost_grad(
         &self,

@@ -57,6 +57,11 @@ pub struct Options {
     pub grazing_tol: f64,
     /// The run stops with a `max_events` diagnostic after this many events.
     pub max_events: usize,
+    /// The run stops with a `max_steps` error after this many step attempts (accepted and
+    /// rejected, over the whole run): an explicit method on a stiff model would otherwise
+    /// take ~10⁸ steps. The default, 10⁶, is ~100× what the example models need at
+    /// rtol 1e-12.
+    pub max_steps: usize,
     /// Put the sensitivities (and cost quadratures) under error control too.
     pub sens_error_control: bool,
     /// Compute sensitivities at all (false: primal simulation only).
@@ -76,6 +81,7 @@ impl Default for Options {
             t_end: None,
             grazing_tol: 1e-3,
             max_events: 100_000,
+            max_steps: 1_000_000,
             sens_error_control: false,
             sensitivities: true,
             record: false,
@@ -97,6 +103,8 @@ pub enum DiagnosticKind {
     StepSizeUnderflow,
     /// A NaN or infinity appeared.
     Nonfinite,
+    /// The run stopped after `Options::max_steps` step attempts.
+    MaxSteps,
     /// Two or more events fired at the same time (within `Options::simultaneous_tol`).
     SimultaneousEvents,
 }
@@ -110,6 +118,7 @@ impl DiagnosticKind {
             DiagnosticKind::MaxEvents => "max_events",
             DiagnosticKind::StepSizeUnderflow => "step_size_underflow",
             DiagnosticKind::Nonfinite => "nonfinite",
+            DiagnosticKind::MaxSteps => "max_steps",
             DiagnosticKind::SimultaneousEvents => "simultaneous_events",
         }
     }

@@ -12,7 +12,8 @@
 //!    every state and observable and the atoms α_k = −J_k t_k'. Events within
 //!    `simultaneous_tol · max(T, 1)` of the earliest fire at the same time in declaration
 //!    order (a `simultaneous_events` diagnostic). A switch crossing flips its bit with the
-//!    identity reset. Then the integrator restarts (no stage is reused across a jump).
+//!    identity reset. Then the integrator restarts (no stage is reused across a jump), its
+//!    first step seeded with the length of the step that contained the event.
 //! 4. At T the final terms (see [`crate::reduce`]).
 //!
 //! Zeno: after each user event the dwell times are checked for geometric shrinking (the last
@@ -99,6 +100,9 @@ where
     }
     if !(opts.simultaneous_tol.is_finite() && opts.simultaneous_tol >= 0.0) {
         return bad("simultaneous-event tolerance must be finite and non-negative");
+    }
+    if opts.max_steps == 0 {
+        return bad("max_steps must be positive");
     }
     let nmodes = info.modes.len();
     let bad_model = |what: String| Err(SolveError::BadModel { what });
@@ -606,7 +610,12 @@ where
             if stop {
                 return Ok(());
             }
+            // Seed the first step after the jump with the step size in use before it (the
+            // error control still shrinks a seed that is too long): Hairer's start-up
+            // heuristic would otherwise spend 3–4 growing steps on every segment.
+            let h_seed = self.integ.last_step_size();
             self.restart(te)?;
+            self.integ.set_step_size(h_seed);
         }
         Ok(())
     }
@@ -620,7 +629,9 @@ where
         let sens = self.sens;
         self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
         model.rhs(self.mode, self.sw, t, &self.y.x, p, &mut self.f_minus);
-        self.nonfinite_x(t, &self.f_minus, || "flow".into())?;
+        self.nonfinite_x(t, &self.f_minus, || {
+            format!("flow of mode `{}`", info.modes[self.mode])
+        })?;
         let gt = model.guard_grad(k, t, &self.y.x, p, &mut self.gx, &mut self.gp);
         if !(gt.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
@@ -663,7 +674,9 @@ where
         self.mode = mode_after;
         let sw_after = self.switch_bits(t, true, Some(sw_before));
         model.rhs(mode_after, sw_after, t, &self.x_plus, p, &mut self.f_plus);
-        self.nonfinite_x(t, &self.f_plus, || "flow".into())?;
+        self.nonfinite_x(t, &self.f_plus, || {
+            format!("flow of mode `{}`", info.modes[mode_after])
+        })?;
         if sens {
             model.reset_jac(k, t, &self.y.x, p, &mut self.rx, &mut self.rp, &mut self.rt);
             sens::jump(
@@ -875,7 +888,9 @@ where
         let sw_after = sw_before ^ (1 << j);
         model.rhs(self.mode, sw_before, t, &self.y.x, p, &mut self.f_minus);
         model.rhs(self.mode, sw_after, t, &self.y.x, p, &mut self.f_plus);
-        self.nonfinite_x(t, &self.f_plus, || "flow".into())?;
+        self.nonfinite_x(t, &self.f_plus, || {
+            format!("flow of mode `{}`", info.modes[self.mode])
+        })?;
         if self.sens {
             let gt = model.switch_grad(j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
             sens::event_time_sensitivity(

@@ -229,10 +229,20 @@ pub enum StepError {
     },
     /// A NaN or infinity appeared and shrinking the step did not remove it.
     NonFinite {
-        /// Time of the step start.
+        /// Time of the step start (for a flow that is undefined beyond some t*, the last
+        /// step creeps up to t* before giving up, so this is t* to rounding).
         t: f64,
-        /// Which quantity (`state x`, `sensitivity S`, `running cost`, ...).
+        /// The expression it came from: `flow of mode `m``, `sensitivity equation of the
+        /// flow of mode `m``, `running cost`, `running-cost gradient`, or `state x` when
+        /// every evaluated stage was finite but their combination overflowed.
         what: String,
+    },
+    /// `Options::max_steps` step attempts (accepted + rejected) were used up.
+    MaxSteps {
+        /// Time reached.
+        t: f64,
+        /// The limit that was hit.
+        steps: usize,
     },
 }
 
@@ -243,6 +253,9 @@ impl fmt::Display for StepError {
                 write!(f, "step size underflow at t = {t:e} (h = {h:e})")
             }
             StepError::NonFinite { t, what } => write!(f, "non-finite {what} at t = {t:e}"),
+            StepError::MaxSteps { t, steps } => {
+                write!(f, "gave up after {steps} steps at t = {t:e} (max_steps)")
+            }
         }
     }
 }
@@ -333,6 +346,8 @@ where
     rtol: f64,
     atol: f64,
     sens_err: bool,
+    /// Budget of step attempts (accepted + rejected) over the integrator's life.
+    max_steps: usize,
     requested: Method,
     active: Method,
     /// Method that produced the last accepted step (the one `dense` uses).
@@ -366,6 +381,13 @@ where
     err_prev: f64,
     /// err_prev^(β₂), cached.
     err_prev_pow: f64,
+    /// Error order the two constants below were computed for (see
+    /// `refresh_controller_consts`).
+    controller_k: f64,
+    /// 1e-4^(β₂).
+    floor_pow: f64,
+    /// ‖e‖ below which the step-size factor is the growth cap 10.
+    full_growth_err: f64,
     /// The last attempt was rejected (no step growth on the next accepted one).
     last_rejected: bool,
     /// Hairer's stiffness estimate h·‖k₇ − k₆‖/‖y₇ − y₆‖ of the last Tsit5 attempt.
@@ -414,6 +436,7 @@ where
             rtol: opts.rtol,
             atol: opts.atol,
             sens_err: opts.sens_error_control && opts.sensitivities,
+            max_steps: opts.max_steps,
             requested: opts.method,
             active,
             dense_method: active,
@@ -433,6 +456,9 @@ where
             fsal_slot: None,
             err_prev: 1e-4,
             err_prev_pow: f64::NAN,
+            controller_k: f64::NAN,
+            floor_pow: f64::NAN,
+            full_growth_err: 0.0,
             last_rejected: false,
             stiff_ratio: 0.0,
             stiff_count: 0,
@@ -507,6 +533,10 @@ where
     pub fn switches(&self) -> Switches {
         self.rhs.sw
     }
+    /// Length of the last accepted step before any truncation (0 right after a restart).
+    pub fn last_step_size(&self) -> f64 {
+        self.dense_h
+    }
     /// The step size the controller proposes next (0 before the first step after a restart).
     pub fn next_step_size(&self) -> f64 {
         self.h
@@ -536,6 +566,8 @@ where
         if self.h == 0.0 {
             self.h = self.initial_step(t_stop - self.t);
         }
+        // Where the last non-finite attempt of this step came from (see `nonfinite_source`).
+        let mut nonfinite: Option<String> = None;
         let mut nonfinite_tries = 0usize;
         loop {
             let span = t_stop - self.t;
@@ -545,30 +577,41 @@ where
                 h = span;
             }
             if h.is_nan() || h <= 10.0 * f64::EPSILON * self.t.abs() || h < 1e-300 {
-                return Err(StepError::StepSizeUnderflow { t: self.t, h });
+                // Shrinking towards a point where the flow stops being defined (√ of a
+                // negative, 1/0, ...) ends here: report the NaN, not the step size.
+                return Err(match nonfinite {
+                    Some(what) => StepError::NonFinite { t: self.t, what },
+                    None => StepError::StepSizeUnderflow { t: self.t, h },
+                });
+            }
+            let used = self.stats.steps + self.stats.rejected_steps;
+            if used >= self.max_steps {
+                return Err(StepError::MaxSteps {
+                    t: self.t,
+                    steps: self.max_steps,
+                });
             }
             let err = self.attempt(h);
             if !err.is_finite() || !self.ynew.is_finite() {
-                // Overflow inside the step: retry much shorter, give up after many tries.
+                // NaN or overflow inside the step: retry much shorter, give up after many
+                // tries (or at the step-size floor above).
                 nonfinite_tries += 1;
                 self.stats.rejected_steps += 1;
                 self.last_rejected = true;
+                let what = self.nonfinite_source();
                 if nonfinite_tries > 60 {
-                    let what = self
-                        .ynew
-                        .nonfinite_part(self.rhs.sens)
-                        .unwrap_or("local error estimate");
-                    return Err(StepError::NonFinite {
-                        t: self.t,
-                        what: what.into(),
-                    });
+                    return Err(StepError::NonFinite { t: self.t, what });
                 }
+                nonfinite = Some(what);
                 self.h = h * 0.25;
                 continue;
             }
             let k = self.error_order();
             if err <= 1.0 {
-                let mut fac = if err == 0.0 {
+                self.refresh_controller_consts();
+                // Below `full_growth_err` the factor is clamped to 10 whatever ‖e_prev‖ is
+                // (‖e_prev‖^β₂ ≥ 1e-4^β₂), so the two powers are skipped, same result.
+                let mut fac = if err <= self.full_growth_err {
                     10.0
                 } else {
                     0.9 * err.powf(-0.7 / k) * self.err_prev_pow
@@ -578,7 +621,11 @@ where
                     fac = fac.min(1.0);
                 }
                 self.err_prev = err.max(1e-4);
-                self.err_prev_pow = self.err_prev.powf(0.4 / k);
+                self.err_prev_pow = if err <= 1e-4 {
+                    self.floor_pow
+                } else {
+                    self.err_prev.powf(0.4 / k)
+                };
                 self.last_rejected = false;
                 self.accept(h, landing, t_stop);
                 self.h = h * fac;
@@ -621,14 +668,61 @@ where
         } else {
             self.rhs.eval(self.t, &self.y, &mut self.k[0]);
         }
-        if let Some(what) = self.k[0].nonfinite_part(self.rhs.sens) {
-            return Err(StepError::NonFinite {
-                t: self.t,
-                what: format!("derivative of {what}"),
-            });
+        if self.k[0].nonfinite_part(self.rhs.sens).is_some() {
+            let what = if self.y.nonfinite_part(self.rhs.sens).is_some() {
+                format!("{} (the state itself)", self.stage_source(0))
+            } else {
+                self.stage_source(0)
+            };
+            return Err(StepError::NonFinite { t: self.t, what });
         }
         self.k0_valid = true;
         Ok(())
+    }
+
+    /// Names the expression behind a non-finite attempt: the first evaluated stage with a
+    /// NaN/∞ decides (`flow of mode `m``, its sensitivity equation, the running cost or its
+    /// gradient); if all stages are finite, the combination overflowed (`state x ...`).
+    fn nonfinite_source(&self) -> String {
+        let stages = match self.active {
+            Method::Tsit5 | Method::Auto => tsit5::STAGES,
+            Method::Verner9 => verner::FSAL_SLOT,
+            Method::Rosenbrock => rosenbrock::STAGES,
+        }
+        .min(self.k.len());
+        for i in 0..stages {
+            if self.k[i].nonfinite_part(self.rhs.sens).is_some() {
+                return self.stage_source(i);
+            }
+        }
+        let part = self
+            .ynew
+            .nonfinite_part(self.rhs.sens)
+            .unwrap_or("local error estimate");
+        format!("{part} (overflow in the flow of mode `{}`)", self.mode_name())
+    }
+
+    /// The expression that produced the non-finite part of stage `i` (which must have one).
+    fn stage_source(&self, i: usize) -> String {
+        let k = &self.k[i];
+        let mode = self.mode_name();
+        if !k.x.iter().all(|v| v.is_finite()) {
+            format!("flow of mode `{mode}`")
+        } else if !k.q.is_finite() {
+            "running cost".into()
+        } else if !k.s.iter().all(|v| v.is_finite()) {
+            format!("sensitivity equation of the flow of mode `{mode}`")
+        } else {
+            "running-cost gradient".into()
+        }
+    }
+
+    /// Name of the current mode (or its index if the model names fewer modes).
+    fn mode_name(&self) -> String {
+        match self.rhs.model.info().modes.get(self.rhs.mode) {
+            Some(name) => name.clone(),
+            None => self.rhs.mode.to_string(),
+        }
     }
 
     /// One attempt of the active method with step h from (t, y): fills `ynew`, the stages and
@@ -643,8 +737,21 @@ where
 
     /// Forgets the PI controller's memory (start, restart, method switch).
     fn reset_controller(&mut self) {
+        self.refresh_controller_consts();
         self.err_prev = 1e-4;
-        self.err_prev_pow = self.err_prev.powf(0.4 / self.error_order());
+        self.err_prev_pow = self.floor_pow;
+    }
+
+    /// Recomputes the controller constants when the order of the active method changed:
+    /// `floor_pow` = 1e-4^(0.4/k) (the smallest ‖e_prev‖^β₂) and `full_growth_err`, half
+    /// the ‖e‖ at which 0.9 ‖e‖^(−0.7/k) · floor_pow = 10 (the growth cap).
+    fn refresh_controller_consts(&mut self) {
+        let k = self.error_order();
+        if k != self.controller_k {
+            self.controller_k = k;
+            self.floor_pow = 1e-4f64.powf(0.4 / k);
+            self.full_growth_err = 0.5 * (10.0 / (0.9 * self.floor_pow)).powf(-k / 0.7);
+        }
     }
 
     /// Order of the error estimate + 1 (the exponent base of the controller).
@@ -984,7 +1091,9 @@ mod tests {
         y.x[0] = 2.0;
         it.restart(0.0, &y, 0, 0);
         match it.step(1.0) {
-            Err(StepError::NonFinite { what, .. }) => assert!(what.contains("state x"), "{what}"),
+            Err(StepError::NonFinite { what, .. }) => {
+                assert!(what.contains("flow of mode"), "{what}")
+            }
             other => panic!("expected NonFinite, got {other:?}"),
         }
     }

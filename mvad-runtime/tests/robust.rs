@@ -1,0 +1,174 @@
+//! Robustness of the driver: a step budget instead of a hang (explicit method on a stiff
+//! model), and NaN/∞ from a flow reported as `NonFinite` naming the flow and the time.
+
+mod common;
+
+use common::{info, AdModel, Sc, Spec};
+use mvad_runtime::error::SolveError;
+use mvad_runtime::model::{ModelInfo, Switches};
+use mvad_runtime::solution::{DiagnosticKind, Method, Options};
+use mvad_runtime::solve::solve;
+use std::time::Instant;
+
+/// A stiff lag coupled to a slow state: ẏ = (u − y)/τ, u̇ = −u, τ = 1e-8, u(0) = 1, y(0) = 0,
+/// C = ∫ y dt over [0, 1]. Tsit5's stability bound forces h ≈ 3.3 τ, i.e. ~3e8 steps.
+struct Lag;
+
+impl Spec for Lag {
+    fn info(&self) -> ModelInfo {
+        let mut i = info(
+            "Lag",
+            &["y", "u"],
+            &[("tau", 1e-8)],
+            &["lag"],
+            vec![],
+            &[],
+            0,
+        );
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        x[0] = S::cst(0.0);
+        x[1] = S::cst(1.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(1.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+        f[0] = (x[1] - x[0]) / p[0];
+        f[1] = -x[1];
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+#[test]
+fn explicit_method_on_a_stiff_model_stops_at_max_steps() {
+    let m = AdModel::new(Lag);
+    let p = m.defaults();
+    let opts = Options {
+        method: Method::Tsit5,
+        max_steps: 20_000,
+        ..Options::default()
+    };
+    let start = Instant::now();
+    let err = solve(&m, &p, &opts).unwrap_err();
+    assert!(start.elapsed().as_secs_f64() < 10.0);
+    match &err {
+        SolveError::MaxSteps { t, steps } => {
+            assert_eq!(*steps, 20_000);
+            // ~3.3e-8 per step: far from the horizon.
+            assert!(*t > 0.0 && *t < 1e-2, "t = {t}");
+        }
+        other => panic!("expected MaxSteps, got {other:?}"),
+    }
+    let msg = err.to_string();
+    assert!(msg.contains("--method auto") && msg.contains("rosenbrock"), "{msg}");
+    let d = err.diagnostic().expect("a numerical failure");
+    assert_eq!(d.kind, DiagnosticKind::MaxSteps);
+    assert_eq!(d.kind.name(), "max_steps");
+    // The same model under `auto` (stiffness detection → Rodas5P) stays far inside the
+    // default budget and gets C = ∫₀¹ y dt with y ≈ e^{−t} (1 + O(τ)).
+    let sol = solve(&m, &p, &Options::default()).expect("auto handles the stiff lag");
+    let used = sol.stats.steps + sol.stats.rejected_steps;
+    assert!(used < 5_000, "{used} steps");
+    approx::assert_relative_eq!(sol.cost, 1.0 - (-1.0f64).exp(), max_relative = 1e-6);
+}
+
+#[test]
+fn a_zero_step_budget_is_an_error_not_a_panic() {
+    let m = AdModel::new(Lag);
+    let opts = Options {
+        max_steps: 0,
+        ..Options::default()
+    };
+    assert!(solve(&m, &m.defaults(), &opts).is_err());
+}
+
+/// x(0) = 0, c = 0.7, horizon 1, C = ∫ x dt, with d = c − t and
+/// - kind 0: ẋ = √d (NaN for t > c);
+/// - kind 1: ẋ = d / max(d, 0) with max(d, 0) = (d + √(d²))/2 exactly: ẋ = 1 for t < c,
+///   0/0 at c and d/0 = −∞ beyond (a division by zero from a known time on);
+/// - kind 2: ẋ = 1/d: the flow stays finite but x = −ln(1 − t/c) blows up at c (a genuine
+///   singularity of the solution, not a NaN: the step size underflows).
+struct Undefined {
+    kind: u8,
+}
+
+impl Spec for Undefined {
+    fn info(&self) -> ModelInfo {
+        let mut i = info(
+            "Undefined",
+            &["x"],
+            &[("c", 0.7)],
+            &["rising"],
+            vec![],
+            &[],
+            0,
+        );
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        x[0] = S::cst(0.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(1.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, t: S, _x: &[S], p: &[S], f: &mut [S]) {
+        let d = p[0] - t;
+        f[0] = match self.kind {
+            0 => d.sqrt(),
+            1 => d / ((d + (d * d).sqrt()) * 0.5),
+            _ => S::cst(1.0) / d,
+        };
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+#[test]
+fn nan_in_a_flow_is_nonfinite_at_the_right_time_naming_the_flow() {
+    for sens in [true, false] {
+        for kind in [0u8, 1] {
+            let m = AdModel::new(Undefined { kind });
+            let opts = Options {
+                rtol: 1e-10,
+                atol: 1e-12,
+                sensitivities: sens,
+                ..Options::default()
+            };
+            let start = Instant::now();
+            let err = solve(&m, &m.defaults(), &opts).unwrap_err();
+            assert!(start.elapsed().as_secs_f64() < 5.0);
+            match &err {
+                SolveError::NonFinite { t, what } => {
+                    assert!(what.contains("mode `rising`"), "kind {kind}: {what}");
+                    assert!(what.contains("flow"), "kind {kind}: {what}");
+                    assert!((t - 0.7).abs() < 1e-9, "kind {kind} sens {sens}: t = {t}");
+                }
+                other => panic!("kind {kind} sens {sens}: expected NonFinite, got {other:?}"),
+            }
+            let d = err.diagnostic().unwrap();
+            assert_eq!(d.kind, DiagnosticKind::Nonfinite);
+            assert!(err.to_string().contains("non-finite"), "{err}");
+        }
+    }
+}
+
+#[test]
+fn a_singular_solution_is_a_step_size_underflow_at_the_singularity() {
+    let m = AdModel::new(Undefined { kind: 2 });
+    let opts = Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Options::default()
+    };
+    match solve(&m, &m.defaults(), &opts).unwrap_err() {
+        SolveError::StepSizeUnderflow { t, .. } => assert!((t - 0.7).abs() < 1e-6, "t = {t}"),
+        other => panic!("expected StepSizeUnderflow, got {other:?}"),
+    }
+}
