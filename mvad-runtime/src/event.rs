@@ -18,7 +18,9 @@
 //! Two crossings between samples (a near-grazing dip) show up as an interior local maximum of
 //! v that is close to zero relative to v's variation over the step; then v is maximised
 //! on the neighbouring samples' interval by golden-section search and, if the maximum
-//! reaches zero, the bracket [left sample, argmax] is used. Roots are found by safeguarded
+//! reaches zero, the bracket [left sample, argmax] is used. On the first step after an event
+//! fired, a guard that never went below zero at the samples is minimised between t₀ and the
+//! first sample, so a whole hop that fits in there is not missed. Roots are found by safeguarded
 //! secant/regula-falsi steps with bisection fallback (see [`locate_root`]) to the resolution
 //! of t (relative ~1e-15), returning the end of the bracket where the function has triggered, so the state
 //! handed to the reset is always on or past the guard.
@@ -178,6 +180,9 @@ pub struct Scanner {
     pub start_val: Vec<f64>,
     /// Whether v_w was increasing at the end of the previous step (dip detection at t₀).
     pub rising: Vec<bool>,
+    /// Event w fired at the last restart and this is the first step since (see
+    /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
+    pub fresh: Vec<bool>,
     /// Crossings on the current step, earliest first (filled by [`Scanner::scan`]).
     pub found: Vec<Crossing>,
     /// Samples per function: `vals[w][i]` at the i-th sample time of the step.
@@ -197,6 +202,7 @@ impl Scanner {
             armed: vec![false; nw],
             start_val: vec![0.0; nw],
             rising: vec![false; nw],
+            fresh: vec![false; nw],
             found: Vec::with_capacity(nw),
             vals: vec![[0.0; NSAMP]; nw],
             tmp: vec![0.0; nw],
@@ -236,6 +242,7 @@ impl Scanner {
         self.active[w] = active;
         self.start_val[w] = v;
         self.rising[w] = false;
+        self.fresh[w] = fired && active && !self.strict(w);
         self.armed[w] = if self.strict(w) {
             true
         } else {
@@ -311,8 +318,19 @@ impl Scanner {
             if bracket.is_none() {
                 if let Some(i0) = armed_from {
                     bracket = dip(&v, &times, i0, self.rising[w], strict, |t| eval(w, t));
+                } else if self.fresh[w] {
+                    // The event fired at t₀ and no sample went below zero: the whole
+                    // excursion to the negative side and back (a short hop of a ball after
+                    // its bounce) may lie between t₀ and the first sample. Look for the
+                    // minimum there; if it is negative the event re-armed at that time and
+                    // the first sample, which has triggered, closes the bracket.
+                    let (tm, neg) = maximize(|t| -eval(w, t), times[0], times[1]);
+                    if neg > 0.0 && triggered(v[1], strict) {
+                        bracket = Some((tm, -neg, times[1], v[1]));
+                    }
                 }
             }
+            self.fresh[w] = false;
             if let Some(b) = bracket {
                 first_right = first_right.min(b.2);
             }
