@@ -119,7 +119,12 @@ fn main() {
             }
             .unwrap();
             if i == 0 {
-                println!("{which}: {} cost {} gradient {:?}", stats(&sol.stats), sol.cost, sol.gradient);
+                println!(
+                    "{which}: {} cost {} gradient {:?}",
+                    stats(&sol.stats),
+                    sol.cost,
+                    sol.gradient
+                );
             }
             acc += sol.cost;
         }

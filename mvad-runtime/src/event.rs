@@ -529,6 +529,44 @@ mod tests {
         assert!(!sc.armed[0]);
     }
 
+    /// A whole hop below zero between t₀ and the first sample (0.2) right after the event
+    /// fired: v = t (t − 0.05) re-arms on (0, 0.05) and fires at 0.05. Only on the first step
+    /// after the firing; later, or for an event that did not fire, samples decide.
+    #[test]
+    fn a_hop_before_the_first_sample_after_firing_is_found() {
+        let f = |t: f64| t * (t - 0.05);
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, f(0.0), true);
+        assert!(sc.fresh[0] && !sc.armed[0]);
+        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
+            .unwrap();
+        assert_eq!(sc.found.len(), 1);
+        assert_relative_eq!(sc.found[0].t, 0.05, max_relative = 1e-14);
+        // A hop that never goes below zero (v = t²) does not fire, and the next step is not
+        // searched again.
+        let g = |t: f64| t * t;
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, 0.0, true);
+        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
+            .unwrap();
+        assert!(sc.found.is_empty());
+        assert!(!sc.fresh[0] && !sc.armed[0]);
+        let mut evals = 0;
+        sc.scan(
+            1.0,
+            2.0,
+            |t, _, _, o| o[0] = f(t - 1.0),
+            |_, t| {
+                evals += 1;
+                f(t - 1.0)
+            },
+            0.0,
+        )
+        .unwrap();
+        assert!(sc.found.is_empty());
+        assert_eq!(evals, 0);
+    }
+
     #[test]
     fn simultaneous_crossings_are_grouped_and_ordered() {
         let fs: [fn(f64) -> f64; 3] = [|t| t - 0.3, |t| t - 0.3 - 1e-15, |t| t - 0.7];

@@ -24,5 +24,7 @@ pub mod solve;
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
-pub use solution::{Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory};
+pub use solution::{
+    Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,
+};
 pub use solve::solve;

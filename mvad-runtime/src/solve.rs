@@ -308,7 +308,11 @@ where
             t_end,
             dt_end,
             sens: opts.sensitivities,
-            integ: Integrator::new(model, p, opts),
+            integ: {
+                let mut it = Integrator::new(model, p, opts);
+                it.set_lazy_dense(true);
+                it
+            },
             y: AugState::zeros(n, np),
             aug_tmp: AugState::zeros(n, np),
             mode: info.initial_mode,
@@ -520,6 +524,10 @@ where
         let sim_tol = self.opts.simultaneous_tol * self.t_end.max(1.0);
         while self.integ.t() < self.t_end {
             self.integ.step(self.t_end)?;
+            // The step's full dense output is needed only to sample guards or to record.
+            if self.rec.is_some() || self.scanner.active.iter().any(|&a| a) {
+                self.integ.ensure_dense();
+            }
             let (t0, t1) = (self.integ.t_prev(), self.integ.t());
             let sw = self.sw;
             {

@@ -39,7 +39,12 @@ fn count(opts: &Options) -> (usize, usize, usize) {
 
 #[test]
 fn allocations_do_not_grow_with_steps() {
-    for method in [Method::Tsit5, Method::Auto] {
+    for method in [
+        Method::Tsit5,
+        Method::Auto,
+        Method::Verner9,
+        Method::Rosenbrock,
+    ] {
         // Same events (two impacts), very different step counts.
         let loose = Options {
             method,

@@ -1013,9 +1013,8 @@ fn print_ball_stats() {
 
 #[test]
 fn stepping_allocates_nothing_for_static_sizes() {
-    // Tsit5 and Verner: restart, steps, dense output and truncation allocate nothing.
-    // Rodas5P allocates exactly its W matrix and pivots per factorisation (nalgebra's `LU`
-    // takes its matrix by value) and nothing else.
+    // Restart, steps, dense output and truncation allocate nothing, with every method
+    // (Rodas5P factorises W in place in buffers allocated by `Integrator::new`).
     let ball = Ball::new();
     let p = ball.default_params();
     for method in [
@@ -1045,12 +1044,10 @@ fn stepping_allocates_nothing_for_static_sizes() {
             it.step(0.6).unwrap();
         }
         let n = allocations() - before;
-        let expected = if method == Method::Rosenbrock {
-            2 * it.stats().factorizations
-        } else {
-            0
-        };
-        assert_eq!(n, expected, "{method:?}: {:?}", it.stats());
+        if method == Method::Rosenbrock {
+            assert!(it.stats().factorizations > 3, "{:?}", it.stats());
+        }
+        assert_eq!(n, 0, "{method:?}: {:?}", it.stats());
     }
 }
 
@@ -1178,4 +1175,66 @@ fn seeded_step_size_is_used_and_still_controlled() {
     it.restart(0.0, &yd, 0, 0);
     it.set_step_size(f64::NAN);
     assert_eq!(it.next_step_size(), 0.0);
+}
+
+/// Lazy interpolation stages: the steps (and the FSAL chain) are identical to the eager
+/// integrator's with 9 fewer evaluations per step; before `ensure_dense` the dense output is
+/// the cubic Hermite interpolant (3rd order, checked against its own closed form on the
+/// oscillator's exact end points), after it bit-identical to the eager 9th-order one.
+#[test]
+fn verner_lazy_interpolation_stages() {
+    let m = oscillator();
+    let w = 1.3;
+    let p = DVector::from_vec(vec![w]);
+    let mut y0 = AugState::zeros(Dyn(2), Dyn(1));
+    y0.x[0] = 1.0;
+    let o = opts(Method::Verner9, 1e-10, 1e-12);
+    let mut eager = Integrator::new(&m, &p, &o);
+    let mut lazy = Integrator::new(&m, &p, &o);
+    lazy.set_lazy_dense(true);
+    eager.restart(0.0, &y0, 0, 0);
+    lazy.restart(0.0, &y0, 0, 0);
+    let t_end = 5.0;
+    let mut steps = 0;
+    let (mut a, mut b) = (
+        AugState::zeros(Dyn(2), Dyn(1)),
+        AugState::zeros(Dyn(2), Dyn(1)),
+    );
+    while eager.t() < t_end {
+        eager.step(t_end).unwrap();
+        lazy.step(t_end).unwrap();
+        steps += 1;
+        assert_eq!(eager.t(), lazy.t());
+        assert_eq!(eager.y(), lazy.y());
+        let (t0, t1) = (lazy.t_prev(), lazy.t());
+        let tq = t0 + 0.37 * (t1 - t0);
+        // Hermite stand-in: y0 + c (y1 − y0) + h (w0 f0 + w1 f1), f = (x₂, −w² x₁).
+        lazy.dense(tq, &mut b);
+        let (h, th) = (t1 - t0, 0.37f64);
+        let (w0, w1, c) = (
+            th - 2.0 * th * th + th.powi(3),
+            th.powi(3) - th * th,
+            3.0 * th * th - 2.0 * th.powi(3),
+        );
+        let (ya, yb) = (lazy.y_prev(), lazy.y());
+        let herm = ya.x[0] + c * (yb.x[0] - ya.x[0]) + h * (w0 * ya.x[1] + w1 * yb.x[1]);
+        assert_relative_eq!(b.x[0], herm, epsilon = 1e-14);
+        lazy.ensure_dense();
+        eager.dense(tq, &mut a);
+        lazy.dense(tq, &mut b);
+        assert_eq!(a, b);
+        let ex = oscillator_exact(w, tq);
+        assert!((b.x[0] - ex[0]).abs() < 1e-8);
+    }
+    let (se, sl) = (eager.stats().rhs_evals, lazy.stats().rhs_evals);
+    assert_eq!(se - sl, 0, "ensure_dense on every step costs the same");
+    // Without ensure_dense the lazy integrator saves 9 evaluations per accepted step.
+    let mut lazy2 = Integrator::new(&m, &p, &o);
+    lazy2.set_lazy_dense(true);
+    lazy2.restart(0.0, &y0, 0, 0);
+    while lazy2.t() < t_end {
+        lazy2.step(t_end).unwrap();
+    }
+    assert_eq!(lazy2.y(), eager.y());
+    assert_eq!(se - lazy2.stats().rhs_evals, 9 * steps);
 }

@@ -65,7 +65,10 @@ fn explicit_method_on_a_stiff_model_stops_at_max_steps() {
         other => panic!("expected MaxSteps, got {other:?}"),
     }
     let msg = err.to_string();
-    assert!(msg.contains("--method auto") && msg.contains("rosenbrock"), "{msg}");
+    assert!(
+        msg.contains("--method auto") && msg.contains("rosenbrock"),
+        "{msg}"
+    );
     let d = err.diagnostic().expect("a numerical failure");
     assert_eq!(d.kind, DiagnosticKind::MaxSteps);
     assert_eq!(d.kind.name(), "max_steps");
@@ -171,4 +174,64 @@ fn a_singular_solution_is_a_step_size_underflow_at_the_singularity() {
         SolveError::StepSizeUnderflow { t, .. } => assert!((t - 0.7).abs() < 1e-6, "t = {t}"),
         other => panic!("expected StepSizeUnderflow, got {other:?}"),
     }
+}
+
+/// ẋ = −a x, x(0) = 1, C = ∫₀¹ x dt = (1 − e^{−a})/a, no events.
+struct Decay;
+
+impl Spec for Decay {
+    fn info(&self) -> ModelInfo {
+        let mut i = info("Decay", &["x"], &[("a", 1.3)], &["main"], vec![], &[], 0);
+        i.has_final_cost = false;
+        i
+    }
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        x[0] = S::cst(1.0);
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(1.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+        f[0] = -p[0] * x[0];
+    }
+    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+/// Without events or recording the driver never evaluates Verner's nine extra interpolation
+/// stages: same steps, bit-identical cost and gradient, 9 fewer evaluations per step than a
+/// recorded run (which needs the 9th-order dense output), and both match the closed form.
+#[test]
+fn verner_skips_interpolation_stages_when_nothing_samples_them() {
+    let m = AdModel::new(Decay);
+    let p = m.defaults();
+    let opts = Options {
+        method: Method::Verner9,
+        rtol: 1e-12,
+        atol: 1e-14,
+        ..Options::default()
+    };
+    let plain = solve(&m, &p, &opts).unwrap();
+    let rec = solve(
+        &m,
+        &p,
+        &Options {
+            record: true,
+            ..opts.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(plain.stats.steps, rec.stats.steps);
+    assert_eq!(plain.cost, rec.cost);
+    assert_eq!(plain.gradient, rec.gradient);
+    assert_eq!(
+        rec.stats.rhs_evals - plain.stats.rhs_evals,
+        9 * plain.stats.steps
+    );
+    let a = p[0];
+    let c = (1.0 - (-a).exp()) / a;
+    let dc = (-a).exp() / a - (1.0 - (-a).exp()) / (a * a);
+    approx::assert_relative_eq!(plain.cost, c, max_relative = 1e-11);
+    approx::assert_relative_eq!(plain.gradient[0], dc, max_relative = 1e-10);
 }

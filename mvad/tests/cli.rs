@@ -9,6 +9,10 @@ use std::process::{Command, Output};
 use approx::assert_relative_eq;
 use serde_json::Value;
 
+#[path = "../src/cli/spec_keys.rs"]
+mod spec_keys;
+use spec_keys::missing_spec_keys;
+
 /// The workspace root (the models are under `models/`).
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -44,20 +48,42 @@ fn run_status(args: &[&str], status: i32) -> Output {
     o
 }
 
+/// How many lines of `text` satisfy `pred`.
+fn count_lines(text: &str, pred: impl Fn(&str) -> bool) -> usize {
+    text.lines().filter(|l| pred(l)).count()
+}
+
 fn json(o: &Output) -> Value {
     serde_json::from_str(&stdout(o)).unwrap_or_else(|e| panic!("not JSON ({e}): {}", stdout(o)))
 }
 
-/// A scratch file holding `contents`.
-fn scratch(name: &str, contents: &[u8]) -> PathBuf {
+/// A scratch file holding `contents`; its path as text.
+fn scratch(name: &str, contents: &[u8]) -> String {
     let dir = std::env::temp_dir().join(format!("mvad-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join(name);
     std::fs::write(&path, contents).expect("write");
-    path
+    path.to_string_lossy().into_owned()
 }
 
 const BALL: &str = "models/bouncing_ball.hyb";
+/// Every model shipped in `models/`.
+const MODELS: [&str; 6] = [
+    "bouncing_ball",
+    "e2_sweep",
+    "thermostat",
+    "stiff_relay",
+    "zeno_ball",
+    "ceiling",
+];
+/// Tolerances at which E1 is accurate to about 1e-10.
+const TIGHT: [&str; 4] = ["--rtol", "1e-10", "--atol", "1e-12"];
+
+/// `args` followed by [`TIGHT`].
+fn tight<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    args.iter().copied().chain(TIGHT).collect()
+}
+
 const E1_COST: f64 = 1.8905137123173506;
 const E1_DCDE: f64 = 2.8314408141470055;
 const E1_T1: f64 = 0.638_550_856_814_101;
@@ -65,23 +91,8 @@ const E1_T2: f64 = 1.6602322277166624;
 
 #[test]
 fn grad_json_has_the_spec_keys_and_the_e1_values() {
-    let o = run_status(
-        &["grad", BALL, "--json", "--rtol", "1e-10", "--atol", "1e-12"],
-        0,
-    );
-    let v = json(&o);
-    for key in [
-        "model",
-        "t_end",
-        "params",
-        "cost",
-        "gradient",
-        "events",
-        "diagnostics",
-        "stats",
-    ] {
-        assert!(v.get(key).is_some(), "missing key {key}");
-    }
+    let v = json(&run_status(&tight(&["grad", BALL, "--json"]), 0));
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
     assert_eq!(v["model"], "BouncingBall");
     assert_eq!(v["t_end"], 2.0);
     assert_eq!(v["params"]["e"], 0.8);
@@ -99,20 +110,6 @@ fn grad_json_has_the_spec_keys_and_the_e1_values() {
     let events = v["events"].as_array().expect("events");
     assert_eq!(events.len(), 2);
     for (k, (ev, t)) in events.iter().zip([E1_T1, E1_T2]).enumerate() {
-        for key in [
-            "index",
-            "name",
-            "t",
-            "mode_before",
-            "mode_after",
-            "guard_slope",
-            "transversal",
-            "dt",
-            "jump",
-            "atoms",
-        ] {
-            assert!(ev.get(key).is_some(), "event {k} lacks {key}");
-        }
         assert_eq!(ev["index"], k);
         assert_eq!(ev["name"], "impact");
         assert_eq!(ev["mode_before"], "main");
@@ -152,7 +149,7 @@ fn grad_json_has_the_spec_keys_and_the_e1_values() {
         max_relative = 1e-8
     );
     assert_eq!(ev["jump"]["height"].as_f64().map(f64::abs), Some(0.0));
-    for key in ["steps", "rejected_steps", "events", "wall_seconds"] {
+    for key in spec_keys::STATS_KEYS {
         assert!(v["stats"][key].is_number(), "stats lack {key}");
     }
     assert_eq!(v["stats"]["events"], 2);
@@ -212,9 +209,7 @@ fn zeno_ball_reports_a_zeno_diagnostic_and_finishes() {
         .filter_map(|d| d["kind"].as_str())
         .collect();
     assert!(kinds.contains(&"zeno"), "{kinds:?}");
-    for d in v["diagnostics"].as_array().expect("array") {
-        assert!(d["t"].is_number() && d["message"].is_string());
-    }
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
     // e = 0.5, h0 = 2: the bounces accumulate at t* = t₁ (1 + 2e/(1 − e)) = 3 t₁.
     let zeno = v["diagnostics"]
         .as_array()
@@ -230,20 +225,21 @@ fn zeno_ball_reports_a_zeno_diagnostic_and_finishes() {
 }
 
 #[test]
-fn check_every_bundled_model() {
-    for name in [
-        "bouncing_ball",
-        "e2_sweep",
-        "thermostat",
-        "stiff_relay",
-        "zeno_ball",
-        "ceiling",
-    ] {
+fn every_bundled_model_checks_and_runs_grad() {
+    for name in MODELS {
         let path = format!("models/{name}.hyb");
         let o = run_status(&["check", &path], 0);
         assert!(stdout(&o).contains("is valid"), "{}", stdout(&o));
         let v = json(&run_status(&["check", &path, "--json"], 0));
         assert!(v["states"].as_array().is_some_and(|s| !s.is_empty()));
+        let v = json(&run_status(&["grad", &path, "--json"], 0));
+        assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{name}");
+        assert!(v["cost"].is_number(), "{name}");
+        let gradient = v["gradient"].as_object().expect("gradient");
+        assert!(
+            gradient.values().all(Value::is_number),
+            "{name}: {gradient:?}"
+        );
     }
     let v = json(&run_status(
         &["check", "models/thermostat.hyb", "--json"],
@@ -251,31 +247,6 @@ fn check_every_bundled_model() {
     ));
     assert_eq!(v["modes"], serde_json::json!(["heating", "cooling"]));
     assert_eq!(v["events"][0]["target"], "cooling");
-}
-
-#[test]
-fn every_bundled_model_runs_grad() {
-    for name in [
-        "bouncing_ball",
-        "e2_sweep",
-        "thermostat",
-        "stiff_relay",
-        "zeno_ball",
-        "ceiling",
-    ] {
-        let path = format!("models/{name}.hyb");
-        let v = json(&run_status(&["grad", &path, "--json"], 0));
-        assert!(v["cost"].is_number(), "{name}");
-        assert!(
-            v["gradient"]
-                .as_object()
-                .expect("gradient")
-                .values()
-                .all(Value::is_number),
-            "{name}: {}",
-            v["gradient"]
-        );
-    }
 }
 
 #[test]
@@ -289,11 +260,10 @@ fn simulate_csv_to_stdout_and_file() {
         "event table on stderr: {}",
         stderr(&o)
     );
-    let path = scratch("traj.csv", b"");
-    let p = path.to_string_lossy().to_string();
+    let p = scratch("traj.csv", b"");
     let o = run_status(&["simulate", BALL, "--out", &p], 0);
     assert!(stdout(&o).contains("impact"), "{}", stdout(&o));
-    let csv = std::fs::read_to_string(&path).expect("csv written");
+    let csv = std::fs::read_to_string(&p).expect("csv written");
     let last = csv.lines().last().expect("rows");
     assert!(last.starts_with("2.0,main,"), "{last}");
     let v = json(&run_status(
@@ -307,19 +277,7 @@ fn simulate_csv_to_stdout_and_file() {
 #[test]
 fn measure_json_and_plots() {
     let v = json(&run_status(
-        &[
-            "measure",
-            BALL,
-            "--observable",
-            "height",
-            "--wrt",
-            "e",
-            "--json",
-            "--rtol",
-            "1e-10",
-            "--atol",
-            "1e-12",
-        ],
+        &tight(&["measure", BALL, "--observable=height", "--wrt=e", "--json"]),
         0,
     ));
     for key in [
@@ -337,8 +295,7 @@ fn measure_json_and_plots() {
         max_relative = 1e-8
     );
     for ext in ["svg", "png"] {
-        let path = scratch(&format!("fig1.{ext}"), b"");
-        let p = path.to_string_lossy().to_string();
+        let p = scratch(&format!("fig1.{ext}"), b"");
         let o = run_status(
             &[
                 "measure",
@@ -353,7 +310,7 @@ fn measure_json_and_plots() {
             0,
         );
         assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
-        let bytes = std::fs::read(&path).expect("picture");
+        let bytes = std::fs::read(&p).expect("picture");
         assert!(bytes.len() > 1000, "{ext}: {} bytes", bytes.len());
         if ext == "png" {
             assert_eq!(&bytes[..4], b"\x89PNG");
@@ -411,47 +368,23 @@ fn sweep_table_two_on_e2() {
     );
     let out = stdout(&o);
     assert!(out.contains("guard slope"), "{out}");
-    assert_eq!(
-        out.lines().filter(|l| l.contains("True")).count(),
-        10,
-        "{out}"
-    );
+    assert_eq!(count_lines(&out, |l| l.contains("True")), 10, "{out}");
+    let over = "--over=v0=-0.5:-5:10";
     let v = json(&run_status(
-        &[
-            "sweep",
-            "models/e2_sweep.hyb",
-            "--over",
-            "v0=-0.5:-5:10",
-            "--json",
-            "--rtol",
-            "1e-10",
-            "--atol",
-            "1e-12",
-        ],
+        &tight(&["sweep", "models/e2_sweep.hyb", over, "--json"]),
         0,
     ));
     let rows = v["rows"].as_array().expect("rows");
     assert_eq!(rows.len(), 10);
-    assert_relative_eq!(
-        rows[0]["guard_slope"].as_f64().expect("n"),
-        4.457577817604534,
-        max_relative = 1e-9
-    );
-    assert_relative_eq!(
-        rows[0]["event_time"].as_f64().expect("n"),
-        0.40342281525020734,
-        max_relative = 1e-9
-    );
-    assert_relative_eq!(
-        rows[9]["guard_slope"].as_f64().expect("n"),
-        6.679820356865894,
-        max_relative = 1e-9
-    );
-    assert_relative_eq!(
-        rows[9]["event_time"].as_f64().expect("n"),
-        0.17123551038388318,
-        max_relative = 1e-9
-    );
+    // h0 = 1, g = 9.81: the impact speed |∇g·f| = √(v0² + 2 g h0) and the time
+    // (v0 + √(v0² + 2 g h0)) / g, at both ends of the sweep (the paper's Table 2).
+    for (row, v0) in [(&rows[0], -0.5f64), (&rows[9], -5.0)] {
+        let speed = (v0 * v0 + 2.0 * 9.81).sqrt();
+        let slope = row["guard_slope"].as_f64().expect("n");
+        assert_relative_eq!(slope, speed, max_relative = 1e-9);
+        let t = row["event_time"].as_f64().expect("n");
+        assert_relative_eq!(t, (v0 + speed) / 9.81, max_relative = 1e-9);
+    }
     for r in rows {
         assert_eq!(r["atom_magnitude"], 0.0, "position is continuous: no atom");
         assert_eq!(r["transversal"], true);
@@ -462,18 +395,15 @@ fn sweep_table_two_on_e2() {
 
 #[test]
 fn workprec_table_and_plot() {
-    let path = scratch("wp.svg", b"");
-    let p = path.to_string_lossy().to_string();
+    let p = scratch("wp.svg", b"");
     let o = run_status(
         &[
             "workprec",
             BALL,
             "--wrt",
             "e",
-            "--reference",
-            "C=1.8905137123173506",
-            "--reference",
-            "e=2.8314408141470055",
+            &format!("--reference=C={E1_COST}"),
+            &format!("--reference=e={E1_DCDE}"),
             "--plot",
             &p,
         ],
@@ -481,14 +411,8 @@ fn workprec_table_and_plot() {
     );
     let out = stdout(&o);
     assert!(out.contains("MV-AD err dC"), "{out}");
-    assert_eq!(
-        out.lines().filter(|l| l.starts_with("1e-")).count(),
-        10,
-        "{out}"
-    );
-    assert!(std::fs::read_to_string(&path)
-        .expect("plot")
-        .contains("MV-AD"));
+    assert_eq!(count_lines(&out, |l| l.starts_with("1e-")), 10, "{out}");
+    assert!(std::fs::read_to_string(&p).expect("plot").contains("MV-AD"));
 }
 
 #[test]
@@ -533,11 +457,10 @@ fn bad_options_and_usage_errors_exit_2() {
 
 #[test]
 fn a_model_without_horizon_needs_t_end() {
-    let path = scratch(
+    let p = scratch(
         "nohorizon.hyb",
         b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
     );
-    let p = path.to_string_lossy().to_string();
     let o = run_status(&["grad", &p], 2);
     assert!(stderr(&o).contains("--t-end"), "{}", stderr(&o));
     run_status(&["grad", &p, "--t-end", "1"], 0);
@@ -545,11 +468,10 @@ fn a_model_without_horizon_needs_t_end() {
 
 #[test]
 fn a_failed_run_exits_1_with_an_error_object() {
-    let path = scratch(
+    let p = scratch(
         "nan.hyb",
         b"model M {\n  state x = -1;\n  flow { der(x) = log(x); }\n  cost = integral(x);\n  horizon 1;\n}\n",
     );
-    let p = path.to_string_lossy().to_string();
     let o = run_status(&["grad", &p, "--json"], 1);
     let v = json(&o);
     assert!(
@@ -562,11 +484,10 @@ fn a_failed_run_exits_1_with_an_error_object() {
     let o = run_status(&["grad", &p], 1);
     assert!(stdout(&o).is_empty());
     // A solution that blows up in finite time.
-    let path = scratch(
+    let p = scratch(
         "blowup.hyb",
         b"model M {\n  state x = 1;\n  flow { der(x) = x^2; }\n  cost = integral(x);\n  horizon 2;\n}\n",
     );
-    let p = path.to_string_lossy().to_string();
     let v = json(&run_status(&["grad", &p, "--json"], 1));
     assert!(v["error"].is_string());
 }
@@ -574,8 +495,7 @@ fn a_failed_run_exits_1_with_an_error_object() {
 /// Asserts a located error: exit 2, first stderr line `FILE:LINE:COL: error: ...` with the
 /// expected line and a message containing `fragment`, the line quoted, a caret.
 fn assert_located(name: &str, contents: &[u8], line: usize, fragment: &str) {
-    let path = scratch(name, contents);
-    let p = path.to_string_lossy().to_string();
+    let p = scratch(name, contents);
     for cmd in ["check", "grad"] {
         let o = run_status(&[cmd, &p], 2);
         let err = stderr(&o);
@@ -641,38 +561,33 @@ fn empty_blank_and_binary_files_are_located_errors() {
                 (s >> 24) as u8
             })
             .collect();
-        let path = scratch(&format!("garbage{size}.hyb"), &bytes);
-        let p = path.to_string_lossy().to_string();
+        let p = scratch(&format!("garbage{size}.hyb"), &bytes);
         let o = run_status(&["grad", &p], 2);
         assert!(stderr(&o).starts_with(&format!("{p}:")), "{}", stderr(&o));
     }
 }
 
+/// A one-state model with the initial value `init` and the flow `der(x) = rhs`.
+fn one_state_model(init: &str, rhs: &str) -> Vec<u8> {
+    format!("model M {{\n  state x = {init};\n  flow {{ der(x) = {rhs}; }}\n}}\n").into_bytes()
+}
+
 #[test]
 fn deep_nesting_is_an_error_not_a_crash() {
     let depth = 100_000;
-    let src = format!(
-        "model M {{\n  state x = {}1{};\n  flow {{ der(x) = 1; }}\n}}\n",
-        "(".repeat(depth),
-        ")".repeat(depth)
+    let parens = format!("{}1{}", "(".repeat(depth), ")".repeat(depth));
+    assert_located(
+        "deep.hyb",
+        &one_state_model(&parens, "1"),
+        2,
+        "nested too deeply",
     );
-    assert_located("deep.hyb", src.as_bytes(), 2, "nested too deeply");
-    let src = format!(
-        "model M {{\n  state x = 1;\n  flow {{ der(x) = {}x; }}\n}}\n",
-        "-".repeat(depth)
-    );
-    let p = scratch("deepneg.hyb", src.as_bytes())
-        .to_string_lossy()
-        .to_string();
-    run_status(&["check", &p], 2);
-    let src = format!(
-        "model M {{\n  state x = 1;\n  flow {{ der(x) = x{}; }}\n}}\n",
-        "^x".repeat(depth)
-    );
-    let p = scratch("deeppow.hyb", src.as_bytes())
-        .to_string_lossy()
-        .to_string();
-    run_status(&["check", &p], 2);
+    let negations = format!("{}x", "-".repeat(depth));
+    let powers = format!("x{}", "^x".repeat(depth));
+    for (name, rhs) in [("deepneg", negations), ("deeppow", powers)] {
+        let p = scratch(&format!("{name}.hyb"), &one_state_model("1", &rhs));
+        run_status(&["check", &p], 2);
+    }
 }
 
 #[test]

@@ -335,9 +335,8 @@ const NONSTIFF_STEPS_TO_SWITCH: usize = 20;
 
 /// An adaptive one-step integrator of the augmented flow in one mode (see the module doc).
 ///
-/// All buffers are allocated in [`Integrator::new`]; stepping allocates nothing (for `Dyn`
-/// sizes, the Rosenbrock method's LU factorisation is the one exception: nalgebra's `LU::new`
-/// takes its matrix by value).
+/// All buffers are allocated in [`Integrator::new`]; stepping allocates nothing, for static
+/// and `Dyn` sizes alike (the Rosenbrock method factorises in place in its own buffers).
 pub struct Integrator<'a, M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -390,6 +389,11 @@ where
     full_growth_err: f64,
     /// The last attempt was rejected (no step growth on the next accepted one).
     last_rejected: bool,
+    /// Verner: evaluate the nine interpolation stages after the FSAL one only on demand
+    /// ([`Integrator::ensure_dense`]); see [`Integrator::set_lazy_dense`].
+    lazy_dense: bool,
+    /// The last accepted Verner step's interpolation stages 18..26 are not evaluated yet.
+    dense_pending: bool,
     /// Hairer's stiffness estimate h·‖k₇ − k₆‖/‖y₇ − y₆‖ of the last Tsit5 attempt.
     stiff_ratio: f64,
     stiff_count: usize,
@@ -460,6 +464,8 @@ where
             floor_pow: f64::NAN,
             full_growth_err: 0.0,
             last_rejected: false,
+            lazy_dense: false,
+            dense_pending: false,
             stiff_ratio: 0.0,
             stiff_count: 0,
             nonstiff_count: 0,
@@ -497,7 +503,29 @@ where
         self.reset_controller();
         self.last_rejected = false;
         self.dense_method = self.active;
+        self.dense_pending = false;
         self.ros.invalidate();
+    }
+
+    /// Verner 9(8) only: with `on`, the nine interpolation stages of an accepted step beyond
+    /// the FSAL one (a third of the step's work) are evaluated only when
+    /// [`Integrator::ensure_dense`] asks for them (the driver does so when it samples guards
+    /// or records the trajectory); until then `dense`/`dense_x` fall back to the cubic
+    /// Hermite interpolant of the step's end points and slopes (3rd order, never garbage).
+    /// [`Integrator::truncate`] completes the stages itself. Off by default.
+    pub fn set_lazy_dense(&mut self, on: bool) {
+        self.lazy_dense = on;
+    }
+
+    /// Makes the full-order dense output of the last accepted step available (evaluates
+    /// Verner's pending interpolation stages; nothing for the other methods).
+    pub fn ensure_dense(&mut self) {
+        if self.dense_pending {
+            let h = self.dense_h;
+            self.verner_dense_stages_rest(h);
+            self.dense_pending = false;
+            self.stats.rhs_evals = self.rhs.evals;
+        }
     }
 
     /// End of the last accepted step.
@@ -699,7 +727,10 @@ where
             .ynew
             .nonfinite_part(self.rhs.sens)
             .unwrap_or("local error estimate");
-        format!("{part} (overflow in the flow of mode `{}`)", self.mode_name())
+        format!(
+            "{part} (overflow in the flow of mode `{}`)",
+            self.mode_name()
+        )
     }
 
     /// The expression that produced the non-finite part of stage `i` (which must have one).
@@ -780,8 +811,14 @@ where
             _ => None,
         };
         self.ros.invalidate();
+        self.dense_pending = false;
         if self.active == Method::Verner9 {
-            self.verner_dense_stages(h);
+            if self.lazy_dense {
+                self.verner_fsal_stage(h);
+                self.dense_pending = true;
+            } else {
+                self.verner_dense_stages(h);
+            }
         }
         self.stats.rhs_evals = self.rhs.evals;
     }
@@ -963,6 +1000,10 @@ where
         }
         let theta = (t - self.t_prev) / self.dense_h;
         let (k, y0, y1, h) = (&self.k[..], &self.y_prev, self.end_state(), self.dense_h);
+        if self.dense_pending {
+            verner::hermite_x(k, y0, y1, h, theta, out);
+            return;
+        }
         match self.dense_method {
             Method::Tsit5 | Method::Auto => tsit5::dense_x(k, y0, h, theta, out),
             Method::Verner9 => verner::dense_x(k, y0, h, theta, out),
@@ -977,6 +1018,19 @@ where
             return;
         }
         let theta = (t - self.t_prev) / self.dense_h;
+        if self.dense_pending {
+            let sens = self.rhs.sens;
+            verner::hermite(
+                &self.k,
+                &self.y_prev,
+                self.end_state(),
+                self.dense_h,
+                theta,
+                sens,
+                out,
+            );
+            return;
+        }
         dense_into(
             self.dense_method,
             &self.k,
@@ -1005,6 +1059,7 @@ where
         if t_cut == self.t {
             return;
         }
+        self.ensure_dense();
         if !self.truncated {
             self.y_end.copy_from(&self.y);
             self.truncated = true;

@@ -43,7 +43,8 @@
 
 use super::{combine, AugState, Integrator, Rhs};
 use crate::model::{HybridModel, ModelAlloc};
-use nalgebra::{DMatrix, DMatrixViewMut, DefaultAllocator, Dim, OMatrix, OVector, LU};
+use nalgebra::linalg::{gauss_step, gauss_step_swap};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Rodas5P stages.
 const NSTAGES: usize = 8;
@@ -263,9 +264,14 @@ where
 {
     /// f_x at the step start.
     jac: OMatrix<f64, N, N>,
-    /// LU of W = I − hγ f_x for the current attempt.
-    lu: Option<LU<f64, nalgebra::Dyn, nalgebra::Dyn>>,
-    /// hγ that `lu` was factorised for.
+    /// LU factors of W = I − hγ f_x for the current attempt, in place (unit lower triangle
+    /// below the diagonal, U on and above it), valid when `lu_ok`.
+    wlu: OMatrix<f64, N, N>,
+    /// Row interchanges of the partial pivoting: row i was swapped with row piv[i] ≥ i.
+    piv: OVector<usize, N>,
+    /// `wlu`/`piv` hold a regular factorisation for `lu_hg`.
+    lu_ok: bool,
+    /// hγ that `wlu` was factorised for.
     lu_hg: f64,
     /// ℓ_x at the step start (zeros without running cost).
     lx0: OVector<f64, N>,
@@ -307,7 +313,9 @@ where
         let z = || AugState::zeros(n, p);
         RosenbrockWork {
             jac: OMatrix::zeros_generic(n, n),
-            lu: None,
+            wlu: OMatrix::zeros_generic(n, n),
+            piv: OVector::from_element_generic(n, nalgebra::Const::<1>, 0),
+            lu_ok: false,
             lu_hg: 0.0,
             lx0: OVector::zeros_generic(n, nalgebra::Const::<1>),
             lp0: OVector::zeros_generic(p, nalgebra::Const::<1>),
@@ -326,7 +334,56 @@ where
     /// Forget the Jacobian and F_t (new step start).
     pub(super) fn invalidate(&mut self) {
         self.base_valid = false;
-        self.lu = None;
+        self.lu_ok = false;
+    }
+
+    /// Factorises W = I − hγ f_x in place with partial pivoting: the elimination steps are
+    /// nalgebra's (`gauss_step`/`gauss_step_swap`, exactly what `LU::new` runs), but on the
+    /// buffers of this struct, so no factorisation allocates (`LU::new` takes its matrix by
+    /// value). Returns false for a singular W.
+    fn factorise(&mut self, hg: f64) -> bool {
+        let n = self.wlu.nrows();
+        self.wlu.copy_from(&self.jac);
+        self.wlu *= -hg;
+        for i in 0..n {
+            self.wlu[(i, i)] += 1.0;
+        }
+        self.lu_hg = hg;
+        self.lu_ok = false;
+        for i in 0..n {
+            let piv = self.wlu.view_range(i.., i).icamax() + i;
+            let diag = self.wlu[(piv, i)];
+            if diag == 0.0 || !diag.is_finite() {
+                return false;
+            }
+            self.piv[i] = piv;
+            if piv != i {
+                self.wlu.columns_range_mut(..i).swap_rows(i, piv);
+                gauss_step_swap(&mut self.wlu, diag, i, piv);
+            } else {
+                gauss_step(&mut self.wlu, diag, i);
+            }
+        }
+        self.lu_ok = true;
+        true
+    }
+
+    /// b := W⁻¹ b with the factors of [`RosenbrockWork::factorise`] (row interchanges, then
+    /// nalgebra's unit-lower and upper triangular solves, as `LU::solve_mut`).
+    fn solve_mut<C: Dim>(&self, b: &mut OMatrix<f64, N, C>) -> bool
+    where
+        DefaultAllocator: nalgebra::allocator::Allocator<N, C>,
+    {
+        if !self.lu_ok {
+            return false;
+        }
+        for (i, &p) in self.piv.iter().enumerate() {
+            if p != i {
+                b.swap_rows(i, p);
+            }
+        }
+        let _ = self.wlu.solve_lower_triangular_with_diag_mut(b, 1.0);
+        self.wlu.solve_upper_triangular_mut(b)
     }
 
     /// Spectral-radius estimate of f_x at the start of the last Rodas5P step.
@@ -526,13 +583,12 @@ fn solve_stage<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let Some(lu) = w.lu.as_ref() else {
+    if !w.lu_ok {
         return false;
-    };
-    let n = k.x.len();
+    }
     k.x.copy_from(&w.r.x);
     k.x *= hg;
-    let ok_x = lu.solve_mut(&mut DMatrixViewMut::from_slice(k.x.as_mut_slice(), n, 1));
+    let ok_x = w.solve_mut(&mut k.x);
     let lxk = w.lx0.dot(&k.x);
     k.q = hg * (w.r.q + lxk);
     if !rhs.sens {
@@ -559,8 +615,7 @@ where
         }
     }
     k.s *= hg;
-    let p = k.s.ncols();
-    let ok_s = lu.solve_mut(&mut DMatrixViewMut::from_slice(k.s.as_mut_slice(), n, p));
+    let ok_s = w.solve_mut(&mut k.s);
     if rhs.has_rc {
         k.qp.gemv_tr(hg, &k.s, &w.lx0, hg);
     } else {
@@ -583,21 +638,11 @@ where
             self.stats.jac_evals += 1;
         }
         let hg = h * GAMMA;
-        if self.ros.lu.is_none() || self.ros.lu_hg != hg {
-            let n = self.y.x.len();
-            let jac = &self.ros.jac;
-            let wm = DMatrix::from_fn(n, n, |i, j| {
-                let id = if i == j { 1.0 } else { 0.0 };
-                id - hg * jac[(i, j)]
-            });
-            let lu = LU::new(wm);
+        if !self.ros.lu_ok || self.ros.lu_hg != hg {
             self.stats.factorizations += 1;
-            if !lu.is_invertible() {
-                self.ros.lu = None;
+            if !self.ros.factorise(hg) {
                 return f64::NAN;
             }
-            self.ros.lu = Some(lu);
-            self.ros.lu_hg = hg;
         }
         for s in 0..NSTAGES {
             // R = F(t0 + c_s h, Y0 + Σ a_sj K_j) + Σ (C_sj/h) K_j + h d_s F_t.

@@ -4,8 +4,11 @@
 //!
 //! Sixteen stages; y₁ = y₀ + h Σ b_i k_i (order 9), error h Σ (b_i − b̂_i) k_i (b̂ of order 8).
 //! The 9th-order continuous extension needs ten more stages (17..26, the first one is
-//! F(t₀ + h, y₁)); they are evaluated once per accepted step, so `dense`/`dense_x` are plain
-//! polynomial evaluations y(t₀ + θh) = y₀ + h Σ_i b_i(θ) k_i.
+//! F(t₀ + h, y₁), the next step's first stage); they are evaluated once per accepted step,
+//! so `dense`/`dense_x` are plain polynomial evaluations y(t₀ + θh) = y₀ + h Σ_i b_i(θ) k_i.
+//! With [`Integrator::set_lazy_dense`] only stage 17 is evaluated eagerly and 18..26 wait for
+//! [`Integrator::ensure_dense`] (a run without events or recording never needs them); in
+//! between, the cubic Hermite interpolant of (y₀, f₀, y₁, f₁) stands in.
 
 use super::{combine, combine_x, AugState, Integrator};
 use crate::model::{HybridModel, ModelAlloc};
@@ -912,6 +915,86 @@ pub(super) fn dense_x<N: Dim, P: Dim>(
     combine_x(out, &y0.x, h, &weights(theta), &k[..STAGES_WITH_DENSE]);
 }
 
+/// Cubic Hermite weights (w₀, w₁, c) with y(θ) = y₀ + c (y₁ − y₀) + h (w₀ f₀ + w₁ f₁):
+/// c = 3θ² − 2θ³, w₀ = θ − 2θ² + θ³, w₁ = θ³ − θ².
+fn hermite_weights(theta: f64) -> (f64, f64, f64) {
+    let t2 = theta * theta;
+    let t3 = t2 * theta;
+    (theta - 2.0 * t2 + t3, t3 - t2, 3.0 * t2 - 2.0 * t3)
+}
+
+/// d = a + c (b − a) + h (w₀ f₀ + w₁ f₁), elementwise.
+#[allow(clippy::too_many_arguments)]
+fn hermite_part(d: &mut [f64], a: &[f64], b: &[f64], f0: &[f64], f1: &[f64], h: f64, theta: f64) {
+    let (w0, w1, c) = hermite_weights(theta);
+    for ((((di, ai), bi), g0), g1) in d.iter_mut().zip(a).zip(b).zip(f0).zip(f1) {
+        *di = ai + c * (bi - ai) + h * (w0 * g0 + w1 * g1);
+    }
+}
+
+/// Cubic Hermite interpolant of the whole augmented state on a step whose interpolation
+/// stages are pending: from y₀, y₁ and the slopes k[0] = F(t₀, y₀), k[16] = F(t₀ + h, y₁)
+/// (S and q_θ only when `sens`).
+pub(super) fn hermite<N: Dim, P: Dim>(
+    k: &[AugState<N, P>],
+    y0: &AugState<N, P>,
+    y1: &AugState<N, P>,
+    h: f64,
+    theta: f64,
+    sens: bool,
+    out: &mut AugState<N, P>,
+) where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    let (f0, f1) = (&k[0], &k[FSAL_SLOT]);
+    hermite_x(k, y0, y1, h, theta, &mut out.x);
+    let mut q = [0.0];
+    hermite_part(&mut q, &[y0.q], &[y1.q], &[f0.q], &[f1.q], h, theta);
+    out.q = q[0];
+    if sens {
+        hermite_part(
+            out.s.as_mut_slice(),
+            y0.s.as_slice(),
+            y1.s.as_slice(),
+            f0.s.as_slice(),
+            f1.s.as_slice(),
+            h,
+            theta,
+        );
+        hermite_part(
+            out.qp.as_mut_slice(),
+            y0.qp.as_slice(),
+            y1.qp.as_slice(),
+            f0.qp.as_slice(),
+            f1.qp.as_slice(),
+            h,
+            theta,
+        );
+    }
+}
+
+/// x only of [`hermite`].
+pub(super) fn hermite_x<N: Dim, P: Dim>(
+    k: &[AugState<N, P>],
+    y0: &AugState<N, P>,
+    y1: &AugState<N, P>,
+    h: f64,
+    theta: f64,
+    out: &mut OVector<f64, N>,
+) where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    hermite_part(
+        out.as_mut_slice(),
+        y0.x.as_slice(),
+        y1.x.as_slice(),
+        k[0].x.as_slice(),
+        k[FSAL_SLOT].x.as_slice(),
+        h,
+        theta,
+    );
+}
+
 impl<M: HybridModel> Integrator<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -940,12 +1023,27 @@ where
 
     /// The ten interpolation stages of the accepted step [t_prev, t_prev + h] into k[16..26].
     pub(super) fn verner_dense_stages(&mut self, h: f64) {
+        self.verner_fsal_stage(h);
+        self.verner_dense_stages_rest(h);
+    }
+
+    /// The first interpolation stage, F(t_prev + h, y₁) (also the next step's first stage).
+    pub(super) fn verner_fsal_stage(&mut self, h: f64) {
+        self.verner_interp_stage(FSAL_SLOT, h);
+    }
+
+    /// Interpolation stages 18..26 (they need the FSAL stage 17 in k[16]).
+    pub(super) fn verner_dense_stages_rest(&mut self, h: f64) {
+        for i in FSAL_SLOT + 1..STAGES_WITH_DENSE {
+            self.verner_interp_stage(i, h);
+        }
+    }
+
+    fn verner_interp_stage(&mut self, i: usize, h: f64) {
         let sens = self.rhs.sens;
         let t0 = self.t_prev;
-        for i in STAGES..STAGES_WITH_DENSE {
-            combine(&mut self.tmp, &self.y_prev, h, &A[i], &self.k[..21], sens);
-            self.rhs.eval(t0 + C[i] * h, &self.tmp, &mut self.k[i]);
-        }
+        combine(&mut self.tmp, &self.y_prev, h, &A[i], &self.k[..21], sens);
+        self.rhs.eval(t0 + C[i] * h, &self.tmp, &mut self.k[i]);
     }
 }
 

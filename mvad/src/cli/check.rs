@@ -7,7 +7,7 @@ use mvad::{Direction, HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
-use super::output::{g, json_text, num};
+use super::output::{g, join_or, json_text, num};
 use super::{setup_params_only, CmdResult, Common};
 
 /// Arguments of `mvad check`.
@@ -103,11 +103,7 @@ where
     s.push_str(&format!(
         "params ({}):       {}\n",
         info.params.len(),
-        if plist.is_empty() {
-            "-".to_string()
-        } else {
-            plist.join(", ")
-        }
+        join_or(&plist, ", ", "-")
     ));
     s.push_str(&format!(
         "modes ({}):        {} (initial: {})\n",
@@ -131,11 +127,7 @@ where
     s.push_str(&format!(
         "observables ({}):  {}\n",
         info.observables.len(),
-        if info.observables.is_empty() {
-            "-".to_string()
-        } else {
-            info.observables.join(", ")
-        }
+        join_or(&info.observables, ", ", "-")
     ));
     let mut cost = Vec::new();
     if info.has_running_cost {
@@ -149,11 +141,7 @@ where
     }
     s.push_str(&format!(
         "cost:             {}\n",
-        if cost.is_empty() {
-            "none (C = 0)".to_string()
-        } else {
-            cost.join(" + ")
-        }
+        join_or(&cost, " + ", "none (C = 0)")
     ));
     s.push_str(&format!(
         "horizon:          {}\n",
@@ -194,18 +182,8 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{Cli, Command};
-    use clap::Parser;
+    use crate::cli::test_support::{args, json};
     use mvad::runtime::fixtures::Ball;
-
-    fn args(extra: &[&str]) -> CheckArgs {
-        let mut v = vec!["mvad", "check", "ball.hyb"];
-        v.extend_from_slice(extra);
-        match Cli::try_parse_from(v).expect("parses").command {
-            Command::Check(a) => a,
-            _ => unreachable!(),
-        }
-    }
 
     #[test]
     fn text_lists_the_declarations() {
@@ -229,7 +207,7 @@ mod tests {
             &args(&["--json", "--set", "e=0.5"]),
         )
         .expect("ok");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         assert_eq!(v["model"], "BouncingBall");
         assert_eq!(v["params"]["e"], 0.5);
         assert_eq!(v["events"][0]["name"], "impact");

@@ -11,8 +11,10 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
-use super::output::{cosine, diagnostics_json, diagnostics_text, g, json_text, num, Table};
-use super::{setup, solve_err, CliError, CmdResult, Common};
+use super::output::{
+    cosine, diagnostics_json, diagnostics_text, g, join_or, json_text, num, Table,
+};
+use super::{check_step, setup, solve_err, CliError, CmdResult, Common};
 
 /// Arguments of `mvad fdcheck`.
 #[derive(Args, Debug)]
@@ -31,12 +33,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let s = setup(model, &args.common)?;
-    if !(args.step.is_finite() && args.step > 0.0 && args.step < 1.0) {
-        return Err(CliError::Input(format!(
-            "error: --step must be in (0, 1), got {}",
-            args.step
-        )));
-    }
+    check_step(args.step)?;
     let info = model.info();
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let mut mvad = Vec::new();
@@ -137,15 +134,11 @@ where
     out.push_str(&format!("events K           {}\n", times.len()));
     out.push_str(&format!(
         "event times (s)    {}\n",
-        if times.is_empty() {
-            "-".to_string()
-        } else {
-            times
-                .iter()
-                .map(|&t| g(t, 6))
-                .collect::<Vec<_>>()
-                .join("; ")
-        }
+        join_or(
+            &times.iter().map(|&t| g(t, 6)).collect::<Vec<_>>(),
+            "; ",
+            "-"
+        )
     ));
     out.push_str(&failures);
     out.push_str(&diagnostics_text(&sol.diagnostics));
@@ -155,19 +148,9 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{Cli, Command};
+    use crate::cli::test_support::{args, json};
     use approx::assert_relative_eq;
-    use clap::Parser;
     use mvad::runtime::fixtures::Ball;
-
-    fn args(extra: &[&str]) -> FdcheckArgs {
-        let mut v = vec!["mvad", "fdcheck", "ball.hyb"];
-        v.extend_from_slice(extra);
-        match Cli::try_parse_from(v).expect("parses").command {
-            Command::Fdcheck(a) => a,
-            _ => unreachable!(),
-        }
-    }
 
     #[test]
     fn e1_table_one() {
@@ -179,7 +162,7 @@ mod tests {
             ]),
         )
         .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         let row = &v["rows"][0];
         assert_eq!(row["param"], "e");
         assert_relative_eq!(
@@ -214,7 +197,7 @@ mod tests {
                    flow { der(x) = -sqrt(a) * b * x; } cost = integral(x); horizon 1; }";
         let m = mvad::load::load_str("m.hyb", src).expect("valid model");
         let out = run(&m, "m.hyb", &args(&["--json"])).expect("the check itself runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         assert_eq!(v["rows"][0]["param"], "a");
         assert!(v["rows"][0]["fd"].is_null(), "{out}");
         assert!(

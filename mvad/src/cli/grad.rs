@@ -10,7 +10,8 @@ use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
 use super::output::{
-    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, num, stats_json, Table,
+    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, num, param_header,
+    stats_json, Table,
 };
 use super::{setup, solve_err, CliError, CmdResult, Common};
 
@@ -92,16 +93,12 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
     s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
     if !sol.events.is_empty() {
         let mode = |m: usize| info.modes.get(m).cloned().unwrap_or_default();
-        let mut header = vec![
-            "#".to_string(),
-            "event".into(),
-            "t".into(),
-            "mode".into(),
-            "guard slope".into(),
-            "transversal".into(),
-        ];
-        header.extend(wrt.iter().map(|&k| format!("dt/d{}", info.params[k])));
-        let mut t = Table::new(&header);
+        let mut t = Table::new(&param_header(
+            &["#", "event", "t", "mode", "guard slope", "transversal"],
+            "dt/d",
+            &info.params,
+            wrt,
+        ));
         for e in &sol.events {
             let name = info
                 .events
@@ -130,14 +127,12 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
         s.push_str(&t.render());
 
         // Jumps and atoms of the observables that jump.
-        let mut header = vec![
-            "#".to_string(),
-            "t".into(),
-            "observable".into(),
-            "jump J".into(),
-        ];
-        header.extend(wrt.iter().map(|&k| format!("atom d/d{}", info.params[k])));
-        let mut t = Table::new(&header);
+        let mut t = Table::new(&param_header(
+            &["#", "t", "observable", "jump J"],
+            "atom d/d",
+            &info.params,
+            wrt,
+        ));
         for e in &sol.events {
             for (i, o) in info.observables.iter().enumerate() {
                 let jump = e.jump_observables.get(i).copied().unwrap_or(0.0);
@@ -178,41 +173,16 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{Cli, Command};
+    use crate::cli::spec_keys::missing_spec_keys;
+    use crate::cli::test_support::{args, json, tight};
     use approx::assert_relative_eq;
-    use clap::Parser;
     use mvad::runtime::fixtures::Ball;
-
-    fn args(extra: &[&str]) -> GradArgs {
-        let mut v = vec!["mvad", "grad", "ball.hyb"];
-        v.extend_from_slice(extra);
-        match Cli::try_parse_from(v).expect("parses").command {
-            Command::Grad(a) => a,
-            _ => unreachable!(),
-        }
-    }
 
     #[test]
     fn json_has_every_key_of_the_spec_and_the_e1_values() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&["--json", "--rtol", "1e-10", "--atol", "1e-12"]),
-        )
-        .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
-        for key in [
-            "model",
-            "t_end",
-            "params",
-            "cost",
-            "gradient",
-            "events",
-            "diagnostics",
-            "stats",
-        ] {
-            assert!(v.get(key).is_some(), "missing {key}: {out}");
-        }
+        let out = run(&Ball::new(), "ball.hyb", &args(&tight(&["--json"]))).expect("runs");
+        let v = json(&out);
+        assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{out}");
         assert_eq!(v["model"], "BouncingBall");
         assert_eq!(v["t_end"], 2.0);
         assert_eq!(v["params"]["e"], 0.8);
@@ -221,45 +191,24 @@ mod tests {
         let de = v["gradient"]["e"].as_f64().expect("number");
         assert_relative_eq!(de, 2.8314408141470055, max_relative = 1e-7);
         let ev = &v["events"][0];
-        for key in [
-            "index",
-            "name",
-            "t",
-            "mode_before",
-            "mode_after",
-            "guard_slope",
-            "transversal",
-            "dt",
-            "jump",
-            "atoms",
-        ] {
-            assert!(ev.get(key).is_some(), "event lacks {key}");
-        }
         assert_eq!(ev["name"], "impact");
         assert_eq!(ev["mode_before"], "main");
-        assert_relative_eq!(
-            ev["t"].as_f64().expect("t"),
-            0.638_550_856_814_101,
-            max_relative = 1e-9
-        );
         // v⁻ = −g t₁ = −6.264 and v⁺ = −e v⁻: the velocity jumps by (1 + e) g t₁.
         let t1 = 0.638_550_856_814_101;
-        assert_relative_eq!(
-            ev["guard_slope"].as_f64().expect("slope"),
-            -9.81 * t1,
-            max_relative = 1e-8
-        );
-        assert_relative_eq!(
-            ev["jump"]["velocity"].as_f64().expect("J"),
-            1.8 * 9.81 * t1,
-            max_relative = 1e-8
-        );
+        assert_relative_eq!(ev["t"].as_f64().expect("t"), t1, max_relative = 1e-9);
+        let slope = ev["guard_slope"].as_f64().expect("slope");
+        assert_relative_eq!(slope, -9.81 * t1, max_relative = 1e-8);
+        let jump = ev["jump"]["velocity"].as_f64().expect("J");
+        assert_relative_eq!(jump, 1.8 * 9.81 * t1, max_relative = 1e-8);
         assert_eq!(ev["jump"]["height"], 0.0);
         assert!(ev["atoms"]["velocity"]["g"].is_number());
         assert_eq!(v["events"].as_array().map(Vec::len), Some(2));
-        for key in ["steps", "rejected_steps", "events", "wall_seconds"] {
-            assert!(v["stats"].get(key).is_some(), "stats lacks {key}");
+        // Removing a key is caught.
+        let mut broken = v.clone();
+        if let Some(ev) = broken["events"][1].as_object_mut() {
+            ev.remove("dt");
         }
+        assert_eq!(missing_spec_keys(&broken), ["events[1].dt"]);
     }
 
     #[test]
@@ -270,21 +219,16 @@ mod tests {
             &args(&["--json", "--wrt", "e,v0"]),
         )
         .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
-        let keys: Vec<&String> = v["gradient"].as_object().expect("obj").keys().collect();
-        assert_eq!(keys, ["e", "v0"]);
-        let dt: Vec<&String> = v["events"][0]["dt"]
-            .as_object()
-            .expect("obj")
-            .keys()
-            .collect();
-        assert_eq!(dt, ["e", "v0"]);
-        let atoms: Vec<&String> = v["events"][0]["atoms"]["velocity"]
-            .as_object()
-            .expect("obj")
-            .keys()
-            .collect();
-        assert_eq!(atoms, ["e", "v0"]);
+        let v = json(&out);
+        let keys = |x: &Value| -> Vec<String> {
+            x.as_object()
+                .into_iter()
+                .flat_map(|o| o.keys().cloned())
+                .collect()
+        };
+        assert_eq!(keys(&v["gradient"]), ["e", "v0"]);
+        assert_eq!(keys(&v["events"][0]["dt"]), ["e", "v0"]);
+        assert_eq!(keys(&v["events"][0]["atoms"]["velocity"]), ["e", "v0"]);
         // params stay complete
         assert_eq!(v["params"].as_object().map(|o| o.len()), Some(4));
     }

@@ -22,9 +22,9 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
 use serde_json::{Map, Value};
 
-use super::output::{diagnostics_json, diagnostics_text, g, json_text, num, Table};
+use super::output::{diagnostics_json, diagnostics_text, g, json_text, num, param_header, Table};
 use super::plot::{figure1, format_of, Figure1};
-use super::{setup, solve_err, xvec, CliError, CmdResult, Common};
+use super::{check_step, observable_index, setup, solve_err, xvec, CliError, CmdResult, Common};
 
 /// Arguments of `mvad measure`.
 #[derive(Args, Debug)]
@@ -53,29 +53,14 @@ where
 {
     let mut s = setup(model, &args.common)?;
     let info = model.info();
-    let obs = info.observable_index(&args.observable).ok_or_else(|| {
-        CliError::Input(format!(
-            "error: unknown observable `{}`; {}",
-            args.observable,
-            if info.observables.is_empty() {
-                "the model declares no observables".to_string()
-            } else {
-                format!("known observables: {}", info.observables.join(", "))
-            }
-        ))
-    })?;
+    let obs = observable_index(info, &args.observable)?;
     if !(2..=1_000_000).contains(&args.points) {
         return Err(CliError::Input(format!(
             "error: --points must be between 2 and 1000000, got {}",
             args.points
         )));
     }
-    if !(args.step.is_finite() && args.step > 0.0 && args.step < 1.0) {
-        return Err(CliError::Input(format!(
-            "error: --step must be in (0, 1), got {}",
-            args.step
-        )));
-    }
+    check_step(args.step)?;
     if let Some(p) = &args.plot {
         format_of(p)?;
         if s.wrt.is_empty() {
@@ -177,15 +162,7 @@ where
         g(t_end, 10)
     );
     out.push_str("density (h_x S + h_θ) dt plus atoms α_k δ(t − t_k), α_k = −J_k t_k'\n\n");
-    let mut t = Table::new(
-        &std::iter::once("param".to_string())
-            .chain([
-                "d/dθ ∫y dt".into(),
-                "density part".into(),
-                "atoms part".into(),
-            ])
-            .collect::<Vec<_>>(),
-    );
+    let mut t = Table::new(&["param", "d/dθ ∫y dt", "density part", "atoms part"]);
     for &k in wrt {
         t.row(vec![
             info.params[k].clone(),
@@ -197,8 +174,7 @@ where
     out.push_str(&t.render());
     out.push_str(&format!("\natoms ({}):\n", mu.atoms.len()));
     if !mu.atoms.is_empty() {
-        let mut header = vec!["#".to_string(), "t".into(), "jump J".into()];
-        header.extend(wrt.iter().map(|&k| format!("α d/d{}", info.params[k])));
+        let header = param_header(&["#", "t", "jump J"], "α d/d", &info.params, wrt);
         let mut t = Table::new(&header);
         for (e, (tk, a)) in sol.events.iter().zip(&mu.atoms) {
             let mut row = vec![
@@ -212,9 +188,7 @@ where
         out.push_str(&t.render());
     }
     out.push_str("\ndensity on the grid:\n");
-    let mut header = vec!["t".to_string()];
-    header.extend(wrt.iter().map(|&k| format!("d/d{}", info.params[k])));
-    let mut t = Table::new(&header);
+    let mut t = Table::new(&param_header(&["t"], "d/d", &info.params, wrt));
     let stride = (grid.len() / 20).max(1);
     for (i, (ti, row)) in grid.iter().zip(&dens).enumerate() {
         if i % stride == 0 || i + 1 == grid.len() {
@@ -237,29 +211,38 @@ where
     Ok(out)
 }
 
-/// Samples of y on `ts` from a recorded solution (right-continuous at events).
-fn observable_on<M: HybridModel>(
-    model: &M,
-    params: &OVector<f64, M::P>,
-    sol: &Solution,
+/// y(t, x) for observable `obs` at the parameters `params`.
+fn observer<'a, M: HybridModel>(
+    model: &'a M,
+    params: &'a OVector<f64, M::P>,
     obs: usize,
-    ts: &[f64],
-) -> Vec<f64>
+) -> impl Fn(f64, &[f64]) -> f64 + 'a
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let nobs = model.info().nobservables();
-    let mut y = vec![0.0; nobs];
-    let Some(traj) = sol.trajectory.as_ref() else {
-        return vec![f64::NAN; ts.len()];
-    };
-    ts.iter()
-        .map(|&t| {
-            let (x, _) = traj.sample(t);
-            model.observe(t, &xvec(model, &x), params, &mut y);
-            y[obs]
-        })
-        .collect()
+    move |t, x| {
+        let mut y = vec![0.0; nobs];
+        model.observe(t, &xvec(model, x), params, &mut y);
+        y[obs]
+    }
+}
+
+/// y(t) along a recorded solution (right-continuous at events; NaN without a record).
+fn observable_along<'a, M: HybridModel>(
+    model: &'a M,
+    params: &'a OVector<f64, M::P>,
+    sol: &'a Solution,
+    obs: usize,
+) -> impl Fn(f64) -> f64 + 'a
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let y_at = observer(model, params, obs);
+    move |t| match sol.trajectory.as_ref() {
+        Some(traj) => y_at(t, &traj.sample(t).0),
+        None => f64::NAN,
+    }
 }
 
 /// Cumulative integrals F(t) = ∫₀ᵗ f ds at the times `ts` (sorted, from 0) for a
@@ -313,22 +296,14 @@ fn observable_integral<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let nobs = model.info().nobservables();
-    let y_at = |t: f64, x: &[f64]| {
-        let mut y = vec![0.0; nobs];
-        model.observe(t, &xvec(model, x), params, &mut y);
-        y[obs]
-    };
-    let right = |t: f64| match sol.trajectory.as_ref() {
-        Some(traj) => y_at(t, &traj.sample(t).0),
-        None => f64::NAN,
-    };
+    let y_at = observer(model, params, obs);
+    let right = observable_along(model, params, sol, obs);
     let left = |t: f64| match sol.events.iter().find(|e| e.t == t) {
         Some(e) => y_at(t, &e.x_before),
         None => right(t),
     };
     let jumps: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
-    cumulative_piecewise(ts, &jumps, left, right)
+    cumulative_piecewise(ts, &jumps, left, &right)
 }
 
 /// The data of Figure 1 for observable `obs` and parameter `k`.
@@ -350,7 +325,8 @@ where
     let t_end = sol.t_end;
     let n = 2001;
     let ts: Vec<f64> = (0..n).map(|i| t_end * i as f64 / (n - 1) as f64).collect();
-    let y = observable_on(model, params, sol, obs, &ts);
+    let y_of = observable_along(model, params, sol, obs);
+    let y: Vec<f64> = ts.iter().map(|&t| y_of(t)).collect();
     let dens: Vec<f64> = ts.iter().map(|&t| mu.density(t)[k]).collect();
     // MV-AD: ∫₀ᵗ density + Σ_{t_k ≤ t} α_k (the density is right-continuous; its left
     // limit at an event comes from the step that ends there).
@@ -421,39 +397,19 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{Cli, Command};
+    use crate::cli::test_support::{args, json, scratch_dir, tight};
     use approx::assert_relative_eq;
-    use clap::Parser;
     use mvad::runtime::fixtures::Ball;
-
-    fn args(extra: &[&str]) -> MeasureArgs {
-        let mut v = vec!["mvad", "measure", "ball.hyb"];
-        v.extend_from_slice(extra);
-        match Cli::try_parse_from(v).expect("parses").command {
-            Command::Measure(a) => a,
-            _ => unreachable!(),
-        }
-    }
 
     #[test]
     fn json_density_atoms_and_the_pairing_with_one() {
         let out = run(
             &Ball::new(),
             "ball.hyb",
-            &args(&[
-                "--observable",
-                "height",
-                "--wrt",
-                "e",
-                "--json",
-                "--rtol",
-                "1e-10",
-                "--atol",
-                "1e-12",
-            ]),
+            &args(&tight(&["--observable", "height", "--wrt", "e", "--json"])),
         )
         .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         assert_eq!(v["observable"], "height");
         assert_eq!(v["grid"].as_array().map(Vec::len), Some(201));
         assert_eq!(v["density"]["e"].as_array().map(Vec::len), Some(201));
@@ -474,9 +430,10 @@ mod tests {
 
     #[test]
     fn velocity_has_atoms_and_the_plot_compares_with_fd() {
-        let dir = std::env::temp_dir().join(format!("mvad-measure-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("dir");
-        let svg = dir.join("fig.svg").to_string_lossy().to_string();
+        let svg = scratch_dir("measure")
+            .join("fig.svg")
+            .to_string_lossy()
+            .to_string();
         let out = run(
             &Ball::new(),
             "ball.hyb",
@@ -491,7 +448,7 @@ mod tests {
             ]),
         )
         .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         // Second impact: α = −J t' with J = (1 + e) |v⁻|, t' = dt₂/de = 2 v₁/g.
         let a = v["atoms"][1]["values"]["e"].as_f64().expect("atom");
         assert!(a < -1.0, "{a}");

@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
 use mvad::runtime::solution::{Method, Options};
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
 pub mod check;
@@ -24,6 +24,8 @@ pub mod output;
 pub mod plot;
 pub mod progress;
 pub mod simulate;
+#[cfg(test)]
+pub mod spec_keys;
 pub mod sweep;
 pub mod workprec;
 
@@ -111,6 +113,13 @@ impl CliError {
     pub fn message(&self) -> &str {
         match self {
             CliError::Input(m) | CliError::Run(m) => m,
+        }
+    }
+    /// The same kind of failure (and exit status) with the message `f` makes of it.
+    pub fn map_message(self, f: impl FnOnce(&str) -> String) -> Self {
+        match self {
+            CliError::Input(m) => CliError::Input(f(&m)),
+            CliError::Run(m) => CliError::Run(f(&m)),
         }
     }
 }
@@ -359,6 +368,31 @@ where
     ))
 }
 
+/// Index of observable `name`, or a bad-input error listing the known ones.
+pub fn observable_index(info: &ModelInfo, name: &str) -> Result<usize, CliError> {
+    info.observable_index(name).ok_or_else(|| {
+        CliError::Input(format!(
+            "error: unknown observable `{name}`; {}",
+            if info.observables.is_empty() {
+                "the model declares no observables".to_string()
+            } else {
+                format!("known observables: {}", info.observables.join(", "))
+            }
+        ))
+    })
+}
+
+/// Checks the relative step h of central differences: 0 < h < 1.
+pub fn check_step(step: f64) -> Result<(), CliError> {
+    if step.is_finite() && step > 0.0 && step < 1.0 {
+        Ok(())
+    } else {
+        Err(CliError::Input(format!(
+            "error: --step must be in (0, 1), got {step}"
+        )))
+    }
+}
+
 /// Maps a runtime failure to an exit status: bad input (options, parameters, horizon)
 /// is 2, a model that ran and failed (non-finite values, step size underflow, too many
 /// events) is 1.
@@ -407,19 +441,82 @@ pub fn parse_wrt(names: &[String], wrt: Option<&str>) -> Result<Vec<usize>, CliE
     Ok(out)
 }
 
+/// Helpers the commands' unit tests share.
+#[cfg(test)]
+pub mod test_support {
+    use super::*;
+    use serde_json::Value;
+
+    /// Tolerances at which the E1 ball is accurate to about 1e-10.
+    pub const TIGHT: [&str; 4] = ["--rtol", "1e-10", "--atol", "1e-12"];
+
+    /// The arguments of one command, picked out of a parsed command line.
+    pub trait CommandArgs: Sized {
+        /// The command's name on the command line.
+        const NAME: &'static str;
+        /// These arguments, if `cmd` is this command.
+        fn pick(cmd: Command) -> Option<Self>;
+    }
+
+    macro_rules! command_args {
+        ($($ty:ty => $variant:ident, $name:literal;)*) => {$(
+            impl CommandArgs for $ty {
+                const NAME: &'static str = $name;
+                fn pick(cmd: Command) -> Option<Self> {
+                    match cmd {
+                        Command::$variant(a) => Some(a),
+                        _ => None,
+                    }
+                }
+            }
+        )*};
+    }
+
+    command_args! {
+        check::CheckArgs => Check, "check";
+        simulate::SimulateArgs => Simulate, "simulate";
+        grad::GradArgs => Grad, "grad";
+        measure::MeasureArgs => Measure, "measure";
+        fdcheck::FdcheckArgs => Fdcheck, "fdcheck";
+        sweep::SweepArgs => Sweep, "sweep";
+        workprec::WorkprecArgs => Workprec, "workprec";
+    }
+
+    /// `mvad NAME ball.hyb EXTRA…` parsed into the arguments of command NAME.
+    pub fn args<A: CommandArgs>(extra: &[&str]) -> A {
+        let mut words = vec!["mvad", A::NAME, "ball.hyb"];
+        words.extend_from_slice(extra);
+        let cli = Cli::try_parse_from(words).expect("the arguments parse");
+        A::pick(cli.command).expect("the command asked for")
+    }
+
+    /// `extra` followed by [`TIGHT`].
+    pub fn tight<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+        extra.iter().copied().chain(TIGHT).collect()
+    }
+
+    /// The JSON object a command printed.
+    pub fn json(out: &str) -> Value {
+        serde_json::from_str(out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
+    }
+
+    /// A scratch directory for the files of the test named `tag`.
+    pub fn scratch_dir(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("mvad-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a scratch directory");
+        dir
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::test_support::args;
     use super::*;
     use clap::CommandFactory;
     use mvad::runtime::fixtures::Ball;
 
     fn common(extra: &[&str]) -> Common {
-        let mut args = vec!["mvad", "check", "m.hyb"];
-        args.extend_from_slice(extra);
-        match Cli::try_parse_from(args).expect("parses").command {
-            Command::Check(g) => g.common,
-            _ => unreachable!("check was given"),
-        }
+        args::<check::CheckArgs>(extra).common
     }
 
     #[test]

@@ -195,6 +195,28 @@ impl Table {
     }
 }
 
+/// Table titles: the `fixed` ones, then `PREFIX NAME` for each parameter in `wrt`.
+pub fn param_header(fixed: &[&str], prefix: &str, names: &[String], wrt: &[usize]) -> Vec<String> {
+    fixed
+        .iter()
+        .map(|s| s.to_string())
+        .chain(wrt.iter().map(|&k| format!("{prefix}{}", names[k])))
+        .collect()
+}
+
+/// `items` joined by `sep`, or `empty` when there are none.
+pub fn join_or<S: AsRef<str>>(items: &[S], sep: &str, empty: &str) -> String {
+    if items.is_empty() {
+        empty.to_string()
+    } else {
+        items
+            .iter()
+            .map(AsRef::as_ref)
+            .collect::<Vec<_>>()
+            .join(sep)
+    }
+}
+
 /// Diagnostics as text lines (`warning: zeno at t = 1.9: ...`), empty if none.
 pub fn diagnostics_text(diags: &[Diagnostic]) -> String {
     let mut s = String::new();
@@ -249,6 +271,17 @@ mod tests {
         assert_eq!(lines[0], "a      long header");
         assert_eq!(lines[1], "-".repeat(18));
         assert_eq!(lines[2], "12345  x");
+    }
+
+    #[test]
+    fn headers_and_lists() {
+        let names: Vec<String> = ["e", "g", "h0"].map(String::from).to_vec();
+        assert_eq!(
+            param_header(&["#", "t"], "dt/d", &names, &[2, 0]),
+            ["#", "t", "dt/dh0", "dt/de"]
+        );
+        assert_eq!(join_or(&names, ", ", "-"), "e, g, h0");
+        assert_eq!(join_or::<String>(&[], ", ", "-"), "-");
     }
 
     #[test]

@@ -12,6 +12,7 @@ use std::ops::Range;
 use std::path::Path;
 use std::sync::OnceLock;
 
+use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -69,6 +70,105 @@ fn fail(path: &Path, e: impl std::fmt::Display) -> CliError {
     CliError::Run(format!("error: cannot draw `{}`: {e}", path.display()))
 }
 
+/// A picture that can be drawn on any plotters backend.
+trait Picture {
+    /// The size in pixels.
+    fn size(&self) -> (u32, u32);
+    /// Draws the whole picture on `root`.
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult;
+}
+
+/// Draws `pic` into `path`, as SVG or PNG by the extension.
+fn render(path: &Path, pic: &impl Picture) -> Result<(), CliError> {
+    let fmt = format_of(path)?;
+    ensure_font()?;
+    match fmt {
+        Format::Svg => present(path, SVGBackend::new(path, pic.size()), pic),
+        Format::Png => present(path, BitMapBackend::new(path, pic.size()), pic),
+    }
+}
+
+fn present<DB: DrawingBackend>(
+    path: &Path,
+    backend: DB,
+    pic: &impl Picture,
+) -> Result<(), CliError> {
+    let root = backend.into_drawing_area();
+    pic.draw(&root).map_err(|e| fail(path, e))?;
+    root.present().map_err(|e| fail(path, e))
+}
+
+/// The largest font size ≤ `want` (and ≥ 10) at which `text` fits the width of `area`
+/// with 10 px to spare on each side.
+fn fitting_size<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, text: &str, want: u32) -> u32 {
+    let room = area.dim_in_pixel().0.saturating_sub(20);
+    let mut size = want.max(10);
+    while size > 10 {
+        let width = area
+            .estimate_text_size(text, &("sans-serif", size).into_text_style(area))
+            .map(|(w, _)| w)
+            // A monospace glyph is 0.6 em wide.
+            .unwrap_or((text.chars().count() as f64 * 0.6 * f64::from(size)) as u32);
+        if width <= room {
+            break;
+        }
+        size -= 1;
+    }
+    size
+}
+
+/// A chart builder on `area` with the caption (shrunk to fit) and the margins every
+/// panel uses.
+fn panel<'a, 'b, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    caption_size: u32,
+    y_label_area: u32,
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut b = ChartBuilder::on(area);
+    b.caption(
+        caption,
+        ("sans-serif", fitting_size(area, caption, caption_size)),
+    )
+    .margin(10)
+    .x_label_area_size(40)
+    .y_label_area_size(y_label_area);
+    b
+}
+
+/// Draws `points` as a line in `style`, with a legend entry `label`.
+fn labelled_line<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    points: impl IntoIterator<Item = (f64, f64)>,
+    style: ShapeStyle,
+    label: &str,
+) -> DrawResult
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate<From = (f64, f64)>,
+{
+    chart
+        .draw_series(LineSeries::new(points, style))
+        .map_err(|e| e.to_string())?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+    Ok(())
+}
+
+/// Draws the legend box of `chart` at `pos`.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    pos: SeriesLabelPosition,
+) -> DrawResult {
+    chart
+        .configure_series_labels()
+        .position(pos)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
 /// A finite range covering `values`, padded by 5% (and never empty).
 pub fn span(values: impl IntoIterator<Item = f64>) -> Range<f64> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -87,20 +187,57 @@ pub fn span(values: impl IntoIterator<Item = f64>) -> Range<f64> {
     (lo - pad)..(hi + pad)
 }
 
-/// A positive range for a log axis covering the positive finite `values`.
-pub fn log_span(values: impl IntoIterator<Item = f64>) -> Range<f64> {
-    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
-    for v in values.into_iter().filter(|v| v.is_finite() && *v > 0.0) {
+/// Whole decades `(a, b)`, a < b, such that 10^a ≤ v ≤ 10^b for every finite v ≥ `floor`
+/// in `values`; `None` if there is no such value.
+pub fn decades(values: impl IntoIterator<Item = f64>, floor: f64) -> Option<(i32, i32)> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values
+        .into_iter()
+        .filter(|v| v.is_finite() && *v >= floor && *v > 0.0)
+    {
         lo = lo.min(v);
         hi = hi.max(v);
     }
-    if !lo.is_finite() || hi <= 0.0 {
-        return 1e-16..1.0;
+    if !lo.is_finite() {
+        return None;
     }
-    if hi <= lo {
-        return (lo / 10.0)..(hi * 10.0);
-    }
-    (lo / 2.0)..(hi * 2.0)
+    // The exponents of f64 lie in [−324, 309]: the casts cannot overflow.
+    let a = lo.log10().floor() as i32;
+    let b = (hi.log10().ceil() as i32).max(a + 1);
+    Some((a, b))
+}
+
+/// 10^e, correctly rounded (`powi` is off by ulps for large |e|).
+fn pow10(e: i32) -> f64 {
+    format!("1e{e}").parse().unwrap_or(f64::NAN)
+}
+
+/// The labelled ticks of a log axis over the decades a..=b: every decade, or every
+/// k-th one when there are more than seven, so that labels never crowd.
+pub fn decade_ticks(a: i32, b: i32) -> Vec<f64> {
+    let stride = ((b - a) as usize).div_ceil(6).max(1);
+    (a..=b).step_by(stride).map(pow10).collect()
+}
+
+/// A log axis over the decades a..=b, labelled at [`decade_ticks`] only; light grid
+/// lines at 2…9 × 10^k when the axis spans at most four decades, else at every decade.
+fn log_axis(a: i32, b: i32) -> WithKeyPoints<LogCoord<f64>> {
+    let light: Vec<f64> = if b - a <= 4 {
+        (a..b)
+            .flat_map(|e| (2..10).map(move |m| f64::from(m) * pow10(e)))
+            .collect()
+    } else {
+        (a..=b).map(pow10).collect()
+    };
+    (pow10(a)..pow10(b))
+        .log_scale()
+        .with_key_points(decade_ticks(a, b))
+        .with_light_points(light)
+}
+
+/// The label of a decade tick: `1e-14`.
+fn decade_label(v: &f64) -> String {
+    format!("1e{}", v.log10().round())
 }
 
 /// The data of Figure 1 for one observable y and one parameter θ.
@@ -130,168 +267,133 @@ pub struct Figure1 {
 
 /// Draws Figure 1 into `path` (.svg or .png).
 pub fn figure1(path: &Path, fig: &Figure1) -> Result<(), CliError> {
-    let fmt = format_of(path)?;
-    let size = (1200, 900);
-    match fmt {
-        Format::Svg => {
-            ensure_font()?;
-            let root = SVGBackend::new(path, size).into_drawing_area();
-            draw_figure1(&root, fig).map_err(|e| fail(path, e))?;
-            root.present().map_err(|e| fail(path, e))
-        }
-        Format::Png => {
-            ensure_font()?;
-            let root = BitMapBackend::new(path, size).into_drawing_area();
-            draw_figure1(&root, fig).map_err(|e| fail(path, e))?;
-            root.present().map_err(|e| fail(path, e))
-        }
-    }
+    render(path, fig)
 }
 
-fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1) -> DrawResult {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
-    root.fill(&WHITE).map_err(e)?;
-    let root = root.titled(&fig.title, ("sans-serif", 24)).map_err(e)?;
-    let (top, bottom) = root.split_vertically(root.dim_in_pixel().1 / 2);
-    let (tl, tr) = top.split_horizontally(top.dim_in_pixel().0 / 2);
+impl Picture for Figure1 {
+    fn size(&self) -> (u32, u32) {
+        (1200, 900)
+    }
 
-    // Top left: y(t) with the events as red dashed lines.
-    let t_range = span(fig.trajectory.iter().map(|p| p.0));
-    let y_range = span(fig.trajectory.iter().map(|p| p.1));
-    {
-        let mut chart = ChartBuilder::on(&tl)
-            .caption(
-                format!("{}(t) and events", fig.observable),
-                ("sans-serif", 18),
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        let fig = self;
+        let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let root = root
+            .titled(
+                &fig.title,
+                ("sans-serif", fitting_size(root, &fig.title, 24)),
             )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(t_range.clone(), y_range.clone())
             .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("t")
-            .y_desc(fig.observable.as_str())
-            .draw()
-            .map_err(e)?;
-        chart
-            .draw_series(LineSeries::new(
-                fig.trajectory.iter().copied(),
-                BLUE.stroke_width(2),
-            ))
-            .map_err(e)?;
-        for &tk in &fig.events {
+        let (top, bottom) = root.split_vertically(root.dim_in_pixel().1 / 2);
+        let (tl, tr) = top.split_horizontally(top.dim_in_pixel().0 / 2);
+
+        // Top left: y(t) with the events as red dashed lines.
+        let t_range = span(fig.trajectory.iter().map(|p| p.0));
+        let y_range = span(fig.trajectory.iter().map(|p| p.1));
+        {
+            let caption = format!("{}(t) and events", fig.observable);
+            let mut chart = panel(&tl, &caption, 18, 60)
+                .build_cartesian_2d(t_range.clone(), y_range.clone())
+                .map_err(e)?;
             chart
-                .draw_series(DashedLineSeries::new(
-                    [(tk, y_range.start), (tk, y_range.end)],
-                    6,
-                    4,
-                    RED.stroke_width(1),
+                .configure_mesh()
+                .x_desc("t")
+                .y_desc(fig.observable.as_str())
+                .draw()
+                .map_err(e)?;
+            chart
+                .draw_series(LineSeries::new(
+                    fig.trajectory.iter().copied(),
+                    BLUE.stroke_width(2),
                 ))
                 .map_err(e)?;
+            for &tk in &fig.events {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        [(tk, y_range.start), (tk, y_range.end)],
+                        6,
+                        4,
+                        RED.stroke_width(1),
+                    ))
+                    .map_err(e)?;
+            }
         }
-    }
 
-    // Top right: density (line) and atoms (stems with a dot).
-    {
-        let d_range = span(
-            fig.density
-                .iter()
-                .map(|p| p.1)
-                .chain(fig.atoms.iter().map(|a| a.1))
-                .chain(std::iter::once(0.0)),
-        );
-        let mut chart = ChartBuilder::on(&tr)
-            .caption(
-                format!("d{}/d{}: density and atoms", fig.observable, fig.param),
-                ("sans-serif", 18),
-            )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(t_range.clone(), d_range)
-            .map_err(e)?;
-        chart.configure_mesh().x_desc("t").draw().map_err(e)?;
-        chart
-            .draw_series(LineSeries::new(
-                fig.density.iter().copied(),
-                BLUE.stroke_width(2),
-            ))
-            .map_err(e)?
-            .label("density")
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE));
-        for &(tk, a) in &fig.atoms {
-            chart
-                .draw_series(LineSeries::new([(tk, 0.0), (tk, a)], RED.stroke_width(2)))
-                .map_err(e)?;
-        }
-        chart
-            .draw_series(
-                fig.atoms
+        // Top right: density (line) and atoms (stems with a dot).
+        {
+            let d_range = span(
+                fig.density
                     .iter()
-                    .map(|&(tk, a)| Circle::new((tk, a), 5, RED.filled())),
-            )
-            .map_err(e)?
-            .label("atoms")
-            .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(e)?;
-    }
+                    .map(|p| p.1)
+                    .chain(fig.atoms.iter().map(|a| a.1))
+                    .chain(std::iter::once(0.0)),
+            );
+            // Headroom for the legend in the upper right corner.
+            let d_range = d_range.start..d_range.end + 0.25 * (d_range.end - d_range.start);
+            let caption = format!("d{}/d{}: density and atoms", fig.observable, fig.param);
+            let mut chart = panel(&tr, &caption, 18, 60)
+                .build_cartesian_2d(t_range.clone(), d_range)
+                .map_err(e)?;
+            chart.configure_mesh().x_desc("t").draw().map_err(e)?;
+            let density = fig.density.iter().copied();
+            labelled_line(&mut chart, density, BLUE.stroke_width(2), "density")?;
+            for &(tk, a) in &fig.atoms {
+                chart
+                    .draw_series(LineSeries::new([(tk, 0.0), (tk, a)], RED.stroke_width(2)))
+                    .map_err(e)?;
+            }
+            chart
+                .draw_series(
+                    fig.atoms
+                        .iter()
+                        .map(|&(tk, a)| Circle::new((tk, a), 5, RED.filled())),
+                )
+                .map_err(e)?
+                .label("atoms")
+                .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        }
 
-    // Bottom: d/dθ ∫₀ᵗ y ds, MV-AD against FD.
-    {
-        let c_range = span(
-            fig.cumulative_mvad
-                .iter()
-                .chain(&fig.cumulative_fd)
-                .map(|p| p.1),
-        );
-        let mut chart = ChartBuilder::on(&bottom)
-            .caption(
-                format!(
-                    "d/d{} of the integral of {} up to t: MV-AD vs central FD   {}",
-                    fig.param, fig.observable, fig.note
-                ),
-                ("sans-serif", 18),
-            )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(t_range, c_range)
-            .map_err(e)?;
-        chart.configure_mesh().x_desc("t").draw().map_err(e)?;
-        chart
-            .draw_series(LineSeries::new(
-                fig.cumulative_mvad.iter().copied(),
-                BLUE.stroke_width(3),
-            ))
-            .map_err(e)?
-            .label("MV-AD")
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE.stroke_width(3)));
-        chart
-            .draw_series(DashedLineSeries::new(
-                fig.cumulative_fd.iter().copied(),
-                8,
-                5,
-                RED.stroke_width(2),
-            ))
-            .map_err(e)?
-            .label("central FD")
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(e)?;
+        // Bottom: d/dθ ∫₀ᵗ y ds, MV-AD against FD; the caption on two lines (the
+        // comparison's numbers below the heading), each shrunk to fit.
+        {
+            let heading = format!(
+                "d/d{} of ∫ {} ds over [0, t]: MV-AD vs central FD",
+                fig.param, fig.observable
+            );
+            let bottom = bottom
+                .titled(
+                    &heading,
+                    ("sans-serif", fitting_size(&bottom, &heading, 18)),
+                )
+                .map_err(e)?;
+            let c_range = span(
+                fig.cumulative_mvad
+                    .iter()
+                    .chain(&fig.cumulative_fd)
+                    .map(|p| p.1),
+            );
+            let mut chart = panel(&bottom, &fig.note, 15, 60)
+                .build_cartesian_2d(t_range, c_range)
+                .map_err(e)?;
+            chart.configure_mesh().x_desc("t").draw().map_err(e)?;
+            let mvad = fig.cumulative_mvad.iter().copied();
+            labelled_line(&mut chart, mvad, BLUE.stroke_width(3), "MV-AD")?;
+            chart
+                .draw_series(DashedLineSeries::new(
+                    fig.cumulative_fd.iter().copied(),
+                    8,
+                    5,
+                    RED.stroke_width(2),
+                ))
+                .map_err(e)?
+                .label("central FD")
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED.stroke_width(2)));
+            legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+        }
+        Ok(())
     }
-    Ok(())
 }
 
 /// One curve of a work-precision picture: (wall seconds, error) points.
@@ -299,90 +401,107 @@ fn draw_figure1<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure1
 pub struct Curve {
     /// Legend text.
     pub label: String,
-    /// (wall seconds, error) points; non-positive errors are drawn at the floor.
+    /// (wall seconds, error) points, in tolerance order. Errors below [`ERROR_FLOOR`]
+    /// (an exact 0 included) are drawn on the bottom edge (a decade below the
+    /// smallest resolved error) as triangles, and
+    /// the panel's legend says so; points with a non-finite or non-positive time or a
+    /// non-finite error are left out.
     pub points: Vec<(f64, f64)>,
+}
+
+/// Errors below this are not resolved by a log axis of doubles: they sit on the floor.
+pub const ERROR_FLOOR: f64 = 1e-17;
+
+/// Work-precision panels (one per quantity, side by side).
+struct WorkPrec<'a> {
+    title: &'a str,
+    panels: &'a [(String, Vec<Curve>)],
 }
 
 /// Draws work-precision panels (one per quantity, side by side) log-log into `path`.
 pub fn workprec(path: &Path, title: &str, panels: &[(String, Vec<Curve>)]) -> Result<(), CliError> {
-    let fmt = format_of(path)?;
-    let size = (600 * panels.len().max(1) as u32, 500);
-    match fmt {
-        Format::Svg => {
-            ensure_font()?;
-            let root = SVGBackend::new(path, size).into_drawing_area();
-            draw_workprec(&root, title, panels).map_err(|e| fail(path, e))?;
-            root.present().map_err(|e| fail(path, e))
-        }
-        Format::Png => {
-            ensure_font()?;
-            let root = BitMapBackend::new(path, size).into_drawing_area();
-            draw_workprec(&root, title, panels).map_err(|e| fail(path, e))?;
-            root.present().map_err(|e| fail(path, e))
-        }
-    }
+    render(path, &WorkPrec { title, panels })
 }
 
-fn draw_workprec<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    title: &str,
-    panels: &[(String, Vec<Curve>)],
-) -> DrawResult {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
-    root.fill(&WHITE).map_err(e)?;
-    let root = root.titled(title, ("sans-serif", 22)).map_err(e)?;
-    let areas = root.split_evenly((1, panels.len().max(1)));
-    const FLOOR: f64 = 1e-17;
-    let colors = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
-    for ((name, curves), area) in panels.iter().zip(areas.iter()) {
-        let xr = log_span(curves.iter().flat_map(|c| c.points.iter().map(|p| p.0)));
-        let yr = log_span(
-            curves
-                .iter()
-                .flat_map(|c| c.points.iter().map(|p| p.1.max(FLOOR))),
-        );
-        let mut chart = ChartBuilder::on(area)
-            .caption(name.as_str(), ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(xr.log_scale(), yr.log_scale())
-            .map_err(e)?;
-        chart
-            .configure_mesh()
-            .x_desc("wall time (s)")
-            .y_desc("error")
-            .x_label_formatter(&|v| format!("{v:.0e}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .draw()
-            .map_err(e)?;
-        for (i, c) in curves.iter().enumerate() {
-            let color = colors[i % colors.len()];
-            let pts: Vec<(f64, f64)> = c
-                .points
-                .iter()
-                .filter(|p| p.0.is_finite() && p.0 > 0.0 && p.1.is_finite())
-                .map(|&(x, y)| (x, y.max(FLOOR)))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
-                .map_err(e)?
-                .label(c.label.as_str())
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-            chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
-                .map_err(e)?;
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(e)?;
+impl Picture for WorkPrec<'_> {
+    fn size(&self) -> (u32, u32) {
+        (600 * self.panels.len().clamp(1, 8) as u32, 500)
     }
-    Ok(())
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
+        let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let root = root
+            .titled(
+                self.title,
+                ("sans-serif", fitting_size(root, self.title, 22)),
+            )
+            .map_err(e)?;
+        let areas = root.split_evenly((1, self.panels.len().max(1)));
+        let colors = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+        for ((name, curves), area) in self.panels.iter().zip(areas.iter()) {
+            let kept = |c: &Curve| -> Vec<(f64, f64)> {
+                c.points
+                    .iter()
+                    .copied()
+                    .filter(|p| p.0.is_finite() && p.0 > 0.0 && p.1.is_finite())
+                    .collect()
+            };
+            let all: Vec<(f64, f64)> = curves.iter().flat_map(kept).collect();
+            let (xa, xb) = decades(all.iter().map(|p| p.0), 0.0).unwrap_or((-6, 0));
+            let (ya, yb) = decades(all.iter().map(|p| p.1), ERROR_FLOOR).unwrap_or((-17, -15));
+            // A decade of headroom for the legend in the upper right corner, and one
+            // below the smallest resolved error for the floor, when a point needs it.
+            let yb = yb + 1;
+            let any_floored = all.iter().any(|p| p.1 < ERROR_FLOOR);
+            let ya = if any_floored { ya - 1 } else { ya };
+            let floor = pow10(ya);
+            let mut chart = panel(area, name, 18, 60)
+                .build_cartesian_2d(log_axis(xa, xb), log_axis(ya, yb))
+                .map_err(e)?;
+            chart
+                .configure_mesh()
+                .x_desc("wall time (s)")
+                .y_desc("error")
+                .x_label_formatter(&decade_label)
+                .y_label_formatter(&decade_label)
+                .draw()
+                .map_err(e)?;
+            for (i, c) in curves.iter().enumerate() {
+                let color = colors[i % colors.len()];
+                let pts = kept(c)
+                    .into_iter()
+                    .map(|(x, y)| (x, if y < ERROR_FLOOR { floor } else { y }));
+                labelled_line(&mut chart, pts, color.stroke_width(2), &c.label)?;
+                let resolved = kept(c).into_iter().filter(|p| p.1 >= ERROR_FLOOR);
+                chart
+                    .draw_series(resolved.map(|p| Circle::new(p, 4, color.filled())))
+                    .map_err(e)?;
+                let floored: Vec<(f64, f64)> = kept(c)
+                    .into_iter()
+                    .filter(|p| p.1 < ERROR_FLOOR)
+                    .map(|p| (p.0, floor))
+                    .collect();
+                chart
+                    .draw_series(
+                        floored
+                            .into_iter()
+                            .map(|p| TriangleMarker::new(p, 7, color.stroke_width(2))),
+                    )
+                    .map_err(e)?;
+            }
+            if any_floored {
+                // An empty series that only puts its entry in the legend.
+                chart
+                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                    .map_err(e)?
+                    .label(format!("error < {ERROR_FLOOR:.0e} (or 0): on the floor"))
+                    .legend(|(x, y)| TriangleMarker::new((x + 10, y), 7, BLACK.stroke_width(2)));
+            }
+            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -406,9 +525,7 @@ mod tests {
     }
 
     fn tmp(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("mvad-plot-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        dir.join(name)
+        crate::cli::test_support::scratch_dir("plot").join(name)
     }
 
     #[test]
@@ -441,8 +558,26 @@ mod tests {
             ("C".to_string(), curves.clone()),
             ("dC/de".to_string(), curves),
         ];
-        workprec(&tmp("wp.svg"), "wp", &panels).expect("svg");
+        let svg = tmp("wp.svg");
+        workprec(&svg, "wp", &panels).expect("svg");
+        let text = std::fs::read_to_string(&svg).expect("written");
+        // The exact zero sits on the floor, and the legend says so; labels are decades.
+        assert!(text.contains("on the floor"), "no floor legend");
+        let labels: Vec<&str> = text.lines().filter(|l| l.parse::<f64>().is_ok()).collect();
+        assert!(
+            labels.contains(&"1e-6") && labels.contains(&"1e-4"),
+            "{labels:?}"
+        );
+        assert!(
+            labels.iter().all(|l| l.starts_with("1e")),
+            "a label that is not a decade: {labels:?}"
+        );
         workprec(&tmp("wp.png"), "wp", &panels).expect("png");
+        // Without a floored point there is no floor entry.
+        let clean = vec![("C".to_string(), vec![panels[0].1[1].clone()])];
+        workprec(&svg, "wp", &clean).expect("svg");
+        let text = std::fs::read_to_string(&svg).expect("written");
+        assert!(!text.contains("on the floor"));
     }
 
     #[test]
@@ -471,7 +606,22 @@ mod tests {
         assert!(r.start < r.end && r.start.is_finite());
         let r = span([]);
         assert!(r.start < r.end);
-        let r = log_span([0.0, -1.0, 1e-3]);
-        assert!(r.start > 0.0 && r.start < r.end);
+    }
+
+    #[test]
+    fn log_axes_cover_whole_decades_with_few_labels() {
+        assert_eq!(decades([1.1e-3, 3e-3, f64::NAN], 0.0), Some((-3, -2)));
+        assert_eq!(decades([8.2e-16, 1.8e-14], ERROR_FLOOR), Some((-16, -13)));
+        assert_eq!(decades([1e-3], 0.0), Some((-3, -2)));
+        assert_eq!(decades([0.0, 1e-18, -1.0], ERROR_FLOOR), None);
+        assert_eq!(decade_ticks(-16, -13), vec![1e-16, 1e-15, 1e-14, 1e-13]);
+        for (a, b) in [(-15, -3), (-17, 0), (-300, 300)] {
+            let ticks = decade_ticks(a, b);
+            assert!(ticks.len() <= 7 && ticks.len() >= 2, "{a}..{b}: {ticks:?}");
+            assert_eq!(ticks[0], pow10(a));
+        }
+        assert_eq!(decade_label(&1e-14), "1e-14");
+        assert_eq!(decade_label(&pow10(-3)), "1e-3");
+        assert_eq!(decade_label(&1.0), "1e0");
     }
 }

@@ -291,19 +291,9 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{Cli, Command};
+    use crate::cli::test_support::{args, json, scratch_dir};
     use approx::assert_relative_eq;
-    use clap::Parser;
     use mvad::runtime::fixtures::Ball;
-
-    fn args(extra: &[&str]) -> SimulateArgs {
-        let mut v = vec!["mvad", "simulate", "ball.hyb"];
-        v.extend_from_slice(extra);
-        match Cli::try_parse_from(v).expect("parses").command {
-            Command::Simulate(a) => a,
-            _ => unreachable!(),
-        }
-    }
 
     /// Closed form of the E1 ball's height before the first impact: h0 − g t²/2.
     #[test]
@@ -352,9 +342,7 @@ mod tests {
 
     #[test]
     fn out_file_and_json() {
-        let dir = std::env::temp_dir().join(format!("mvad-sim-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("dir");
-        let path = dir.join("traj.csv");
+        let path = scratch_dir("simulate").join("traj.csv");
         let p = path.to_string_lossy().to_string();
         let out = run(&Ball::new(), "ball.hyb", &args(&["--out", &p])).expect("runs");
         assert!(out.contains("impact"), "{out}");
@@ -366,7 +354,7 @@ mod tests {
             &args(&["--json", "--points", "5"]),
         )
         .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         assert_eq!(v["columns"][2], "h");
         assert_eq!(v["rows"].as_array().map(Vec::len), Some(5 + 4));
         assert_eq!(v["events"][0]["name"], "impact");

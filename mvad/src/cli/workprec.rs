@@ -28,7 +28,7 @@ use serde_json::{Map, Value};
 use super::output::{g, json_text, num, Table};
 use super::plot::{format_of, workprec as plot_workprec, Curve};
 use super::progress::Progress;
-use super::{param_index, parse_number, setup, solve_err, CliError, CmdResult, Common};
+use super::{check_step, param_index, parse_number, setup, solve_err, CliError, CmdResult, Common};
 
 /// Arguments of `mvad workprec`.
 #[derive(Args, Debug)]
@@ -72,6 +72,26 @@ struct Point {
     grad: Vec<f64>,
     grad_err: f64,
     step: f64,
+}
+
+/// The reference values the errors are measured against: C and dC/dθ over `--wrt`.
+struct Reference {
+    cost: f64,
+    grad: Vec<f64>,
+}
+
+impl Point {
+    /// A point with its errors against `r`.
+    fn scored(seconds: f64, cost: f64, grad: Vec<f64>, step: f64, r: &Reference) -> Point {
+        Point {
+            seconds,
+            cost,
+            cost_err: rel_error(cost, r.cost),
+            grad_err: grad_error(&grad, &r.grad),
+            grad,
+            step,
+        }
+    }
 }
 
 /// Mean wall time of `f` over enough repetitions, and its last result.
@@ -119,12 +139,7 @@ where
     if let Some(p) = &args.plot {
         format_of(p)?;
     }
-    if !(args.step.is_finite() && args.step > 0.0 && args.step < 1.0) {
-        return Err(CliError::Input(format!(
-            "error: --step must be in (0, 1), got {}",
-            args.step
-        )));
-    }
+    check_step(args.step)?;
     if !(args.atol_ratio.is_finite() && args.atol_ratio > 0.0) {
         return Err(CliError::Input(format!(
             "error: --atol-ratio must be positive, got {}",
@@ -174,11 +189,13 @@ where
             "given, the rest MV-AD at rtol 1e-13"
         };
     }
-    let ref_cost = ref_cost.unwrap_or(f64::NAN);
-    let ref_g: Vec<f64> = wrt
-        .iter()
-        .map(|&k| ref_grad[k].unwrap_or(f64::NAN))
-        .collect();
+    let reference = Reference {
+        cost: ref_cost.unwrap_or(f64::NAN),
+        grad: wrt
+            .iter()
+            .map(|&k| ref_grad[k].unwrap_or(f64::NAN))
+            .collect(),
+    };
 
     let progress = Progress::new(TOLERANCES.len(), "workprec");
     let mut rows = Vec::new();
@@ -189,9 +206,8 @@ where
             atol,
             ..s.opts.clone()
         };
-        let mv = mvad_point(model, &s.params, &o, wrt, ref_cost, &ref_g).map_err(solve_err)?;
-        let fd =
-            fd_point(model, &s.params, &o, wrt, args.step, ref_cost, &ref_g).map_err(solve_err)?;
+        let mv = mvad_point(model, &s.params, &o, wrt, &reference).map_err(solve_err)?;
+        let fd = fd_point(model, &s.params, &o, wrt, args.step, &reference).map_err(solve_err)?;
         rows.push(Row {
             rtol,
             atol,
@@ -234,16 +250,17 @@ where
 
     let names: Vec<String> = wrt.iter().map(|&k| info.params[k].clone()).collect();
     if args.common.json {
+        // {NAME: value} over the `--wrt` parameters.
+        let named = |values: &[f64]| -> Value {
+            let pairs = names.iter().zip(values);
+            Value::Object(pairs.map(|(n, v)| (n.clone(), num(*v))).collect())
+        };
         let point = |p: &Point| {
-            let mut gm = Map::new();
-            for (n, v) in names.iter().zip(&p.grad) {
-                gm.insert(n.clone(), num(*v));
-            }
             serde_json::json!({
                 "wall_seconds": num(p.seconds),
                 "cost": num(p.cost),
                 "cost_error": num(p.cost_err),
-                "gradient": Value::Object(gm),
+                "gradient": named(&p.grad),
                 "gradient_error": num(p.grad_err),
             })
         };
@@ -260,16 +277,12 @@ where
                 })
             })
             .collect();
-        let mut gm = Map::new();
-        for (n, v) in names.iter().zip(&ref_g) {
-            gm.insert(n.clone(), num(*v));
-        }
         let mut m = Map::new();
         m.insert("model".into(), Value::from(info.name.clone()));
         m.insert("wrt".into(), Value::from(names.clone()));
         m.insert(
             "reference".into(),
-            serde_json::json!({"cost": num(ref_cost), "gradient": Value::Object(gm), "source": source}),
+            serde_json::json!({"cost": num(reference.cost), "gradient": named(&reference.grad), "source": source}),
         );
         m.insert("rows".into(), Value::Array(rows_json));
         return Ok(json_text(&Value::Object(m)));
@@ -280,8 +293,8 @@ where
          errors are relative; dC/dθ error = max |Δ| / max |ref| over the parameters\n\n",
         info.name,
         names.join(", "),
-        g(ref_cost, 15),
-        ref_g.iter().map(|&v| g(v, 15)).collect::<Vec<_>>().join(", ")
+        g(reference.cost, 15),
+        reference.grad.iter().map(|&v| g(v, 15)).collect::<Vec<_>>().join(", ")
     );
     let mut t = Table::new(&[
         "rtol",
@@ -317,22 +330,14 @@ fn mvad_point<M: HybridModel>(
     params: &OVector<f64, M::P>,
     opts: &Options,
     wrt: &[usize],
-    ref_cost: f64,
-    ref_g: &[f64],
+    reference: &Reference,
 ) -> Result<Point, SolveError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let (seconds, sol): (f64, Solution) = timed(|| solve(model, params, opts))?;
     let grad: Vec<f64> = wrt.iter().map(|&k| sol.gradient[k]).collect();
-    Ok(Point {
-        seconds,
-        cost: sol.cost,
-        cost_err: rel_error(sol.cost, ref_cost),
-        grad_err: grad_error(&grad, ref_g),
-        grad,
-        step: 0.0,
-    })
+    Ok(Point::scored(seconds, sol.cost, grad, 0.0, reference))
 }
 
 fn fd_point<M: HybridModel>(
@@ -341,8 +346,7 @@ fn fd_point<M: HybridModel>(
     opts: &Options,
     wrt: &[usize],
     rel_step: f64,
-    ref_cost: f64,
-    ref_g: &[f64],
+    reference: &Reference,
 ) -> Result<Point, SolveError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -367,31 +371,14 @@ where
         }
         Ok((cost, grad))
     })?;
-    Ok(Point {
-        seconds,
-        cost,
-        cost_err: rel_error(cost, ref_cost),
-        grad_err: grad_error(&grad, ref_g),
-        grad,
-        step: rel_step,
-    })
+    Ok(Point::scored(seconds, cost, grad, rel_step, reference))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::{Cli, Command};
-    use clap::Parser;
+    use crate::cli::test_support::{args, json};
     use mvad::runtime::fixtures::Ball;
-
-    fn args(extra: &[&str]) -> WorkprecArgs {
-        let mut v = vec!["mvad", "workprec", "ball.hyb"];
-        v.extend_from_slice(extra);
-        match Cli::try_parse_from(v).expect("parses").command {
-            Command::Workprec(a) => a,
-            _ => unreachable!(),
-        }
-    }
 
     #[test]
     fn errors_fall_with_the_tolerance_against_the_closed_form() {
@@ -409,7 +396,7 @@ mod tests {
             ]),
         )
         .expect("runs");
-        let v: Value = serde_json::from_str(&out).expect("json");
+        let v = json(&out);
         assert_eq!(v["reference"]["source"], "given");
         let rows = v["rows"].as_array().expect("rows");
         assert_eq!(rows.len(), TOLERANCES.len());
