@@ -1,7 +1,8 @@
 //! Finite-difference checks of dC/dθ: central differences and a step sweep.
 //!
-//! For parameter i the absolute step is h = rel_step · max(|θ_i|, 1) (so a parameter whose
-//! value is 0 still gets a step of rel_step), and
+//! For parameter i the absolute step is h = rel_step · |θ_i| ([`fd_step`]; rel_step itself
+//! when θ_i = 0), so a tiny parameter such as a time constant of 1e-8 is perturbed relative
+//! to its own size and never changes sign, and
 //!
 //! ```text
 //!   dC/dθ_i ≈ (C(θ + h e_i) − C(θ − h e_i)) / (θ_i⁺ − θ_i⁻)
@@ -18,6 +19,16 @@ use crate::model::{HybridModel, ModelAlloc};
 use crate::solution::Options;
 use crate::solve::solve;
 use nalgebra::{DefaultAllocator, OVector};
+
+/// The absolute central-difference step for a parameter of value `theta`:
+/// rel_step · |θ|, or rel_step when θ = 0.
+pub fn fd_step(theta: f64, rel_step: f64) -> f64 {
+    if theta == 0.0 {
+        rel_step
+    } else {
+        rel_step * theta.abs()
+    }
+}
 
 /// Default relative step of the central differences.
 pub const DEFAULT_REL_STEP: f64 = 1e-6;
@@ -76,7 +87,7 @@ where
             what: format!("finite-difference step must be finite and positive, got {rel_step}"),
         });
     }
-    let h = rel_step * params[i].abs().max(1.0);
+    let h = fd_step(params[i], rel_step);
     let mut plus = params.clone();
     let mut minus = params.clone();
     plus[i] += h;

@@ -60,7 +60,9 @@ pub const GL8: [(f64, f64); 8] = [
 /// writes the integrand into `out`; the integral is *added* to `acc`. An interval is accepted
 /// when the 8-point rule on it and the sum of the rules on its halves agree to `rtol`
 /// (relative to the larger entry, absolute floor `atol`), else it is split (depth ≤ 30).
-/// `tmp` needs 3·len scratch entries.
+/// At most [`MAX_QUADRATURE_SPLITS`] splits are made per call, so an integrand with a
+/// discontinuity or noise below `rtol` costs bounded work instead of 2³⁰ pieces; past the
+/// budget each remaining piece is accepted as it stands. `tmp` needs 3·len scratch entries.
 pub fn integrate_adaptive<F: FnMut(f64, &mut [f64])>(
     f: &mut F,
     a: f64,
@@ -74,8 +76,23 @@ pub fn integrate_adaptive<F: FnMut(f64, &mut [f64])>(
     let (whole, rest) = tmp.split_at_mut(len);
     let (halves, val) = rest.split_at_mut(len);
     gl8(f, a, b, whole, &mut val[..len]);
-    adapt(f, a, b, rtol, atol, acc, whole, halves, &mut val[..len], 0);
+    let mut budget = MAX_QUADRATURE_SPLITS;
+    adapt(
+        f,
+        (a, b),
+        (rtol, atol),
+        acc,
+        whole,
+        halves,
+        &mut val[..len],
+        0,
+        &mut budget,
+    );
 }
+
+/// The most interval splits one call of [`integrate_adaptive`] makes (each costs 16
+/// integrand evaluations).
+pub const MAX_QUADRATURE_SPLITS: usize = 256;
 
 /// One 8-point rule on [a, b] into `out`; `val` is scratch of the same length.
 fn gl8<F: FnMut(f64, &mut [f64])>(f: &mut F, a: f64, b: f64, out: &mut [f64], val: &mut [f64]) {
@@ -92,15 +109,14 @@ fn gl8<F: FnMut(f64, &mut [f64])>(f: &mut F, a: f64, b: f64, out: &mut [f64], va
 #[allow(clippy::too_many_arguments)]
 fn adapt<F: FnMut(f64, &mut [f64])>(
     f: &mut F,
-    a: f64,
-    b: f64,
-    rtol: f64,
-    atol: f64,
+    (a, b): (f64, f64),
+    (rtol, atol): (f64, f64),
     acc: &mut [f64],
     whole: &[f64],
     halves: &mut [f64],
     val: &mut [f64],
     depth: usize,
+    budget: &mut usize,
 ) {
     let len = acc.len();
     let m = 0.5 * (a + b);
@@ -116,36 +132,16 @@ fn adapt<F: FnMut(f64, &mut [f64])>(
             ok = false;
         }
     }
-    if ok || depth >= 30 || !(m > a && m < b) {
+    if ok || depth >= 30 || *budget == 0 || !(m > a && m < b) {
         for i in 0..len {
             acc[i] += halves[i];
         }
         return;
     }
-    adapt(
-        f,
-        a,
-        m,
-        rtol,
-        0.5 * atol,
-        acc,
-        &left,
-        halves,
-        val,
-        depth + 1,
-    );
-    adapt(
-        f,
-        m,
-        b,
-        rtol,
-        0.5 * atol,
-        acc,
-        &right,
-        halves,
-        val,
-        depth + 1,
-    );
+    *budget -= 1;
+    let tols = (rtol, 0.5 * atol);
+    adapt(f, (a, m), tols, acc, &left, halves, val, depth + 1, budget);
+    adapt(f, (m, b), tols, acc, &right, halves, val, depth + 1, budget);
 }
 
 /// Scratch for [`final_terms`].

@@ -132,6 +132,39 @@ fn zeno_ball_ends_at_accumulation_with_tail() {
     );
 }
 
+/// The cumulative velocity measure μ_v([0, t]) is d/dθ ∫₀ᵗ v ds = d/dθ (h(t) − h0) =
+/// S_h(t) − ∂h0/∂θ at every t (atoms included once their event has passed).
+#[test]
+fn cumulative_measure_of_velocity_is_the_height_sensitivity() {
+    let ball = Ball::new();
+    let p = ball.default_params();
+    let opts = Options {
+        record: true,
+        ..tight()
+    };
+    let sol = solve(&ball, &p, &opts).unwrap();
+    let mv = measure(&ball, &p, &sol, 1).unwrap();
+    let traj = sol.trajectory.as_ref().unwrap();
+    let ts = [0.0, 0.3, 0.638, 0.639, 1.2, 1.66, 1.661, 2.0];
+    let cum = mv.cumulative(&ts);
+    assert_eq!(cum.len(), ts.len());
+    for (t, m) in ts.iter().zip(&cum) {
+        let (_, s) = traj.sample(*t);
+        for j in 0..4 {
+            let want = s[2 * j] - if j == Ball::H0 { 1.0 } else { 0.0 };
+            assert!(
+                close(m[j], want, 1e-8, 1e-10),
+                "t = {t}, param {j}: {} vs {want}",
+                m[j]
+            );
+        }
+    }
+    let total = mv.pair(|_| 1.0);
+    for j in 0..4 {
+        assert!(close(cum[7][j], total[j], 1e-10, 1e-12));
+    }
+}
+
 /// ⟨μ, 1⟩ on `height` equals dC/dθ for C = ∫h dt (E1, fixture), and the atoms are the
 /// event records' atoms.
 #[test]

@@ -182,12 +182,11 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{args, json};
-    use mvad::runtime::fixtures::Ball;
+    use crate::cli::test_support::{json, on_ball};
 
     #[test]
     fn text_lists_the_declarations() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&[])).expect("ok");
+        let out = on_ball(run, &[]).expect("ok");
         assert!(
             out.starts_with("ball.hyb: model `BouncingBall` is valid\n"),
             "{out}"
@@ -201,12 +200,7 @@ mod tests {
 
     #[test]
     fn json_has_the_structure() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&["--json", "--set", "e=0.5"]),
-        )
-        .expect("ok");
+        let out = on_ball(run, &["--json", "--set", "e=0.5"]).expect("ok");
         let v = json(&out);
         assert_eq!(v["model"], "BouncingBall");
         assert_eq!(v["params"]["e"], 0.5);

@@ -1,6 +1,6 @@
 //! `mvad fdcheck MODEL.hyb [--step 1e-6]`: MV-AD against central finite differences,
 //! as in the paper's Table 1: per parameter the MV-AD value of dC/dθ, the central
-//! difference (C(θ + h e_i) − C(θ − h e_i)) / 2h with h = step · max(|θ_i|, 1), their
+//! difference (C(θ + h e_i) − C(θ − h e_i)) / 2h with h = step · |θ_i| (step when θ_i = 0), their
 //! absolute and relative difference; the cosine similarity of the two gradients over
 //! the `--wrt` parameters; the number of events K and their times.
 
@@ -148,18 +148,16 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{args, json};
+    use crate::cli::test_support::{args, json, on_ball};
     use approx::assert_relative_eq;
-    use mvad::runtime::fixtures::Ball;
 
     #[test]
     fn e1_table_one() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&[
+        let out = on_ball(
+            run,
+            &[
                 "--json", "--rtol", "1e-12", "--atol", "1e-14", "--step", "1e-5",
-            ]),
+            ],
         )
         .expect("runs");
         let v = json(&out);
@@ -222,13 +220,13 @@ mod tests {
 
     #[test]
     fn text_table_and_bad_step() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--wrt", "e"])).expect("runs");
+        let out = on_ball(run, &["--wrt", "e"]).expect("runs");
         assert!(out.contains("param  MV-AD"), "{out}");
         assert!(
             out.contains("event times (s)    0.638551; 1.66023"),
             "{out}"
         );
-        let err = run(&Ball::new(), "ball.hyb", &args(&["--step", "0"])).err();
+        let err = on_ball(run, &["--step", "0"]).err();
         assert_eq!(err.map(|e| e.status()), Some(2));
     }
 }

@@ -174,13 +174,12 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
 mod tests {
     use super::*;
     use crate::cli::spec_keys::missing_spec_keys;
-    use crate::cli::test_support::{args, json, tight};
+    use crate::cli::test_support::{json, on_ball, tight};
     use approx::assert_relative_eq;
-    use mvad::runtime::fixtures::Ball;
 
     #[test]
     fn json_has_every_key_of_the_spec_and_the_e1_values() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&tight(&["--json"]))).expect("runs");
+        let out = on_ball(run, &tight(&["--json"])).expect("runs");
         let v = json(&out);
         assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{out}");
         assert_eq!(v["model"], "BouncingBall");
@@ -213,12 +212,7 @@ mod tests {
 
     #[test]
     fn wrt_restricts_gradient_dt_and_atoms() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&["--json", "--wrt", "e,v0"]),
-        )
-        .expect("runs");
+        let out = on_ball(run, &["--json", "--wrt", "e,v0"]).expect("runs");
         let v = json(&out);
         let keys = |x: &Value| -> Vec<String> {
             x.as_object()
@@ -235,12 +229,12 @@ mod tests {
 
     #[test]
     fn text_table_and_adjoint() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&[])).expect("runs");
+        let out = on_ball(run, &[]).expect("runs");
         assert!(out.contains("cost C = 1.89051371"), "{out}");
         assert!(out.contains("events (2):"), "{out}");
         assert!(out.contains("impact"), "{out}");
         assert!(out.contains("velocity"), "{out}");
-        let err = run(&Ball::new(), "ball.hyb", &args(&["--mode", "adjoint"]))
+        let err = on_ball(run, &["--mode", "adjoint"])
             .map(|_| ())
             .expect_err("error");
         assert_eq!(err.status(), 2);

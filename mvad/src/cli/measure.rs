@@ -12,6 +12,7 @@
 //! d/dθ ∫₀ᵗ y ds from MV-AD (density integral plus the atoms so far) against central
 //! finite differences of the same integral.
 
+use mvad_runtime::reduce::integrate_adaptive;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -245,47 +246,10 @@ where
     }
 }
 
-/// Cumulative integrals F(t) = ∫₀ᵗ f ds at the times `ts` (sorted, from 0) for a
-/// function that is smooth except for jumps at `jumps`: Simpson's rule on every piece
-/// between consecutive points of `ts` ∪ `jumps`, with `left(t)` the value just before t
-/// and `right(t)` the value at and after t. Putting the jumps at breakpoints keeps the
-/// error O(Δt⁴) and smooth in the jump times, so finite differences of F stay accurate
-/// (a rule that straddles a jump has an O(Δt·J) error that moves with the jump).
-fn cumulative_piecewise(
-    ts: &[f64],
-    jumps: &[f64],
-    left: impl Fn(f64) -> f64,
-    right: impl Fn(f64) -> f64,
-) -> Vec<f64> {
-    let mut points: Vec<(f64, bool)> = ts.iter().map(|&t| (t, false)).collect();
-    points.extend(jumps.iter().filter(|t| t.is_finite()).map(|&t| (t, true)));
-    points.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut out = Vec::with_capacity(ts.len());
-    let mut acc = 0.0;
-    let mut next_grid = 0;
-    let mut prev: Option<f64> = None;
-    for &(t, is_jump) in &points {
-        if let Some(a) = prev {
-            if t > a {
-                let mid = 0.5 * (a + t);
-                let fb = if is_jump || jumps.contains(&t) {
-                    left(t)
-                } else {
-                    right(t)
-                };
-                acc += (t - a) / 6.0 * (right(a) + 4.0 * right(mid) + fb);
-            }
-        }
-        prev = Some(t);
-        if !is_jump && next_grid < ts.len() && t == ts[next_grid] {
-            out.push(acc);
-            next_grid += 1;
-        }
-    }
-    out
-}
-
-/// ∫₀ᵗ y ds at `ts` from a recorded solution, with its events as breakpoints.
+/// ∫₀ᵗ y ds at `ts` (ascending) from a recorded solution: adaptive Gauss–Legendre on every
+/// piece between consecutive accepted-step times, event times and grid times, so neither a
+/// jump nor a boundary layer inside a step (a stiff lag's 1e-8 transient) is straddled by a
+/// fixed rule — finite differences of two such integrals then stay accurate.
 fn observable_integral<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
@@ -296,14 +260,34 @@ fn observable_integral<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let y_at = observer(model, params, obs);
-    let right = observable_along(model, params, sol, obs);
-    let left = |t: f64| match sol.events.iter().find(|e| e.t == t) {
-        Some(e) => y_at(t, &e.x_before),
-        None => right(t),
+    let Some(traj) = sol.trajectory.as_ref() else {
+        return vec![f64::NAN; ts.len()];
     };
-    let jumps: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
-    cumulative_piecewise(ts, &jumps, left, &right)
+    let y = observable_along(model, params, sol, obs);
+    let mut knots: Vec<f64> = traj.step_times().to_vec();
+    knots.extend(sol.events.iter().map(|e| e.t));
+    knots.extend_from_slice(ts);
+    knots.retain(|t| t.is_finite());
+    knots.sort_by(f64::total_cmp);
+    knots.dedup();
+    let mut out = Vec::with_capacity(ts.len());
+    let mut acc = [0.0];
+    let mut tmp = [0.0; 3];
+    let mut next = 0;
+    let mut prev: Option<f64> = None;
+    for &b in &knots {
+        if let Some(a) = prev {
+            let mut f = |s: f64, o: &mut [f64]| o[0] = y(s);
+            integrate_adaptive(&mut f, a, b, 1e-12, 1e-300, &mut acc, &mut tmp);
+        }
+        prev = Some(b);
+        while next < ts.len() && ts[next] <= b {
+            out.push(acc[0]);
+            next += 1;
+        }
+    }
+    out.resize(ts.len(), acc[0]);
+    out
 }
 
 /// The data of Figure 1 for observable `obs` and parameter `k`.
@@ -328,24 +312,11 @@ where
     let y_of = observable_along(model, params, sol, obs);
     let y: Vec<f64> = ts.iter().map(|&t| y_of(t)).collect();
     let dens: Vec<f64> = ts.iter().map(|&t| mu.density(t)[k]).collect();
-    // MV-AD: ∫₀ᵗ density + Σ_{t_k ≤ t} α_k (the density is right-continuous; its left
-    // limit at an event comes from the step that ends there).
-    let jumps: Vec<f64> = mu.atoms.iter().map(|a| a.0).collect();
-    let mut cum = cumulative_piecewise(
-        &ts,
-        &jumps,
-        |t| mu.density(t - 1e-9 * t.abs().max(f64::MIN_POSITIVE))[k],
-        |t| mu.density(t)[k],
-    );
-    for (tk, a) in &mu.atoms {
-        for (c, &t) in cum.iter_mut().zip(&ts) {
-            if t >= *tk {
-                *c += a[k];
-            }
-        }
-    }
+    // MV-AD: μ([0, t]) = ∫₀ᵗ density + Σ_{t_k ≤ t} α_k, with the density integrated
+    // adaptively inside every step.
+    let cum: Vec<f64> = mu.cumulative(&ts).into_iter().map(|m| m[k]).collect();
     // Central differences of ∫₀ᵗ y ds from two recorded primal runs.
-    let h = rel_step * params[k].abs().max(1.0);
+    let h = mvad_runtime::fd::fd_step(params[k], rel_step);
     let run_at = |delta: f64| -> Result<(Vec<f64>, f64), CliError> {
         let mut p = params.clone();
         p[k] += delta;
@@ -397,16 +368,15 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{args, json, scratch_dir, tight};
+    use crate::cli::test_support::{args, json, on_ball, scratch_dir, tight};
     use approx::assert_relative_eq;
     use mvad::runtime::fixtures::Ball;
 
     #[test]
     fn json_density_atoms_and_the_pairing_with_one() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&tight(&["--observable", "height", "--wrt", "e", "--json"])),
+        let out = on_ball(
+            run,
+            &tight(&["--observable", "height", "--wrt", "e", "--json"]),
         )
         .expect("runs");
         let v = json(&out);
@@ -434,10 +404,9 @@ mod tests {
             .join("fig.svg")
             .to_string_lossy()
             .to_string();
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&[
+        let out = on_ball(
+            run,
+            &[
                 "--observable",
                 "velocity",
                 "--wrt",
@@ -445,7 +414,7 @@ mod tests {
                 "--plot",
                 &svg,
                 "--json",
-            ]),
+            ],
         )
         .expect("runs");
         let v = json(&out);
@@ -478,16 +447,5 @@ mod tests {
         )
         .err();
         assert_eq!(err.map(|e| e.status()), Some(2));
-    }
-
-    #[test]
-    fn piecewise_cumulative_integral_with_a_jump() {
-        // f = t on [0, 0.5), t + 1 after: F(t) = t²/2 + max(0, t − 0.5).
-        let ts: Vec<f64> = (0..=4).map(|i| i as f64 * 0.3).collect();
-        let f = |t: f64| t + if t >= 0.5 { 1.0 } else { 0.0 };
-        let out = cumulative_piecewise(&ts, &[0.5], |t| if t == 0.5 { 0.5 } else { f(t) }, f);
-        for (t, v) in ts.iter().zip(&out) {
-            assert_relative_eq!(*v, t * t / 2.0 + (t - 0.5).max(0.0), epsilon = 1e-14);
-        }
     }
 }

@@ -445,6 +445,7 @@ pub fn parse_wrt(names: &[String], wrt: Option<&str>) -> Result<Vec<usize>, CliE
 #[cfg(test)]
 pub mod test_support {
     use super::*;
+    use mvad::runtime::fixtures::Ball;
     use serde_json::Value;
 
     /// Tolerances at which the E1 ball is accurate to about 1e-10.
@@ -488,6 +489,15 @@ pub mod test_support {
         words.extend_from_slice(extra);
         let cli = Cli::try_parse_from(words).expect("the arguments parse");
         A::pick(cli.command).expect("the command asked for")
+    }
+
+    /// Runs a command's `run` on the hand-written E1 ball (`fixtures::Ball`, file name
+    /// `ball.hyb`) with the arguments `extra`.
+    pub fn on_ball<A: CommandArgs>(
+        run: impl Fn(&Ball, &str, &A) -> CmdResult,
+        extra: &[&str],
+    ) -> CmdResult {
+        run(&Ball::new(), "ball.hyb", &args(extra))
     }
 
     /// `extra` followed by [`TIGHT`].

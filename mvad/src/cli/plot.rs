@@ -16,7 +16,22 @@ use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use super::output::g;
 use super::CliError;
+
+/// Tick labels for a linear axis over `range`: 4 significant digits (`2.5e7`, `-0.0013`),
+/// so an axis whose scale is far from 1 does not print every tick as `0.0`, and a tick that
+/// is zero up to rounding (|v| ≤ 1e-12 of the axis scale) prints as `0`.
+fn axis_label(range: &Range<f64>) -> impl Fn(&f64) -> String {
+    let scale = range.start.abs().max(range.end.abs());
+    move |v: &f64| {
+        if v.abs() <= 1e-12 * scale {
+            "0".to_string()
+        } else {
+            g(*v, 4)
+        }
+    }
+}
 
 /// The picture formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,7 +59,7 @@ pub fn format_of(path: &Path) -> Result<Format, CliError> {
     }
 }
 
-static FONT: &[u8] = include_bytes!("../../assets/DejaVuSansMono.ttf");
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Registers the shipped font under the family names plotters uses (once).
 fn ensure_font() -> Result<(), CliError> {
@@ -136,22 +151,98 @@ fn panel<'a, 'b, DB: DrawingBackend>(
     b
 }
 
-/// Draws `points` as a line in `style`, with a legend entry `label`.
-fn labelled_line<'a, DB, CT>(
+/// The polyline `points` cut into pieces that plotters strokes correctly when the line
+/// is thicker than one pixel, with `px` mapping a point to its pixel:
+/// - a point on the pixel of its predecessor is dropped (a segment of length zero has
+///   no direction, and plotters would put a vertex of the outline at NaN, i.e. at 0);
+/// - the line is cut where it turns by more than 90° (plotters joins segments with
+///   unbounded miters, so a near reversal, such as a jump followed by a slope, would
+///   draw a spike across the picture); the two pieces share the corner;
+/// - a non-finite point ends a piece.
+///
+/// Pieces of a single point (nothing to draw) are left out.
+fn stroke_pieces(
+    points: impl IntoIterator<Item = (f64, f64)>,
+    px: impl Fn(&(f64, f64)) -> (i32, i32),
+) -> Vec<Vec<(f64, f64)>> {
+    let mut pieces = Vec::new();
+    let mut piece: Vec<(f64, f64)> = Vec::new();
+    // The pixels of the last two points of `piece`.
+    let mut before: Option<(i32, i32)> = None;
+    let mut last: Option<(i32, i32)> = None;
+    let mut finish = |piece: &mut Vec<(f64, f64)>| {
+        let done = std::mem::take(piece);
+        if done.len() >= 2 {
+            pieces.push(done);
+        }
+    };
+    for p in points {
+        if !(p.0.is_finite() && p.1.is_finite()) {
+            finish(&mut piece);
+            (before, last) = (None, None);
+            continue;
+        }
+        let q = px(&p);
+        if last == Some(q) {
+            continue;
+        }
+        if let (Some(a), Some(b)) = (before, last) {
+            let turn = i64::from(b.0 - a.0) * i64::from(q.0 - b.0)
+                + i64::from(b.1 - a.1) * i64::from(q.1 - b.1);
+            if turn < 0 {
+                let corner = piece[piece.len() - 1];
+                finish(&mut piece);
+                piece.push(corner);
+            }
+        }
+        piece.push(p);
+        (before, last) = (last, Some(q));
+    }
+    finish(&mut piece);
+    pieces
+}
+
+/// How a line is stroked.
+#[derive(Clone, Copy, Debug)]
+enum Stroke {
+    /// A solid line.
+    Solid,
+    /// Dashes of this many pixels with gaps of that many.
+    Dashed(u32, u32),
+}
+
+/// Draws `points` as a line in `style` cut into [`stroke_pieces`], with a legend entry
+/// if `label` is given.
+fn line<'a, DB, CT>(
     chart: &mut ChartContext<'a, DB, CT>,
     points: impl IntoIterator<Item = (f64, f64)>,
     style: ShapeStyle,
-    label: &str,
+    stroke: Stroke,
+    label: Option<&str>,
 ) -> DrawResult
 where
     DB: DrawingBackend + 'a,
     CT: CoordTranslate<From = (f64, f64)>,
 {
-    chart
-        .draw_series(LineSeries::new(points, style))
-        .map_err(|e| e.to_string())?
-        .label(label)
-        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let pieces = stroke_pieces(points, |p| chart.as_coord_spec().translate(p));
+    for piece in pieces {
+        match stroke {
+            Stroke::Solid => chart.draw_series(std::iter::once(PathElement::new(piece, style))),
+            Stroke::Dashed(dash, gap) => {
+                chart.draw_series(DashedLineSeries::new(piece, dash, gap, style))
+            }
+        }
+        .map_err(err)?;
+    }
+    if let Some(label) = label {
+        // An empty series that only puts the entry in the legend.
+        chart
+            .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())
+            .map_err(err)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+    }
     Ok(())
 }
 
@@ -300,14 +391,17 @@ impl Picture for Figure1 {
                 .configure_mesh()
                 .x_desc("t")
                 .y_desc(fig.observable.as_str())
+                .y_label_formatter(&axis_label(&y_range))
                 .draw()
                 .map_err(e)?;
-            chart
-                .draw_series(LineSeries::new(
-                    fig.trajectory.iter().copied(),
-                    BLUE.stroke_width(2),
-                ))
-                .map_err(e)?;
+            let trajectory = fig.trajectory.iter().copied();
+            line(
+                &mut chart,
+                trajectory,
+                BLUE.stroke_width(2),
+                Stroke::Solid,
+                None,
+            )?;
             for &tk in &fig.events {
                 chart
                     .draw_series(DashedLineSeries::new(
@@ -333,15 +427,20 @@ impl Picture for Figure1 {
             let d_range = d_range.start..d_range.end + 0.25 * (d_range.end - d_range.start);
             let caption = format!("d{}/d{}: density and atoms", fig.observable, fig.param);
             let mut chart = panel(&tr, &caption, 18, 60)
-                .build_cartesian_2d(t_range.clone(), d_range)
+                .build_cartesian_2d(t_range.clone(), d_range.clone())
                 .map_err(e)?;
-            chart.configure_mesh().x_desc("t").draw().map_err(e)?;
+            chart
+                .configure_mesh()
+                .x_desc("t")
+                .y_label_formatter(&axis_label(&d_range))
+                .draw()
+                .map_err(e)?;
             let density = fig.density.iter().copied();
-            labelled_line(&mut chart, density, BLUE.stroke_width(2), "density")?;
+            let blue = BLUE.stroke_width(2);
+            line(&mut chart, density, blue, Stroke::Solid, Some("density"))?;
             for &(tk, a) in &fig.atoms {
-                chart
-                    .draw_series(LineSeries::new([(tk, 0.0), (tk, a)], RED.stroke_width(2)))
-                    .map_err(e)?;
+                let stem = [(tk, 0.0), (tk, a)];
+                line(&mut chart, stem, RED.stroke_width(2), Stroke::Solid, None)?;
             }
             chart
                 .draw_series(
@@ -375,21 +474,31 @@ impl Picture for Figure1 {
                     .map(|p| p.1),
             );
             let mut chart = panel(&bottom, &fig.note, 15, 60)
-                .build_cartesian_2d(t_range, c_range)
+                .build_cartesian_2d(t_range, c_range.clone())
                 .map_err(e)?;
-            chart.configure_mesh().x_desc("t").draw().map_err(e)?;
-            let mvad = fig.cumulative_mvad.iter().copied();
-            labelled_line(&mut chart, mvad, BLUE.stroke_width(3), "MV-AD")?;
             chart
-                .draw_series(DashedLineSeries::new(
-                    fig.cumulative_fd.iter().copied(),
-                    8,
-                    5,
-                    RED.stroke_width(2),
-                ))
-                .map_err(e)?
-                .label("central FD")
-                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED.stroke_width(2)));
+                .configure_mesh()
+                .x_desc("t")
+                .y_label_formatter(&axis_label(&c_range))
+                .draw()
+                .map_err(e)?;
+            let mvad = fig.cumulative_mvad.iter().copied();
+            line(
+                &mut chart,
+                mvad,
+                BLUE.stroke_width(3),
+                Stroke::Solid,
+                Some("MV-AD"),
+            )?;
+            let fd = fig.cumulative_fd.iter().copied();
+            let red = RED.stroke_width(2);
+            line(
+                &mut chart,
+                fd,
+                red,
+                Stroke::Dashed(8, 5),
+                Some("central FD"),
+            )?;
             legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         }
         Ok(())
@@ -472,7 +581,8 @@ impl Picture for WorkPrec<'_> {
                 let pts = kept(c)
                     .into_iter()
                     .map(|(x, y)| (x, if y < ERROR_FLOOR { floor } else { y }));
-                labelled_line(&mut chart, pts, color.stroke_width(2), &c.label)?;
+                let style = color.stroke_width(2);
+                line(&mut chart, pts, style, Stroke::Solid, Some(&c.label))?;
                 let resolved = kept(c).into_iter().filter(|p| p.1 >= ERROR_FLOOR);
                 chart
                     .draw_series(resolved.map(|p| Circle::new(p, 4, color.filled())))
@@ -606,6 +716,38 @@ mod tests {
         assert!(r.start < r.end && r.start.is_finite());
         let r = span([]);
         assert!(r.start < r.end);
+    }
+
+    #[test]
+    fn thick_lines_are_cut_at_reversals_and_lose_repeated_pixels() {
+        let px = |p: &(f64, f64)| (p.0 as i32, p.1 as i32);
+        // A sawtooth: up, a jump down, up again; the jump reverses the direction twice.
+        let saw = [(0.0, 0.0), (10.0, 10.0), (10.2, -40.0), (20.0, -30.0)];
+        assert_eq!(
+            stroke_pieces(saw, px),
+            vec![
+                vec![(0.0, 0.0), (10.0, 10.0)],
+                vec![(10.0, 10.0), (10.2, -40.0)],
+                vec![(10.2, -40.0), (20.0, -30.0)],
+            ]
+        );
+        // A right angle and a straight line stay whole; repeated pixels are dropped.
+        let bend = [(0.0, 0.0), (0.4, 0.3), (5.0, 0.0), (5.0, 5.0), (5.0, 9.0)];
+        assert_eq!(
+            stroke_pieces(bend, px),
+            vec![vec![(0.0, 0.0), (5.0, 0.0), (5.0, 5.0), (5.0, 9.0)]]
+        );
+        // Non-finite points split; lone points and zero-length stems draw nothing.
+        let gap = [
+            (0.0, 0.0),
+            (1.0, 1.0),
+            (f64::NAN, 0.0),
+            (2.0, 2.0),
+            (3.0, 2.0),
+        ];
+        assert_eq!(stroke_pieces(gap, px).len(), 2);
+        assert!(stroke_pieces([(1.0, 0.0), (1.0, 0.0)], px).is_empty());
+        assert!(stroke_pieces([(f64::INFINITY, 0.0)], px).is_empty());
     }
 
     #[test]

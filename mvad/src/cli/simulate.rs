@@ -291,19 +291,14 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{args, json, scratch_dir};
+    use crate::cli::test_support::{args, json, on_ball, scratch_dir};
     use approx::assert_relative_eq;
     use mvad::runtime::fixtures::Ball;
 
     /// Closed form of the E1 ball's height before the first impact: h0 − g t²/2.
     #[test]
     fn csv_follows_the_closed_form_and_shows_both_sides_of_events() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&["--points", "11", "--rtol", "1e-10"]),
-        )
-        .expect("runs");
+        let out = on_ball(run, &["--points", "11", "--rtol", "1e-10"]).expect("runs");
         let mut lines = out.lines();
         assert_eq!(lines.next(), Some("t,mode,h,v,height,velocity"));
         let rows: Vec<Vec<String>> = lines
@@ -329,7 +324,7 @@ mod tests {
 
     #[test]
     fn step_grid_is_sorted_and_ends_at_t() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&[])).expect("runs");
+        let out = on_ball(run, &[]).expect("runs");
         let ts: Vec<f64> = out
             .lines()
             .skip(1)
@@ -344,26 +339,16 @@ mod tests {
     fn out_file_and_json() {
         let path = scratch_dir("simulate").join("traj.csv");
         let p = path.to_string_lossy().to_string();
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--out", &p])).expect("runs");
+        let out = on_ball(run, &["--out", &p]).expect("runs");
         assert!(out.contains("impact"), "{out}");
         let text = std::fs::read_to_string(&path).expect("written");
         assert!(text.starts_with("t,mode,h,v"));
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&["--json", "--points", "5"]),
-        )
-        .expect("runs");
+        let out = on_ball(run, &["--json", "--points", "5"]).expect("runs");
         let v = json(&out);
         assert_eq!(v["columns"][2], "h");
         assert_eq!(v["rows"].as_array().map(Vec::len), Some(5 + 4));
         assert_eq!(v["events"][0]["name"], "impact");
-        let err = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&["--out", "/nonexistent/dir/x.csv"]),
-        )
-        .err();
+        let err = on_ball(run, &["--out", "/nonexistent/dir/x.csv"]).err();
         assert_eq!(err.map(|e| e.status()), Some(1));
         assert_eq!(
             run(&Ball::new(), "b", &args(&["--points", "1"]))

@@ -208,9 +208,8 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{args, json, tight};
+    use crate::cli::test_support::{json, on_ball, tight};
     use approx::assert_relative_eq;
-    use mvad::runtime::fixtures::Ball;
 
     #[test]
     fn parses_ranges() {
@@ -243,15 +242,14 @@ mod tests {
     /// t = (v0 + sqrt(v0² + 2 g h0)) / g and |∇g·f| = sqrt(v0² + 2 g h0).
     #[test]
     fn e2_table_two_against_the_closed_form() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&tight(&[
+        let out = on_ball(
+            run,
+            &tight(&[
                 "--over=v0=-0.5:-5:10",
                 "--set=h0=1",
                 "--observable=height",
                 "--json",
-            ])),
+            ]),
         )
         .expect("runs");
         let v = json(&out);
@@ -277,7 +275,7 @@ mod tests {
 
     #[test]
     fn text_table() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--over", "e=0.5:0.9:3"])).expect("runs");
+        let out = on_ball(run, &["--over", "e=0.5:0.9:3"]).expect("runs");
         assert!(out.contains("guard slope |∇g·f|"), "{out}");
         assert_eq!(
             out.lines().filter(|l| l.contains("True")).count(),

@@ -377,15 +377,13 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{args, json};
-    use mvad::runtime::fixtures::Ball;
+    use crate::cli::test_support::{json, on_ball};
 
     #[test]
     fn errors_fall_with_the_tolerance_against_the_closed_form() {
-        let out = run(
-            &Ball::new(),
-            "ball.hyb",
-            &args(&[
+        let out = on_ball(
+            run,
+            &[
                 "--json",
                 "--wrt",
                 "e",
@@ -393,7 +391,7 @@ mod tests {
                 "C=1.8905137123173506",
                 "--reference",
                 "e=2.8314408141470055",
-            ]),
+            ],
         )
         .expect("runs");
         let v = json(&out);
@@ -415,7 +413,7 @@ mod tests {
 
     #[test]
     fn text_and_bad_references() {
-        let out = run(&Ball::new(), "ball.hyb", &args(&["--wrt", "e"])).expect("runs");
+        let out = on_ball(run, &["--wrt", "e"]).expect("runs");
         assert!(out.contains("MV-AD at rtol 1e-13"), "{out}");
         assert_eq!(
             out.lines().filter(|l| l.contains(" s ")).count(),
@@ -428,7 +426,7 @@ mod tests {
             &["--reference", "C=q"],
             &["--step", "2"],
         ] {
-            let err = run(&Ball::new(), "ball.hyb", &args(bad)).err();
+            let err = on_ball(run, bad).err();
             assert_eq!(err.map(|e| e.status()), Some(2), "{bad:?}");
         }
     }
