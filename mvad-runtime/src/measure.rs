@@ -17,8 +17,8 @@
 
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc};
-use crate::reduce::integrate_adaptive;
-use crate::solution::{Solution, Trajectory, TRAJ_NODES};
+use crate::reduce::{aitken_iterated, integrate_adaptive};
+use crate::solution::{DiagnosticKind, Solution, Trajectory, TRAJ_NODES};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
 /// μ_y for one observable, one density and one set of atoms per parameter.
@@ -97,7 +97,7 @@ where
         .iter()
         .map(|e| (e.t, e.atoms[observable].clone()))
         .collect();
-    Ok(Measure {
+    let mut mu = Measure {
         observable,
         name: info.observables[observable].clone(),
         nparams: np,
@@ -105,10 +105,50 @@ where
         t1: traj.t1.clone(),
         nodes,
         atoms,
-    })
+    };
+    let zeno = solution
+        .diagnostics
+        .iter()
+        .find(|d| d.kind == DiagnosticKind::Zeno);
+    if let Some(d) = zeno {
+        mu.add_zeno_tail_atom(d.t);
+    }
+    Ok(mu)
 }
 
 impl Measure {
+    /// Lumps the infinitely many events a Zeno run did not simulate into one effective atom
+    /// at the accumulation time t* (the paper's S4: the tail as an effective atom). With
+    /// c_K = μ([0, t_K]) after the K-th recorded event, μ([0, t*)) = lim c_K is estimated by
+    /// Aitken's Δ² process ([`aitken_iterated`]) over the last five events (three when fewer
+    /// were recorded): per-bounce masses of the form (a + bK) r^K, which a parameter of the
+    /// restitution gives, need its second pass.
+    /// The atom is that limit minus μ([0, t*]) as recorded.
+    fn add_zeno_tail_atom(&mut self, t_star: f64) {
+        let mut times: Vec<f64> = self
+            .atoms
+            .iter()
+            .map(|a| a.0)
+            .filter(|&t| t <= t_star)
+            .collect();
+        if times.len() < 3 || !t_star.is_finite() {
+            return;
+        }
+        let keep = if times.len() >= 5 { 5 } else { 3 };
+        times.drain(..times.len() - keep);
+        times.push(t_star);
+        let c = self.cumulative(&times);
+        let recorded_at_t_star = &c[keep];
+        let tail: Vec<f64> = (0..self.nparams)
+            .map(|j| {
+                let seq: Vec<f64> = c[..keep].iter().map(|v| v[j]).collect();
+                aitken_iterated(&seq) - recorded_at_t_star[j]
+            })
+            .collect();
+        let at = self.atoms.partition_point(|a| a.0 <= t_star);
+        self.atoms.insert(at, (t_star, tail));
+    }
+
     /// The density h_x S + h_θ at t into `out` (length p); right-continuous at events.
     pub fn density_into(&self, t: f64, out: &mut [f64]) {
         out.fill(0.0);

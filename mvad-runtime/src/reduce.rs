@@ -21,6 +21,17 @@
 use crate::model::{HybridModel, ModelAlloc, Switches};
 use nalgebra::{DefaultAllocator, OMatrix, OVector};
 
+/// Aitken's Δ² applied repeatedly: each pass maps every three consecutive values to their
+/// [`aitken`] limit, until fewer than three remain; returns the last. Five values give two
+/// passes, which remove error terms of the form (a + bk)ρᵏ that one pass leaves.
+pub fn aitken_iterated(seq: &[f64]) -> f64 {
+    let mut cur = seq.to_vec();
+    while cur.len() >= 3 {
+        cur = cur.windows(3).map(|w| aitken(w[0], w[1], w[2])).collect();
+    }
+    cur.last().copied().unwrap_or(f64::NAN)
+}
+
 /// Aitken's Δ² limit of a sequence from its last three values a0, a1, a2.
 ///
 /// Falls back to a2 when the differences do not look geometric (ratio outside (−0.999, 0.999),

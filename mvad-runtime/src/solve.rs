@@ -31,7 +31,7 @@ use crate::error::SolveError;
 use crate::event::{Scanner, Watch};
 use crate::integrate::{AugState, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Switches, MAX_SWITCHES};
-use crate::reduce::{aitken, final_terms, FinalWork, GL8};
+use crate::reduce::{aitken_iterated, final_terms, FinalWork, GL8};
 use crate::sens;
 use crate::solution::{
     Diagnostic, DiagnosticKind, EventRecord, Options, Segment, Solution, Stats, Trajectory,
@@ -154,14 +154,19 @@ const ZENO_MAX_RATIO: f64 = 0.999;
 /// Cosine below which an event of an established Zeno sequence ends the run.
 const ZENO_GRAZE: f64 = 1e-3;
 
-/// Dwell-time history and the last three event snapshots.
+/// Post-event snapshots kept for the Zeno limit: five, so Aitken's Δ² can be applied twice
+/// (per-bounce terms of the form (a + bk)ρᵏ, as derivatives w.r.t. a restitution give,
+/// need the second pass).
+const ZENO_SNAPS: usize = 5;
+
+/// Dwell-time history and the last [`ZENO_SNAPS`] event snapshots.
 struct Zeno<M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     times: [f64; ZENO_RATIOS + 2],
     count: usize,
-    snaps: [Snapshot<M>; 3],
+    snaps: [Snapshot<M>; ZENO_SNAPS],
 }
 
 impl<M: HybridModel> Zeno<M>
@@ -181,13 +186,13 @@ where
         Zeno {
             times: [0.0; ZENO_RATIOS + 2],
             count: 0,
-            snaps: [snap(), snap(), snap()],
+            snaps: std::array::from_fn(|_| snap()),
         }
     }
 
     /// The snapshot slot for the event being recorded now.
     fn slot(&mut self) -> &mut Snapshot<M> {
-        &mut self.snaps[self.count % 3]
+        &mut self.snaps[self.count % ZENO_SNAPS]
     }
 
     /// Registers the time of the event just recorded in `slot()`.
@@ -955,19 +960,21 @@ where
             // The segment up to the last event was closed when it fired.
             let z = &self.zeno;
             let c = z.count;
-            let s = |i: usize| &z.snaps[(c + i) % 3];
+            let s = |i: usize| &z.snaps[(c + i) % ZENO_SNAPS];
+            let last = ZENO_SNAPS - 1;
             let stuck = self.stuck.is_some();
             // Stuck on a guard: the limit is the last post-event state itself.
             let lim = |f: &dyn Fn(&Snapshot<M>) -> f64| {
                 if stuck {
-                    f(s(2))
+                    f(s(last))
                 } else {
-                    aitken(f(s(0)), f(s(1)), f(s(2)))
+                    let seq: [f64; ZENO_SNAPS] = std::array::from_fn(|i| f(s(i)));
+                    aitken_iterated(&seq)
                 }
             };
             let t_star = {
                 let a = lim(&|s| s.t);
-                if a.is_finite() && a >= s(2).t {
+                if a.is_finite() && a >= s(last).t {
                     a
                 } else {
                     t_star_geo
