@@ -33,8 +33,7 @@ fn zeno_velocity_measure_pairs_to_the_height_change() {
 
     // ⟨μ_h, 1⟩ is the cost gradient (C = ∫h dt), tail included.
     let h_total = height.pair(|_| 1.0);
-    for j in 0..4 {
-        let (a, b) = (h_total[j], sol.gradient[j]);
+    for (j, (&a, &b)) in h_total.iter().zip(&sol.gradient).enumerate() {
         assert!(
             (a - b).abs() <= 1e-7 * b.abs().max(1.0),
             "height θ{j}: {a} vs {b}"
