@@ -188,11 +188,12 @@ mod tests {
     }
 
     /// A perturbation that leaves the valid range fails for that row only: with
-    /// a = 1e-7 and h = 1e-6, a − h < 0 and √a is NaN in the perturbed run.
+    /// a = 1 + 1e-7 and the relative step h = 1e-6·a, a − h < 1 and √(a − 1) is NaN in the
+    /// perturbed run.
     #[test]
     fn a_failed_difference_is_reported_in_its_row() {
-        let src = "model M { param a = 1e-7; param b = 2; state x = 1; \
-                   flow { der(x) = -sqrt(a) * b * x; } cost = integral(x); horizon 1; }";
+        let src = "model M { param a = 1.0000001; param b = 2; state x = 1; \
+                   flow { der(x) = -sqrt(a - 1) * b * x; } cost = integral(x); horizon 1; }";
         let m = mvad::load::load_str("m.hyb", src).expect("valid model");
         let out = run(&m, "m.hyb", &args(&["--json"])).expect("the check itself runs");
         let v = json(&out);
@@ -204,13 +205,14 @@ mod tests {
                 .is_some_and(|e| e.contains("non-finite")),
             "{out}"
         );
-        // b's row is unaffected: C = (1 − e^{−k})/k with k = b √a, dC/db = √a dC/dk,
-        // dC/dk = −(e^k − 1 − k)/(k² e^k).
-        let k = 2.0 * 1e-7f64.sqrt();
+        // b's row is unaffected: C = (1 − e^{−k})/k with k = b √(a − 1), dC/db = √(a − 1)
+        // dC/dk, dC/dk = −(e^k − 1 − k)/(k² e^k).
+        let root = (1.0000001f64 - 1.0).sqrt();
+        let k = 2.0 * root;
         let dcdk = -(k.exp() - 1.0 - k) / (k * k * k.exp());
         assert_relative_eq!(
             v["rows"][1]["mvad"].as_f64().expect("n"),
-            1e-7f64.sqrt() * dcdk,
+            root * dcdk,
             max_relative = 1e-6
         );
         assert!(v["rows"][1]["rel_err"].as_f64().expect("n") < 1e-5, "{out}");
