@@ -1,8 +1,8 @@
 //! Finite-difference checks of dC/dθ: central differences and a step sweep.
 //!
-//! For parameter i the absolute step is h = rel_step · |θ_i| ([`fd_step`]; rel_step itself
-//! when θ_i = 0), so a tiny parameter such as a time constant of 1e-8 is perturbed relative
-//! to its own size and never changes sign, and
+//! For parameter i the absolute step is h = rel_step · max(|θ_i|, 1), or rel_step · |θ_i|
+//! for a parameter smaller than that ([`fd_step`]), so a time constant of 1e-8 is perturbed
+//! relative to its own size and never changes sign, and
 //!
 //! ```text
 //!   dC/dθ_i ≈ (C(θ + h e_i) − C(θ − h e_i)) / (θ_i⁺ − θ_i⁻)
@@ -21,12 +21,15 @@ use crate::solve::solve;
 use nalgebra::{DefaultAllocator, OVector};
 
 /// The absolute central-difference step for a parameter of value `theta`:
-/// rel_step · |θ|, or rel_step when θ = 0.
+/// h = rel_step · max(|θ|, 1), except that a parameter smaller than that step (a time
+/// constant of 1e-8, say) gets the purely relative h = rel_step · |θ|, so θ ± h never
+/// changes sign.
 pub fn fd_step(theta: f64, rel_step: f64) -> f64 {
-    if theta == 0.0 {
-        rel_step
-    } else {
+    let h = rel_step * theta.abs().max(1.0);
+    if theta != 0.0 && h >= theta.abs() {
         rel_step * theta.abs()
+    } else {
+        h
     }
 }
 

@@ -1,6 +1,6 @@
 //! `mvad fdcheck MODEL.hyb [--step 1e-6]`: MV-AD against central finite differences,
 //! as in the paper's Table 1: per parameter the MV-AD value of dC/dθ, the central
-//! difference (C(θ + h e_i) − C(θ − h e_i)) / 2h with h = step · |θ_i| (step when θ_i = 0), their
+//! difference (C(θ + h e_i) − C(θ − h e_i)) / 2h with h = step · max(|θ_i|, 1) (step · |θ_i| for a smaller θ_i), their
 //! absolute and relative difference; the cosine similarity of the two gradients over
 //! the `--wrt` parameters; the number of events K and their times.
 
@@ -188,7 +188,7 @@ mod tests {
     }
 
     /// A perturbation that leaves the valid range fails for that row only: with
-    /// a = 1 + 1e-7 and the relative step h = 1e-6·a, a − h < 1 and √(a − 1) is NaN in the
+    /// a = 1 + 1e-7 and the step h = 1e-6·a, a − h < 1 and √(a − 1) is NaN in the
     /// perturbed run.
     #[test]
     fn a_failed_difference_is_reported_in_its_row() {
