@@ -526,9 +526,11 @@ where
         self.sw = self.switch_bits(0.0, false, None);
         self.restart(0.0)?;
         let nev = info.events.len();
-        let sim_tol = self.opts.simultaneous_tol * self.t_end.max(1.0);
         while self.integ.t() < self.t_end {
             self.integ.step(self.t_end)?;
+            // Simultaneity is judged relative to the time resolution where the events are,
+            // never to the horizon: the answer must not depend on how far T lies beyond them.
+            let sim_tol = self.opts.simultaneous_tol * self.integ.t().abs().max(1.0);
             // The step's full dense output is needed only to sample guards or to record.
             if self.rec.is_some() || self.scanner.active.iter().any(|&a| a) {
                 self.integ.ensure_dense();
@@ -859,7 +861,7 @@ where
     /// Whether event k's reset left the state stuck on its guard: the flow approached the
     /// guard (d·ġ⁻ > 0), the reset stopped or reversed that approach to first order
     /// (d·ġ⁺ ≤ 0 at x⁺) and yet a short Heun probe x⁺ + δ/2 (f⁺ + f(x⁺ + δ f⁺)),
-    /// δ = 1e-6·max(T, 1), lands on the firing side of the guard again. Without a crossing the
+    /// δ = 1e-6·max(|t_k|, 1), lands on the firing side of the guard again. Without a crossing the
     /// event cannot fire again and the state would sink through the guard (the bouncing ball
     /// with e = 0, or a Zeno sequence too fine to resolve): events accumulate at t_k, and the
     /// run ends there with the state held at x⁺. `rate_minus` is ∇g·f⁻ + ∂g/∂t.
@@ -881,7 +883,9 @@ where
         if d * (self.gx.dot(&self.f_plus) + gt) > 0.0 {
             return false;
         }
-        let delta = 1e-6 * self.t_end.max(1.0);
+        // Relative to the event time (the time resolution there), not to the horizon T: the
+        // verdict must be the same whether T lies just past t_k or 10⁶ times beyond it.
+        let delta = 1e-6 * t.abs().max(1.0);
         let v_plus = d * model.guard(k, t, &self.x_plus, p);
         self.xs.copy_from(&self.x_plus);
         self.xs.axpy(delta, &self.f_plus, 1.0);
