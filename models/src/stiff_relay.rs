@@ -60,4 +60,45 @@ mod tests {
             }
         }
     }
+
+    /// dC/dτ of C = ∫₀³ y² dt in closed form: after k switches y is the τ = 0 triangle wave
+    /// delayed by 2τk, so dC/dτ = Σ_k −2k·[y₀²] over segment k = −2·3·(0 − 0.25) = 1.5
+    /// (segments 1 and 2 run between ±0.5, so only the last one, k = 3, counts).
+    ///
+    /// The class this guards: a parameter whose sensitivities are far larger than the state
+    /// (S_τ ~ 1/τ = 1e8 near each switch). A step size chosen for x alone left S wrong by 5×
+    /// at rtol 1e-3…1e-6 with a misleading grazing warning; sensitivity error control without
+    /// the |θ_j| weight put S_τ's rounding floor above atol and ran into `max_steps`.
+    #[test]
+    fn the_gradient_in_tau_is_right_at_every_tolerance_with_default_options() {
+        let m = StiffRelay::new();
+        let p = StiffRelayParams::default().to_vector();
+        for method in [mvad::solution::Method::Auto, mvad::solution::Method::Rosenbrock] {
+            for rtol in [1e-3, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12] {
+                let opts = Options {
+                    method,
+                    rtol,
+                    ..Options::default()
+                };
+                let sol = solve(&m, &p, &opts).expect("runs");
+                let what = format!("{method:?} rtol {rtol:e}");
+                assert!(sol.diagnostics.is_empty(), "{what}: {:?}", sol.diagnostics);
+                assert_eq!(sol.events.len(), 3, "{what}");
+                let err = (sol.gradient[0] - 1.5).abs() / 1.5;
+                assert!(
+                    err <= 10.0 * rtol + 1e-10,
+                    "{what}: dC/dtau = {:.15e}, rel err {err:.1e}",
+                    sol.gradient[0]
+                );
+                for (k, e) in sol.events.iter().enumerate() {
+                    let want = 2.0 * k as f64;
+                    assert!(
+                        (e.dt[0] - want).abs() <= 10.0 * rtol * want.max(1.0) + 1e-9,
+                        "{what}: event {k} dt/dtau = {}, want {want}",
+                        e.dt[0]
+                    );
+                }
+            }
+        }
+    }
 }

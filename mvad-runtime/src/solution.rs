@@ -62,7 +62,9 @@ pub struct Options {
     /// take ~10⁸ steps. The default, 10⁶, is ~700× the most any example model needs at
     /// rtol 1e-12 (`stiff_relay.hyb` under `auto`: ~1,500 attempts).
     pub max_steps: usize,
-    /// Put the sensitivities (and cost quadratures) under error control too.
+    /// Put the sensitivities (and cost quadratures) under error control too, column j
+    /// weighted by |θ_j| (on by default: a step size chosen for x alone can leave S wrong
+    /// at every tolerance, e.g. a stiff lag whose S_τ ~ 1/τ is resolved only near events).
     pub sens_error_control: bool,
     /// Compute sensitivities at all (false: primal simulation only).
     pub sensitivities: bool,
@@ -82,7 +84,7 @@ impl Default for Options {
             grazing_tol: 1e-3,
             max_events: 100_000,
             max_steps: 1_000_000,
-            sens_error_control: false,
+            sens_error_control: true,
             sensitivities: true,
             record: false,
             simultaneous_tol: 1e-12,

@@ -30,7 +30,9 @@
 //! ## Error control and step size
 //! The local error estimate e of the embedded pair is measured in the weighted RMS norm
 //! ‖e‖ = sqrt(1/N Σ (e_i / (atol + rtol·max(|y0_i|, |y1_i|)))²) over x and q (the latter only
-//! with a running cost); `Options::sens_error_control` adds S and q_θ. A step is accepted when
+//! with a running cost); `Options::sens_error_control` (on by default) adds S and q_θ, column j
+//! weighted by |θ_j| so that it is controlled as the change θ_j·S_j it predicts (the parameter
+//! scaling of CVODES; see [`sens_weight`]). A step is accepted when
 //! ‖e‖ ≤ 1, and the next step is h·clamp(0.9 ‖e‖^(−β₁) ‖e_prev‖^(β₂), 0.2, 10) (a PI controller
 //! with β₁ = 0.7/k, β₂ = 0.4/k, k = order of the estimate + 1; no growth right after a
 //! rejection). The first step after every [`Integrator::restart`] comes from Hairer's heuristic
@@ -885,68 +887,55 @@ where
 
     /// Weighted RMS norm of `self.yerr` relative to y (start) and ynew (end).
     fn error_norm(&self) -> f64 {
-        let sc = |a: f64, b: f64| self.atol + self.rtol * a.abs().max(b.abs());
-        let mut sum = 0.0;
-        let mut count = 0usize;
-        let mut add = |e: &[f64], y0: &[f64], y1: &[f64]| {
-            for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
-                // An exact zero counts as zero even where the scale is 0 (atol = 0, y = 0).
-                let r = if *ei == 0.0 { 0.0 } else { ei / sc(*a, *b) };
-                sum += r * r;
-            }
-            count += e.len();
-        };
-        add(
-            self.yerr.x.as_slice(),
-            self.y.x.as_slice(),
-            self.ynew.x.as_slice(),
-        );
-        if self.rhs.has_rc {
-            add(&[self.yerr.q], &[self.y.q], &[self.ynew.q]);
-        }
-        if self.sens_err {
-            add(
-                self.yerr.s.as_slice(),
-                self.y.s.as_slice(),
-                self.ynew.s.as_slice(),
-            );
-            if self.rhs.has_rc {
-                add(
-                    self.yerr.qp.as_slice(),
-                    self.y.qp.as_slice(),
-                    self.ynew.qp.as_slice(),
-                );
-            }
-        }
-        if count == 0 {
-            return 0.0;
-        }
-        (sum / count as f64).sqrt()
+        self.weighted_rms(&self.yerr, &self.y, &self.ynew)
     }
 
     /// Weighted RMS norm of `v` with scale atol + rtol |y|, over the controlled parts.
     fn scaled_norm(&self, v: &AugState<M::N, M::P>, y: &AugState<M::N, M::P>) -> f64 {
+        self.weighted_rms(v, y, y)
+    }
+
+    /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over x, q and, under
+    /// sensitivity error control, S and q_θ. The weight is 1 on x and q and
+    /// [`sens_weight`]`(θ_j)` on column j of S and on q_θ[j], so both are measured as the
+    /// change θ_j·S_j they predict for a relative change of θ_j.
+    fn weighted_rms(
+        &self,
+        e: &AugState<M::N, M::P>,
+        y0: &AugState<M::N, M::P>,
+        y1: &AugState<M::N, M::P>,
+    ) -> f64 {
+        let (atol, rtol) = (self.atol, self.rtol);
         let mut sum = 0.0;
         let mut count = 0usize;
-        let mut add = |e: &[f64], y0: &[f64]| {
-            for (ei, a) in e.iter().zip(y0) {
-                let r = if *ei == 0.0 {
-                    0.0
-                } else {
-                    ei / (self.atol + self.rtol * a.abs())
-                };
-                sum += r * r;
+        let mut add = |e: &[f64], y0: &[f64], y1: &[f64], w: f64| {
+            for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
+                // An exact zero counts as zero even where the scale is 0 (atol = 0, y = 0).
+                if *ei != 0.0 {
+                    let r = w * ei / (atol + rtol * w * a.abs().max(b.abs()));
+                    sum += r * r;
+                }
             }
             count += e.len();
         };
-        add(v.x.as_slice(), y.x.as_slice());
+        add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
         if self.rhs.has_rc {
-            add(&[v.q], &[y.q]);
+            add(&[e.q], &[y0.q], &[y1.q], 1.0);
         }
         if self.sens_err {
-            add(v.s.as_slice(), y.s.as_slice());
-            if self.rhs.has_rc {
-                add(v.qp.as_slice(), y.qp.as_slice());
+            let n = e.x.len();
+            for (j, theta) in self.rhs.p.iter().enumerate() {
+                let w = sens_weight(*theta);
+                let col = j * n..(j + 1) * n;
+                add(
+                    &e.s.as_slice()[col.clone()],
+                    &y0.s.as_slice()[col.clone()],
+                    &y1.s.as_slice()[col],
+                    w,
+                );
+                if self.rhs.has_rc {
+                    add(&[e.qp[j]], &[y0.qp[j]], &[y1.qp[j]], w);
+                }
             }
         }
         if count == 0 {
@@ -1103,6 +1092,19 @@ fn dense_into<N: Dim, P: Dim>(
     }
 }
 
+/// The weight of parameter θ_j's sensitivities in the error norm: |θ_j|, or 1 when θ_j = 0
+/// (the parameter scaling `pbar` of CVODES). Unweighted, a parameter of size 1e-8 has
+/// sensitivities of size 1e8 whose rounding floor (ε·1e8) lies above any absolute
+/// tolerance, and one of size 1e8 has sensitivities too small to be controlled at all;
+/// weighted, every column is held to the accuracy the state itself is held to.
+fn sens_weight(theta: f64) -> f64 {
+    if theta != 0.0 && theta.is_finite() {
+        theta.abs()
+    } else {
+        1.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1153,3 +1155,4 @@ mod tests {
         }
     }
 }
+
