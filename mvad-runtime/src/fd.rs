@@ -17,7 +17,7 @@
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc};
 use crate::solution::Options;
-use crate::solve::solve;
+use crate::solve::solve_with;
 use nalgebra::{DefaultAllocator, OVector};
 
 /// The absolute central-difference step for a parameter of value `theta`:
@@ -103,8 +103,8 @@ where
             ),
         });
     }
-    let cp = solve(model, &plus, opts)?.cost;
-    let cm = solve(model, &minus, opts)?.cost;
+    let cp = solve_with(model, &plus, opts, &mut ())?.cost;
+    let cm = solve_with(model, &minus, opts, &mut ())?.cost;
     Ok(FdPoint {
         rel_step,
         step: h,

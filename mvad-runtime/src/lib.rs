@@ -18,13 +18,15 @@ pub mod integrate;
 pub mod measure;
 pub mod reduce;
 pub mod sens;
+pub mod sink;
 pub mod solution;
 pub mod solve;
 
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
+pub use sink::{EventCounts, EventSink, EventView, Stream};
 pub use solution::{
     Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,
 };
-pub use solve::solve;
+pub use solve::{solve, solve_with};

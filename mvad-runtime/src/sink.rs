@@ -1,0 +1,134 @@
+//! Where the events of a run go: the event loop hands every user event, as a borrowed
+//! [`EventView`], to an [`EventSink`] the caller chooses.
+//!
+//! - `()` keeps nothing: a run that wants only C and dC/dθ allocates nothing per event
+//!   (the count is still in [`crate::Stats::events`]).
+//! - [`EventCounts`] counts the firings of each declared event.
+//! - `Vec<EventRecord>` keeps the full table, with the jumps and atoms of the measure;
+//!   [`crate::solve::solve`] uses it and returns it as [`crate::Solution::events`].
+//! - [`Stream`] calls a closure per event: a streaming reduction (a running sum of event
+//!   times, a histogram, a check) over a run too long to keep.
+
+use crate::solution::EventRecord;
+
+/// One user event as the event loop sees it when the event fires. The slices borrow the
+/// loop's buffers and are valid only for the call.
+#[derive(Clone, Copy, Debug)]
+pub struct EventView<'a> {
+    /// Position in the run (0, 1, …).
+    pub index: usize,
+    /// Index of the event in the model's declaration order.
+    pub event: usize,
+    /// Event time t_k.
+    pub t: f64,
+    /// Mode before the event.
+    pub mode_before: usize,
+    /// Mode after the event.
+    pub mode_after: usize,
+    /// ∇g·f⁻ at the event.
+    pub guard_slope: f64,
+    /// ∂g/∂t at the event.
+    pub guard_dt: f64,
+    /// False when the crossing grazes (see `Options::grazing_tol`).
+    pub transversal: bool,
+    /// dt_k/dθ, one per parameter (empty without sensitivities).
+    pub dt: &'a [f64],
+    /// x(t_k⁻).
+    pub x_before: &'a [f64],
+    /// x(t_k⁺).
+    pub x_after: &'a [f64],
+    /// The observables at (t_k, x⁻).
+    pub observables_before: &'a [f64],
+    /// The observables at (t_k, x⁺).
+    pub observables_after: &'a [f64],
+}
+
+impl EventView<'_> {
+    /// The event table's entry: the jumps J = y⁺ − y⁻ of every state and observable and the
+    /// atoms α = −J·dt_k/dθ the measure places at t_k, one row per observable.
+    pub fn to_record(&self) -> EventRecord {
+        let diff =
+            |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).map(|(a, b)| a - b).collect() };
+        let jump_observables = diff(self.observables_after, self.observables_before);
+        let atoms = jump_observables
+            .iter()
+            .map(|j| self.dt.iter().map(|d| -j * d).collect())
+            .collect();
+        EventRecord {
+            index: self.index,
+            event: self.event,
+            t: self.t,
+            mode_before: self.mode_before,
+            mode_after: self.mode_after,
+            guard_slope: self.guard_slope,
+            guard_dt: self.guard_dt,
+            transversal: self.transversal,
+            dt: self.dt.to_vec(),
+            x_before: self.x_before.to_vec(),
+            x_after: self.x_after.to_vec(),
+            jump_states: diff(self.x_after, self.x_before),
+            jump_observables,
+            atoms,
+        }
+    }
+}
+
+/// Receives the user events of a run, in time order (simultaneous events in declaration
+/// order). Switch crossings of kinks are not events and are not passed on.
+pub trait EventSink {
+    /// Called once per user event, after its reset and sensitivity jump are known.
+    fn event(&mut self, ev: &EventView<'_>);
+}
+
+/// Keeps nothing.
+impl EventSink for () {
+    #[inline]
+    fn event(&mut self, _ev: &EventView<'_>) {}
+}
+
+/// Keeps the full event table.
+impl EventSink for Vec<EventRecord> {
+    fn event(&mut self, ev: &EventView<'_>) {
+        self.push(ev.to_record());
+    }
+}
+
+/// Firings per declared event, indexed like `ModelInfo::events`.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct EventCounts {
+    /// `per_event[k]` = how often event k fired.
+    pub per_event: Vec<usize>,
+}
+
+impl EventCounts {
+    /// Counters for a model with `nevents` declared events (allocated here, once).
+    pub fn new(nevents: usize) -> Self {
+        EventCounts {
+            per_event: vec![0; nevents],
+        }
+    }
+}
+
+impl EventSink for EventCounts {
+    fn event(&mut self, ev: &EventView<'_>) {
+        if ev.event >= self.per_event.len() {
+            self.per_event.resize(ev.event + 1, 0);
+        }
+        self.per_event[ev.event] += 1;
+    }
+}
+
+/// A streaming reduction: the closure sees every event and keeps what it wants.
+pub struct Stream<F>(pub F);
+
+impl<F: FnMut(&EventView<'_>)> EventSink for Stream<F> {
+    fn event(&mut self, ev: &EventView<'_>) {
+        (self.0)(ev)
+    }
+}
+
+impl<S: EventSink + ?Sized> EventSink for &mut S {
+    fn event(&mut self, ev: &EventView<'_>) {
+        (**self).event(ev)
+    }
+}

@@ -1,0 +1,302 @@
+//! What happens at an event time: a user event (t', reset, new mode and bits, S⁺, the cost
+//! terms it moves, the Zeno and stuck-state checks, the event handed to the sink) and a
+//! switch crossing of a kink (identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump).
+
+use super::Driver;
+use crate::error::SolveError;
+use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::sens;
+use crate::sink::{EventSink, EventView};
+use crate::solution::{Diagnostic, DiagnosticKind};
+use nalgebra::DefaultAllocator;
+
+/// How the trajectory met the guard of the event being applied.
+#[derive(Clone, Copy, Debug)]
+struct Approach {
+    /// ∇g·f⁻.
+    slope: f64,
+    /// ∂g/∂t.
+    gt: f64,
+    /// |∇g·f⁻ + ∂g/∂t| below the grazing tolerance.
+    grazing: bool,
+}
+
+impl<M: HybridModel> Driver<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Applies user event k at time t to `self.y` (the state at t⁻) and hands it to `sink`.
+    /// Returns true when the run must stop here: a Zeno accumulation has been reached or
+    /// the reset left the state stuck on its guard.
+    pub(super) fn apply_event(
+        &mut self,
+        k: usize,
+        t: f64,
+        sink: &mut impl EventSink,
+    ) -> Result<bool, SolveError> {
+        let approach = self.event_approach(k, t)?;
+        let (mode_before, sw_before) = (self.mode, self.sw);
+        let sw_after = self.event_reset(k, t)?;
+        let l_plus = self.event_costs(k, t, sw_before, sw_after)?;
+        let zeno_stop = self.zeno_verdict(t, l_plus, approach.grazing, approach.slope);
+        self.emit_event(k, t, mode_before, approach, sink);
+        let graze_scale = self.opts.grazing_tol * self.gx.norm() * self.f_minus.norm();
+        let mode_after = self.mode;
+        let stuck = zeno_stop.is_none()
+            && self.model.info().events[k].armed_in(mode_after)
+            && t < self.t_end
+            && self.stuck_after_reset(k, t, mode_after, sw_after, approach.slope + approach.gt);
+        if approach.grazing && zeno_stop.is_none() && !stuck {
+            self.report_grazing(k, t, approach.slope, graze_scale);
+        }
+        // The new state.
+        self.y.x.copy_from(&self.x_plus);
+        if self.sens {
+            self.y.s.copy_from(&self.s_plus);
+        }
+        self.sw = sw_after;
+        self.fired[k] = true;
+        if zeno_stop.is_some() {
+            self.zeno_stop = zeno_stop;
+        } else if stuck {
+            self.zeno_stop = Some((t, 0.0));
+            self.stuck = Some(k);
+        }
+        Ok(self.zeno_stop.is_some())
+    }
+
+    /// f⁻, ∇g and ∂g/∂t at (t, x⁻), whether the crossing grazes and, with sensitivities, the
+    /// event-time sensitivity t' = −(∇g·S⁻ + ∂g/∂θ)/(∇g·f⁻ + ∂g/∂t) into `self.dt`.
+    fn event_approach(&mut self, k: usize, t: f64) -> Result<Approach, SolveError> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        let name = &info.events[k].name;
+        self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
+        model.rhs(self.mode, self.sw, t, &self.y.x, p, &mut self.f_minus);
+        self.nonfinite_x(t, &self.f_minus, || {
+            format!("flow of mode `{}`", info.modes[self.mode])
+        })?;
+        let gt = model.guard_grad(k, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        if !(gt.is_finite()
+            && self.gx.iter().all(|v| v.is_finite())
+            && self.gp.iter().all(|v| v.is_finite())
+            && model.guard(k, t, &self.y.x, p).is_finite())
+        {
+            return Err(SolveError::NonFinite {
+                t,
+                what: format!("guard of event `{name}`"),
+            });
+        }
+        let grazing = sens::is_grazing(&self.gx, &self.f_minus, gt, self.opts.grazing_tol);
+        if !self.sens {
+            let slope = self.gx.dot(&self.f_minus);
+            return Ok(Approach { slope, gt, grazing });
+        }
+        let (slope, denom) = sens::event_time_sensitivity(
+            &self.gx,
+            &self.gp,
+            gt,
+            &self.f_minus,
+            &self.y.s,
+            &mut self.dt,
+        );
+        if !self.dt.iter().all(|v| v.is_finite()) {
+            return Err(SolveError::NonFinite {
+                t,
+                what: format!(
+                    "event-time sensitivity of event `{name}` (tangential crossing: ∇g·f + ∂g/∂t = {denom:e})"
+                ),
+            });
+        }
+        Ok(Approach { slope, gt, grazing })
+    }
+
+    /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (returned, bits
+    /// with σ_j = 0 keep their old value), f⁺ and, with sensitivities, S⁺ by the saltation
+    /// jump (see [`sens::jump`]) into `self.s_plus`.
+    fn event_reset(&mut self, k: usize, t: f64) -> Result<Switches, SolveError> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        let ev = &info.events[k];
+        model.reset(k, t, &self.y.x, p, &mut self.x_plus);
+        self.nonfinite_x(t, &self.x_plus, || format!("reset of event `{}`", ev.name))?;
+        let sw_before = self.sw;
+        let mode_after = ev.target.unwrap_or(self.mode);
+        self.mode = mode_after;
+        let sw_after = self.switch_bits(t, true, Some(sw_before));
+        model.rhs(mode_after, sw_after, t, &self.x_plus, p, &mut self.f_plus);
+        self.nonfinite_x(t, &self.f_plus, || {
+            format!("flow of mode `{}`", info.modes[mode_after])
+        })?;
+        if self.sens {
+            model.reset_jac(k, t, &self.y.x, p, &mut self.rx, &mut self.rp, &mut self.rt);
+            sens::jump(
+                &self.rx,
+                &self.rp,
+                &self.rt,
+                &self.y.s,
+                &self.f_minus,
+                &self.f_plus,
+                &self.dt,
+                &mut self.work,
+                &mut self.s_plus,
+            );
+            if !self.s_plus.iter().all(|v| v.is_finite()) {
+                return Err(SolveError::NonFinite {
+                    t,
+                    what: format!("sensitivity jump of event `{}`", ev.name),
+                });
+            }
+        }
+        Ok(sw_after)
+    }
+
+    /// The cost terms event k moves: the running-cost jump (ℓ⁻ − ℓ⁺)·t' into q_θ, the total
+    /// derivative S⁺ + f⁺t' of the post-event state into `self.dtot`, and the event cost φ_k
+    /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ. Returns ℓ⁺ (0 without a running cost).
+    fn event_costs(
+        &mut self,
+        k: usize,
+        t: f64,
+        sw_before: Switches,
+        sw_after: Switches,
+    ) -> Result<f64, SolveError> {
+        let (model, p, sens) = (self.model, self.p, self.sens);
+        let info = model.info();
+        let mut l_plus = 0.0;
+        if info.has_running_cost {
+            let l_minus = model.running_cost(sw_before, t, &self.y.x, p);
+            l_plus = model.running_cost(sw_after, t, &self.x_plus, p);
+            if !(l_minus.is_finite() && l_plus.is_finite()) {
+                return Err(SolveError::NonFinite {
+                    t,
+                    what: "cost".into(),
+                });
+            }
+            if sens {
+                self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
+            }
+        }
+        if sens {
+            sens::post_event_total(&self.s_plus, &self.f_plus, &self.dt, &mut self.dtot);
+        }
+        let ev = &info.events[k];
+        if ev.has_cost {
+            let phi = model.event_cost(k, t, &self.x_plus, p);
+            if !phi.is_finite() {
+                return Err(SolveError::NonFinite {
+                    t,
+                    what: format!("cost term of event `{}`", ev.name),
+                });
+            }
+            self.c_ev += phi;
+            if sens {
+                let phi_t =
+                    model.event_cost_grad(k, t, &self.x_plus, p, &mut self.cx, &mut self.cp);
+                self.g_ev.gemv_tr(1.0, &self.dtot, &self.cx, 1.0);
+                self.g_ev += &self.cp;
+                self.g_ev.axpy(phi_t, &self.dt, 1.0);
+            }
+        }
+        Ok(l_plus)
+    }
+
+    /// Hands the event to the sink, with the observables on both sides of the jump.
+    fn emit_event(
+        &mut self,
+        k: usize,
+        t: f64,
+        mode_before: usize,
+        a: Approach,
+        sink: &mut impl EventSink,
+    ) {
+        let (model, p) = (self.model, self.p);
+        model.observe(t, &self.y.x, p, &mut self.obs_minus);
+        model.observe(t, &self.x_plus, p, &mut self.obs_plus);
+        sink.event(&EventView {
+            index: self.nevents,
+            event: k,
+            t,
+            mode_before,
+            mode_after: self.mode,
+            guard_slope: a.slope,
+            guard_dt: a.gt,
+            transversal: !a.grazing,
+            dt: if self.sens { self.dt.as_slice() } else { &[] },
+            x_before: self.y.x.as_slice(),
+            x_after: self.x_plus.as_slice(),
+            observables_before: &self.obs_minus,
+            observables_after: &self.obs_plus,
+        });
+        self.nevents += 1;
+    }
+
+    fn report_grazing(&mut self, k: usize, t: f64, slope: f64, graze_scale: f64) {
+        let message = format!(
+            "event `{}` grazes: |∇g·f| = {:.3e} < {} |∇g| |f| = {:.3e}; t' is ill-conditioned",
+            self.event_name(k),
+            slope.abs(),
+            self.opts.grazing_tol,
+            graze_scale
+        );
+        self.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::Grazing,
+            t,
+            message,
+        });
+    }
+
+    /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump.
+    pub(super) fn apply_switch(&mut self, j: usize, t: f64) -> Result<(), SolveError> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        let sw_before = self.sw;
+        let sw_after = sw_before ^ (1 << j);
+        model.rhs(self.mode, sw_before, t, &self.y.x, p, &mut self.f_minus);
+        model.rhs(self.mode, sw_after, t, &self.y.x, p, &mut self.f_plus);
+        self.nonfinite_x(t, &self.f_plus, || {
+            format!("flow of mode `{}`", info.modes[self.mode])
+        })?;
+        if self.sens {
+            let gt = model.switch_grad(j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+            sens::event_time_sensitivity(
+                &self.gx,
+                &self.gp,
+                gt,
+                &self.f_minus,
+                &self.y.s,
+                &mut self.dt,
+            );
+            if !self.dt.iter().all(|v| v.is_finite()) {
+                return Err(SolveError::NonFinite {
+                    t,
+                    what: format!(
+                        "crossing-time sensitivity of switching function {j} (tangential crossing)"
+                    ),
+                });
+            }
+            if sens::is_grazing(&self.gx, &self.f_minus, gt, self.opts.grazing_tol) {
+                self.diagnostics.push(Diagnostic {
+                    kind: DiagnosticKind::Grazing,
+                    t,
+                    message: format!("switching function {j} is crossed nearly tangentially"),
+                });
+            }
+            sens::switch_jump(
+                &mut self.y.s,
+                &self.f_minus,
+                &self.f_plus,
+                &self.dt,
+                &mut self.work,
+            );
+            if info.has_running_cost {
+                let l_minus = model.running_cost(sw_before, t, &self.y.x, p);
+                let l_plus = model.running_cost(sw_after, t, &self.y.x, p);
+                self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
+            }
+        }
+        self.sw = sw_after;
+        self.switch_crossings += 1;
+        Ok(())
+    }
+}

@@ -1,0 +1,518 @@
+//! The driver: simulate a hybrid model, locate its events, carry S = ∂x/∂θ through every
+//! jump and reduce to C(θ) and dC/dθ.
+//!
+//! One run of [`solve`]:
+//! 1. T from `Options::t_end` (then dT/dθ = 0) or the model's horizon; x(0) = x₀(θ),
+//!    S(0) = ∂x₀/∂θ; switch bits from the signs of σ_j at t = 0.
+//! 2. Accepted steps of the integrator (x, S, q = ∫ℓ, q_θ = ∫(ℓ_x S + ℓ_θ)); after each step the
+//!    [`Scanner`] looks for guard and switch crossings on the dense output (see [`crate::event`]).
+//! 3. At the earliest crossing the step is truncated there and the event applied: t_k', the
+//!    reset, the new mode, the switch bits re-evaluated at x⁺, S⁺ (see [`crate::sens`]), the
+//!    running-cost jump (ℓ⁻ − ℓ⁺) t_k', the event cost and its total derivative, the jumps of
+//!    every state and observable and the atoms α_k = −J_k t_k'. Events within
+//!    `simultaneous_tol · max(|t_k|, 1)` of the earliest fire at the same time in declaration
+//!    order (a `simultaneous_events` diagnostic). A switch crossing flips its bit with the
+//!    identity reset. Then the integrator restarts (no stage is reused across a jump), its
+//!    first step seeded with the length of the step that contained the event.
+//! 4. At T the final terms (see [`crate::reduce`]).
+//!
+//! Zeno accumulations and resets that leave the state on its guard end the run at the limit
+//! (see [`zeno`]).
+//!
+//! The work is split by job: this module holds the loop (step, scan, truncate at the
+//! earliest crossing, apply, restart); [`jump`] what happens at an event or switch crossing;
+//! [`zeno`] accumulations; [`record`] the trajectory record; [`finish`] the end of the run.
+//! Events leave the loop through an [`EventSink`] the caller chooses.
+
+mod finish;
+mod jump;
+mod record;
+mod zeno;
+
+use crate::error::SolveError;
+use crate::event::{Scanner, Watch};
+use crate::integrate::{AugState, Integrator};
+use crate::model::{HybridModel, ModelAlloc, Switches, MAX_SWITCHES};
+use crate::sink::EventSink;
+use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, Options, Solution};
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
+use record::Recorder;
+use std::time::Instant;
+use zeno::Zeno;
+
+/// Simulates `model` at `params` and returns the cost, dC/dθ, the full event table and
+/// everything the measure needs.
+///
+/// Errors: bad input (wrong parameter count, non-finite parameters, bad options, no or a
+/// non-positive horizon) and numerical failures (`NonFinite` naming the expression,
+/// `StepSizeUnderflow`, `MaxEvents`); see [`SolveError`].
+pub fn solve<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut table: Vec<EventRecord> = Vec::new();
+    let mut sol = solve_with(model, params, opts, &mut table)?;
+    sol.events = table;
+    Ok(sol)
+}
+
+/// Like [`solve`], but every user event goes to `sink` instead of into
+/// `Solution::events` (which stays empty): with `&mut ()` a run that wants only C and dC/dθ
+/// allocates nothing per event; see [`crate::sink`].
+pub fn solve_with<M: HybridModel, K: EventSink>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sink: &mut K,
+) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let start = Instant::now();
+    validate(model, params, opts)?;
+    let t_end = match opts.t_end {
+        Some(t) => t,
+        None => model.horizon(params).ok_or(SolveError::NoHorizon)?,
+    };
+    if !(t_end.is_finite() && t_end > 0.0) {
+        return Err(SolveError::BadHorizon { t_end });
+    }
+    let mut d = Driver::new(model, params, opts, t_end);
+    d.run(sink)?;
+    let mut sol = d.finish()?;
+    sol.stats.wall_seconds = start.elapsed().as_secs_f64();
+    Ok(sol)
+}
+
+fn validate<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+) -> Result<(), SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = model.info();
+    let np = model.nparams().value();
+    if params.len() != np || info.params.len() != np {
+        return Err(SolveError::ParamCount {
+            expected: np,
+            got: params.len(),
+        });
+    }
+    if let Some((index, &value)) = params.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(SolveError::BadParam { index, value });
+    }
+    let bad = |what: &str| Err(SolveError::BadOption { what: what.into() });
+    if !(opts.rtol.is_finite() && opts.rtol > 0.0) {
+        return bad("rtol must be finite and positive");
+    }
+    if !(opts.atol.is_finite() && opts.atol >= 0.0) {
+        return bad("atol must be finite and non-negative");
+    }
+    if !(opts.grazing_tol.is_finite() && opts.grazing_tol >= 0.0) {
+        return bad("grazing tolerance must be finite and non-negative");
+    }
+    if !(opts.simultaneous_tol.is_finite() && opts.simultaneous_tol >= 0.0) {
+        return bad("simultaneous-event tolerance must be finite and non-negative");
+    }
+    if opts.max_steps == 0 {
+        return bad("max_steps must be positive");
+    }
+    let nmodes = info.modes.len();
+    let bad_model = |what: String| Err(SolveError::BadModel { what });
+    if nmodes == 0 || info.initial_mode >= nmodes {
+        return bad_model(format!(
+            "initial mode {} of {} modes",
+            info.initial_mode, nmodes
+        ));
+    }
+    if info.switches > MAX_SWITCHES {
+        return bad_model(format!(
+            "{} switching functions (at most {MAX_SWITCHES})",
+            info.switches
+        ));
+    }
+    if info.states.len() != model.nstates().value() {
+        return bad_model("state names and state dimension disagree".into());
+    }
+    for ev in &info.events {
+        if ev.target.is_some_and(|m| m >= nmodes) || ev.mode.is_some_and(|m| m >= nmodes) {
+            return bad_model(format!(
+                "event `{}` names a mode that does not exist",
+                ev.name
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// All state and buffers of one run (allocated once in `new`).
+struct Driver<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    model: &'a M,
+    p: &'a OVector<f64, M::P>,
+    opts: &'a Options,
+    t_end: f64,
+    dt_end: OVector<f64, M::P>,
+    sens: bool,
+    integ: Integrator<'a, M>,
+    y: AugState<M::N, M::P>,
+    aug_tmp: AugState<M::N, M::P>,
+    mode: usize,
+    sw: Switches,
+    scanner: Scanner,
+    xs: OVector<f64, M::N>,
+    xe: OVector<f64, M::N>,
+    x_plus: OVector<f64, M::N>,
+    f_minus: OVector<f64, M::N>,
+    f_plus: OVector<f64, M::N>,
+    work: OVector<f64, M::N>,
+    rt: OVector<f64, M::N>,
+    gx: OVector<f64, M::N>,
+    gp: OVector<f64, M::P>,
+    dt: OVector<f64, M::P>,
+    rx: OMatrix<f64, M::N, M::N>,
+    rp: OMatrix<f64, M::N, M::P>,
+    s_plus: OMatrix<f64, M::N, M::P>,
+    dtot: OMatrix<f64, M::N, M::P>,
+    cx: OVector<f64, M::N>,
+    cp: OVector<f64, M::P>,
+    obs_minus: Vec<f64>,
+    obs_plus: Vec<f64>,
+    /// Accumulated event costs Σ φ_k and their total derivatives.
+    c_ev: f64,
+    g_ev: OVector<f64, M::P>,
+    fired: Vec<bool>,
+    /// User events applied so far.
+    nevents: usize,
+    diagnostics: Vec<Diagnostic>,
+    switch_crossings: usize,
+    zeno: Zeno<M>,
+    /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
+    zeno_stop: Option<(f64, f64)>,
+    /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
+    stuck: Option<usize>,
+    rec: Option<Recorder>,
+}
+
+impl<'a, M: HybridModel> Driver<'a, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &'a Options, t_end: f64) -> Self {
+        let (n, np) = (model.nstates(), model.nparams());
+        let info = model.info();
+        let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        let vp = || OVector::<f64, M::P>::zeros_generic(np, Const::<1>);
+        let mut dt_end = vp();
+        if opts.t_end.is_none() {
+            model.horizon_grad(p, &mut dt_end);
+        }
+        let nobs = info.nobservables();
+        let nev = info.events.len();
+        Driver {
+            model,
+            p,
+            opts,
+            t_end,
+            dt_end,
+            sens: opts.sensitivities,
+            integ: {
+                let mut it = Integrator::new(model, p, opts);
+                it.set_lazy_dense(true);
+                it
+            },
+            y: AugState::zeros(n, np),
+            aug_tmp: AugState::zeros(n, np),
+            mode: info.initial_mode,
+            sw: 0,
+            scanner: Scanner::new(nev, info.switches),
+            xs: vn(),
+            xe: vn(),
+            x_plus: vn(),
+            f_minus: vn(),
+            f_plus: vn(),
+            work: vn(),
+            rt: vn(),
+            gx: vn(),
+            gp: vp(),
+            dt: vp(),
+            rx: OMatrix::zeros_generic(n, n),
+            rp: OMatrix::zeros_generic(n, np),
+            s_plus: OMatrix::zeros_generic(n, np),
+            dtot: OMatrix::zeros_generic(n, np),
+            cx: vn(),
+            cp: vp(),
+            obs_minus: vec![0.0; nobs],
+            obs_plus: vec![0.0; nobs],
+            c_ev: 0.0,
+            g_ev: vp(),
+            fired: vec![false; nev],
+            nevents: 0,
+            diagnostics: Vec::new(),
+            switch_crossings: 0,
+            zeno: Zeno::new(model),
+            zeno_stop: None,
+            stuck: None,
+            rec: opts
+                .record
+                .then(|| Recorder::new(n.value(), if opts.sensitivities { np.value() } else { 0 })),
+        }
+    }
+
+    fn event_name(&self, k: usize) -> &str {
+        &self.model.info().events[k].name
+    }
+
+    fn nonfinite_x(
+        &self,
+        t: f64,
+        x: &OVector<f64, M::N>,
+        what: impl FnOnce() -> String,
+    ) -> Result<(), SolveError> {
+        if x.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(SolveError::NonFinite { t, what: what() })
+        }
+    }
+
+    /// Switch bits at (t, x) in `mode`: bit j set iff σ_j > 0; for σ_j = 0 exactly, the bit of
+    /// `hint` is kept, or at the start (hint = None) the sign of σ̇_j under the other bits.
+    fn switch_bits(&mut self, t: f64, x_is_plus: bool, hint: Option<Switches>) -> Switches {
+        let nsw = self.model.info().switches;
+        let mut bits: Switches = 0;
+        let mut undecided: Switches = 0;
+        for j in 0..nsw {
+            let x = if x_is_plus { &self.x_plus } else { &self.y.x };
+            let s = self.model.switch_value(j, t, x, self.p);
+            if s > 0.0 {
+                bits |= 1 << j;
+            } else if s == 0.0 {
+                match hint {
+                    Some(h) => bits |= h & (1 << j),
+                    None => undecided |= 1 << j,
+                }
+            }
+        }
+        if undecided != 0 {
+            let x = if x_is_plus {
+                self.x_plus.clone()
+            } else {
+                self.y.x.clone()
+            };
+            self.model
+                .rhs(self.mode, bits, t, &x, self.p, &mut self.work);
+            for j in 0..nsw {
+                if undecided & (1 << j) != 0 {
+                    let st = self
+                        .model
+                        .switch_grad(j, t, &x, self.p, &mut self.gx, &mut self.gp);
+                    if self.gx.dot(&self.work) + st > 0.0 {
+                        bits |= 1 << j;
+                    }
+                }
+            }
+        }
+        bits
+    }
+
+    /// Signed watched value of function w at (t, x) under bits `sw` (see [`crate::event`]).
+    fn signed(
+        model: &M,
+        p: &OVector<f64, M::P>,
+        nev: usize,
+        sw: Switches,
+        w: usize,
+        t: f64,
+        x: &OVector<f64, M::N>,
+    ) -> f64 {
+        if w < nev {
+            model.info().events[w].direction.sign() * model.guard(w, t, x, p)
+        } else {
+            let j = w - nev;
+            let s = model.switch_value(j, t, x, p);
+            if sw & (1 << j) != 0 {
+                -s
+            } else {
+                s
+            }
+        }
+    }
+
+    /// Restarts the integrator and the scanner at (t, self.y) in the current mode and bits.
+    fn restart(&mut self, t: f64) -> Result<(), SolveError> {
+        let info = self.model.info();
+        let nev = info.events.len();
+        for w in 0..self.scanner.len() {
+            let active = w >= nev || info.events[w].armed_in(self.mode);
+            let v = if active {
+                Self::signed(self.model, self.p, nev, self.sw, w, t, &self.y.x)
+            } else {
+                0.0
+            };
+            if v.is_nan() {
+                return Err(self.guard_nonfinite(w, t));
+            }
+            let fired = w < nev && self.fired[w];
+            self.scanner.restart_one(w, active, v, fired);
+        }
+        self.fired.fill(false);
+        self.integ.restart(t, &self.y, self.mode, self.sw);
+        if let Some(rec) = &mut self.rec {
+            rec.open_segment(t);
+        }
+        Ok(())
+    }
+
+    fn guard_nonfinite(&self, w: usize, t: f64) -> SolveError {
+        let what = match self.scanner.watch(w) {
+            Watch::Event(k) => format!("guard of event `{}`", self.event_name(k)),
+            Watch::Switch(j) => format!("switching function {j}"),
+        };
+        SolveError::NonFinite { t, what }
+    }
+
+    /// The event loop: step, scan the step's dense output for crossings, truncate at the
+    /// earliest, apply it (user events first; switch flips only when no user event fires
+    /// there), restart, until T or a stop at an accumulation.
+    fn run(&mut self, sink: &mut impl EventSink) -> Result<(), SolveError> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        model.initial_state(p, &mut self.y.x);
+        self.nonfinite_x(0.0, &self.y.x.clone(), || "initial state".into())?;
+        if self.sens {
+            model.initial_state_jac(p, &mut self.y.s);
+        }
+        self.sw = self.switch_bits(0.0, false, None);
+        self.restart(0.0)?;
+        let nev = info.events.len();
+        while self.integ.t() < self.t_end {
+            self.integ.step(self.t_end)?;
+            // Simultaneity is judged relative to the time resolution where the events are,
+            // never to the horizon: the answer must not depend on how far T lies beyond them.
+            let sim_tol = self.opts.simultaneous_tol * self.integ.t().abs().max(1.0);
+            // The step's full dense output is needed only to sample guards or to record.
+            if self.rec.is_some() || self.scanner.active.iter().any(|&a| a) {
+                self.integ.ensure_dense();
+            }
+            let (t0, t1) = (self.integ.t_prev(), self.integ.t());
+            let sw = self.sw;
+            {
+                let integ = &self.integ;
+                let xs = &mut self.xs;
+                let xe = &mut self.xe;
+                let sample = |t: f64, is_end: bool, active: &[bool], out: &mut [f64]| {
+                    if is_end {
+                        xs.copy_from(&integ.y().x);
+                    } else {
+                        integ.dense_x(t, xs);
+                    }
+                    for (w, o) in out.iter_mut().enumerate() {
+                        if active[w] {
+                            *o = Self::signed(model, p, nev, sw, w, t, xs);
+                        }
+                    }
+                };
+                let eval = |w: usize, t: f64| {
+                    integ.dense_x(t, xe);
+                    Self::signed(model, p, nev, sw, w, t, xe)
+                };
+                let res = self.scanner.scan(t0, t1, sample, eval, sim_tol);
+                if let Err((w, t)) = res {
+                    return Err(self.guard_nonfinite(w, t));
+                }
+            }
+            if self.scanner.found.is_empty() {
+                self.record_step(t0, t1);
+                continue;
+            }
+            let te = self
+                .scanner
+                .found
+                .iter()
+                .map(|c| c.t)
+                .fold(f64::INFINITY, f64::min);
+            self.record_step(t0, te);
+            self.integ.truncate(te);
+            self.y.copy_from(self.integ.y());
+            if let Some(rec) = &mut self.rec {
+                rec.close_segment(te, self.mode, self.sw);
+            }
+            let nfound = self.scanner.found.len();
+            let mut user = 0;
+            let mut stop = false;
+            for i in 0..nfound {
+                let c = self.scanner.found[i];
+                if let Watch::Event(k) = self.scanner.watch(c.w) {
+                    user += 1;
+                    stop |= self.apply_event(k, te, sink)?;
+                }
+            }
+            if user == 0 {
+                for i in 0..nfound {
+                    let c = self.scanner.found[i];
+                    if let Watch::Switch(j) = self.scanner.watch(c.w) {
+                        self.apply_switch(j, te)?;
+                    }
+                }
+            }
+            if user > 1 {
+                self.report_simultaneous(te);
+            }
+            let total = self.nevents + self.switch_crossings;
+            if total > self.opts.max_events {
+                return Err(SolveError::MaxEvents {
+                    t: te,
+                    count: self.opts.max_events,
+                });
+            }
+            if stop {
+                return Ok(());
+            }
+            // Seed the first step after the jump with the step size in use before it (the
+            // error control still shrinks a seed that is too long): Hairer's start-up
+            // heuristic would otherwise spend 3–4 growing steps on every segment.
+            let h_seed = self.integ.last_step_size();
+            self.restart(te)?;
+            self.integ.set_step_size(h_seed);
+        }
+        Ok(())
+    }
+
+    /// The `simultaneous_events` diagnostic for the user events among the crossings found
+    /// at t (applied in declaration order).
+    fn report_simultaneous(&mut self, t: f64) {
+        let names: Vec<String> = self
+            .scanner
+            .found
+            .iter()
+            .filter_map(|c| match self.scanner.watch(c.w) {
+                Watch::Event(k) => Some(format!("`{}`", self.event_name(k))),
+                Watch::Switch(_) => None,
+            })
+            .collect();
+        self.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::SimultaneousEvents,
+            t,
+            message: format!(
+                "events {} fired at the same time; applied in declaration order",
+                names.join(", ")
+            ),
+        });
+    }
+
+    /// Records [t0, t1] of the current step when recording.
+    fn record_step(&mut self, t0: f64, t1: f64) {
+        if let Some(rec) = &mut self.rec {
+            rec.record_step(&self.integ, &mut self.aug_tmp, t0, t1);
+        }
+    }
+}
