@@ -609,7 +609,7 @@ where
             if h.is_nan() || h <= 10.0 * f64::EPSILON * self.t.abs() || h < 1e-300 {
                 // Shrinking towards a point where the flow stops being defined (√ of a
                 // negative, 1/0, ...) ends here: report the NaN, not the step size.
-                return Err(match nonfinite {
+                return Err(match nonfinite.or_else(|| self.undefined_just_ahead()) {
                     Some(what) => StepError::NonFinite { t: self.t, what },
                     None => StepError::StepSizeUnderflow { t: self.t, h },
                 });
@@ -733,6 +733,23 @@ where
             "{part} (overflow in the flow of mode `{}`)",
             self.mode_name()
         )
+    }
+
+    /// When the step size has shrunk to the resolution of t without a non-finite attempt
+    /// (the sensitivities' derivative can blow up before the flow does, as ∂√(c − t)/∂c at
+    /// t → c, and hold the step short of c), probes F at t + 2ᵏ·10ε|t|, k = 0..4, with the
+    /// state held: the name of the expression that is non-finite there, if any, so the run
+    /// reports where the flow stops being defined rather than a bare step-size underflow.
+    fn undefined_just_ahead(&mut self) -> Option<String> {
+        let dt = 10.0 * f64::EPSILON * self.t.abs().max(f64::MIN_POSITIVE);
+        for k in 0..5 {
+            let t = self.t + dt * f64::from(1u32 << k);
+            self.rhs.eval(t, &self.y, &mut self.k[1]);
+            if self.k[1].nonfinite_part(self.rhs.sens).is_some() {
+                return Some(self.stage_source(1));
+            }
+        }
+        None
     }
 
     /// The expression that produced the non-finite part of stage `i` (which must have one).
@@ -887,12 +904,15 @@ where
 
     /// Weighted RMS norm of `self.yerr` relative to y (start) and ynew (end).
     fn error_norm(&self) -> f64 {
-        self.weighted_rms(&self.yerr, &self.y, &self.ynew)
+        self.weighted_rms(&self.yerr, &self.y, &self.ynew, false)
     }
 
-    /// Weighted RMS norm of `v` with scale atol + rtol |y|, over the controlled parts.
+    /// Weighted RMS norm of `v` with scale atol + rtol |y|, over the controlled parts, for the
+    /// initial-step heuristic. Components whose scale is zero (atol = 0 and y = 0, as S at
+    /// t = 0 when x₀ does not depend on θ) say nothing about the solution's scale and are
+    /// left out, instead of making the norm infinite and the first step zero.
     fn scaled_norm(&self, v: &AugState<M::N, M::P>, y: &AugState<M::N, M::P>) -> f64 {
-        self.weighted_rms(v, y, y)
+        self.weighted_rms(v, y, y, true)
     }
 
     /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over x, q and, under
@@ -904,19 +924,24 @@ where
         e: &AugState<M::N, M::P>,
         y0: &AugState<M::N, M::P>,
         y1: &AugState<M::N, M::P>,
+        skip_unscaled: bool,
     ) -> f64 {
         let (atol, rtol) = (self.atol, self.rtol);
         let mut sum = 0.0;
         let mut count = 0usize;
         let mut add = |e: &[f64], y0: &[f64], y1: &[f64], w: f64| {
             for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
+                let scale = atol + rtol * w * a.abs().max(b.abs());
+                if skip_unscaled && scale == 0.0 {
+                    continue;
+                }
                 // An exact zero counts as zero even where the scale is 0 (atol = 0, y = 0).
                 if *ei != 0.0 {
-                    let r = w * ei / (atol + rtol * w * a.abs().max(b.abs()));
+                    let r = w * ei / scale;
                     sum += r * r;
                 }
+                count += 1;
             }
-            count += e.len();
         };
         add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
         if self.rhs.has_rc {
@@ -1155,4 +1180,3 @@ mod tests {
         }
     }
 }
-
