@@ -443,7 +443,7 @@ fn dip<E: FnMut(f64) -> f64>(
 fn peaks_before_end(v: &[f64; NSAMP]) -> bool {
     let (va, vb, vc) = (v[NSAMP - 3], v[NSAMP - 2], v[NSAMP - 1]);
     let curvature = va - 2.0 * vb + vc;
-    if !(curvature < 0.0) {
+    if curvature.is_nan() || curvature >= 0.0 {
         return false;
     }
     let vertex = (va - vc) / (2.0 * curvature);
