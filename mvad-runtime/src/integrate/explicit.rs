@@ -185,9 +185,9 @@ pub(super) fn check_tableau<const S: usize, const K: usize, const D: usize>(
     // The interpolant: b_i(0) = 0, b_i(1) = b_i, and Σ b_i(θ) c_i^(q−1) = θ^q/q.
     assert!(tab.weights(0.0).iter().all(|w| *w == 0.0));
     let w1 = tab.weights(1.0);
-    for i in 0..K {
+    for (i, wi) in w1.iter().enumerate() {
         let bi = if i < S { tab.b[i] } else { 0.0 };
-        assert_relative_eq!(w1[i], bi, epsilon = 1e3 * eps);
+        assert_relative_eq!(*wi, bi, epsilon = 1e3 * eps);
     }
     let th = 0.37;
     let w = tab.weights(th);

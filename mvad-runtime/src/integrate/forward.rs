@@ -225,7 +225,7 @@ where
         self.rhs.evals
     }
 
-    /// [`weighted_rms`]: x, q (with a running cost) and, under sensitivity error control, S and
+    /// `weighted_rms`: x, q (with a running cost) and, under sensitivity error control, S and
     /// q_θ with column j weighted by |θ_j|.
     #[inline]
     fn error_norm(
