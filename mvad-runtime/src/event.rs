@@ -418,15 +418,36 @@ fn dip<E: FnMut(f64) -> f64>(
             nc += 1;
         }
     }
+    // A maximum between the last interior sample and t₁, which the samples see only as a
+    // rise: the parabola through the last three samples is concave and peaks inside
+    // (s_{N−2}, t₁). Without this the next step, starting past the peak, sees only a fall.
+    let last = NSAMP - 1;
+    if i0 < last && v[last] > v[last - 1] && close(v[last]) && peaks_before_end(v) {
+        candidates[nc] = last;
+        nc += 1;
+    }
     for &i in &candidates[..nc] {
         let left = i.saturating_sub(1);
-        let right = if i == 0 { 1 } else { i + 1 };
+        let right = if i == 0 { 1 } else { (i + 1).min(last) };
         let (tm, vm) = maximize(&mut eval, times[left], times[right]);
         if triggered(vm, strict) {
             return Some((times[left], v[left], tm, vm));
         }
     }
     None
+}
+
+/// Whether the parabola through the last three (equispaced) samples of `v` is concave with
+/// its vertex strictly between the last two sample times. With the samples v_a, v_b, v_c at
+/// −d, 0, d the vertex lies at s* = d (v_a − v_c) / (2 (v_a − 2 v_b + v_c)).
+fn peaks_before_end(v: &[f64; NSAMP]) -> bool {
+    let (va, vb, vc) = (v[NSAMP - 3], v[NSAMP - 2], v[NSAMP - 1]);
+    let curvature = va - 2.0 * vb + vc;
+    if curvature.is_nan() || curvature >= 0.0 {
+        return false;
+    }
+    let vertex = (va - vc) / (2.0 * curvature);
+    vertex > 0.0 && vertex < 1.0
 }
 
 #[cfg(test)]
@@ -495,6 +516,21 @@ mod tests {
         .unwrap();
         assert_eq!(sc.found.len(), 1);
         assert_relative_eq!(sc.found[0].t, 0.49, max_relative = 1e-12);
+    }
+
+    /// A dip whose peak lies between the last interior sample and t₁ (the samples only see
+    /// v rise towards t₁) is found on this step: the next one starts past the peak.
+    #[test]
+    fn scanner_finds_a_dip_peaking_just_before_the_end_of_the_step() {
+        // v rises at every sample (0, 0.2, …, 1); its peak, at 0.95, lies between the last
+        // interior sample and t₁ (for any INTERIOR ≥ 1).
+        let f = |t: f64| 1e-10 - (t - 0.95) * (t - 0.95);
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, f(0.0), false);
+        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
+            .unwrap();
+        assert_eq!(sc.found.len(), 1, "the dip at 0.95 ± 1e-5 is missed");
+        assert_relative_eq!(sc.found[0].t, 0.95 - 1e-5, max_relative = 1e-12);
     }
 
     /// After firing, a function exactly at zero is disarmed; it re-arms once negative and the

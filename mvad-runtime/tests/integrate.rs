@@ -808,7 +808,11 @@ fn auto_switches_to_rosenbrock_on_the_stiff_lag() {
     let mut y0 = AugState::zeros(Dyn(2), Dyn(2));
     y0.x[0] = 0.0;
     y0.x[1] = 1.0;
-    let o = opts(Method::Auto, 1e-8, 1e-10);
+    // Error control on x alone.
+    let o = Options {
+        sens_error_control: false,
+        ..opts(Method::Auto, 1e-8, 1e-10)
+    };
     let mut it = Integrator::new(&m, &p, &o);
     it.restart(0.0, &y0, 0, 0);
     let t_end = 3.0;
@@ -863,7 +867,10 @@ fn auto_switches_to_rosenbrock_on_the_stiff_lag() {
     for (i, si) in s.iter().enumerate() {
         for (j, sij) in si.iter().enumerate() {
             assert_relative_eq!(y.s[(i, j)], *sij, max_relative = 1e-6);
-            assert_relative_eq!(itsec.y().s[(i, j)], *sij, max_relative = 2e-7);
+            // Column j of S is controlled as θ_j·S_j (CVODES's parameter scaling), so S_τ,
+            // of size 1 here, is held to ~atol/τ absolute rather than atol: 4.1e-7 relative
+            // (2e-7 with unscaled control, which cannot run the stiff relay's S_τ ~ 1/τ).
+            assert_relative_eq!(itsec.y().s[(i, j)], *sij, max_relative = 5e-7);
         }
     }
 }

@@ -6,32 +6,36 @@ use mvad_runtime::sink::{EventCounts, EventView, Stream};
 use mvad_runtime::solution::{EventRecord, Options};
 use mvad_runtime::solve::{solve, solve_with};
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::cell::Cell;
 
+/// Counts the allocations of the current thread only: the test runner's own threads
+/// allocate concurrently (reporting a finished test) and must not count.
 struct Counting;
 
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    static ALLOCS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn allocations() -> usize {
+    ALLOCS.with(Cell::get)
+}
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
-
-/// The allocation counter is global: tests in this binary run one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
 
 /// An elastic ball (e = 1): one impact every 2·sqrt(2 h0/g) ≈ 1.28 s, no accumulation.
 fn elastic(t_end: f64) -> (Ball, nalgebra::SVector<f64, 4>, Options) {
@@ -47,7 +51,6 @@ fn elastic(t_end: f64) -> (Ball, nalgebra::SVector<f64, 4>, Options) {
 
 #[test]
 fn every_sink_sees_the_same_events_and_the_same_gradient() {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let (ball, p, opts) = elastic(20.0);
     let reference = solve(&ball, &p, &opts).unwrap();
     assert!(
@@ -92,16 +95,15 @@ fn every_sink_sees_the_same_events_and_the_same_gradient() {
 
 #[test]
 fn without_a_table_the_allocations_do_not_grow_with_the_events() {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let count = |t_end: f64, table: bool| {
         let (ball, p, opts) = elastic(t_end);
-        let before = ALLOCS.load(Ordering::Relaxed);
+        let before = allocations();
         let sol = if table {
             solve(&ball, &p, &opts).unwrap()
         } else {
             solve_with(&ball, &p, &opts, &mut ()).unwrap()
         };
-        (ALLOCS.load(Ordering::Relaxed) - before, sol.stats.events)
+        (allocations() - before, sol.stats.events)
     };
     let (few, e_few) = count(5.0, false);
     let (many, e_many) = count(200.0, false);

@@ -31,7 +31,7 @@ mod zeno;
 
 use crate::error::SolveError;
 use crate::event::{Scanner, Watch};
-use crate::integrate::{AugState, Integrator};
+use crate::integrate::{AugState, Forward, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Switches, MAX_SWITCHES};
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, Options, Solution};
@@ -162,7 +162,7 @@ where
     t_end: f64,
     dt_end: OVector<f64, M::P>,
     sens: bool,
-    integ: Integrator<'a, M>,
+    integ: Integrator<Forward<'a, M>>,
     y: AugState<M::N, M::P>,
     aug_tmp: AugState<M::N, M::P>,
     mode: usize,

@@ -3,7 +3,7 @@
 //! the smooth segments (mode and switch bits) between events. Together with the event table
 //! (x⁻, x⁺, t_k, dt_k/dθ per event) this is the forward record a backward pass replays.
 
-use crate::integrate::{AugState, Integrator};
+use crate::integrate::{AugState, Forward, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Switches};
 use crate::solution::{Segment, Trajectory, TRAJ_NODES};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
@@ -35,7 +35,7 @@ impl Recorder {
     /// step is truncated at an event). `tmp` is scratch space for one dense evaluation.
     pub(super) fn record_step<M: HybridModel>(
         &mut self,
-        integ: &Integrator<'_, M>,
+        integ: &Integrator<Forward<'_, M>>,
         tmp: &mut AugState<M::N, M::P>,
         t0: f64,
         t1: f64,

@@ -1,0 +1,354 @@
+//! The forward augmented state (x, S, q, q_θ) and its vector-space operations.
+
+use super::system::StageVector;
+use crate::model::ModelAlloc;
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
+
+/// The augmented state `(x, S, q, q_θ)` integrated over a smooth segment (see the module doc).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AugState<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// The state x.
+    pub x: OVector<f64, N>,
+    /// The sensitivity S = ∂x/∂θ (n × p).
+    pub s: OMatrix<f64, N, P>,
+    /// The running-cost quadrature q = ∫ ℓ dt.
+    pub q: f64,
+    /// Its parameter gradient q_θ = ∫ (ℓ_x S + ℓ_θ) dt.
+    pub qp: OVector<f64, P>,
+}
+
+impl<N: Dim, P: Dim> AugState<N, P>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// All parts zero (x ∈ Rⁿ, S ∈ Rⁿˣᵖ, q, q_θ ∈ Rᵖ).
+    pub fn zeros(n: N, p: P) -> Self {
+        AugState {
+            x: OVector::zeros_generic(n, Const::<1>),
+            s: OMatrix::zeros_generic(n, p),
+            q: 0.0,
+            qp: OVector::zeros_generic(p, Const::<1>),
+        }
+    }
+
+    /// Copies every part of `other` into `self` (no allocation).
+    pub fn copy_from(&mut self, other: &Self) {
+        self.x.copy_from(&other.x);
+        self.s.copy_from(&other.s);
+        self.q = other.q;
+        self.qp.copy_from(&other.qp);
+    }
+
+    /// `self += a · other`, every part.
+    pub fn axpy(&mut self, a: f64, other: &Self) {
+        StageVector::axpy(self, a, other, true);
+    }
+
+    /// Whether every entry of every part is finite.
+    pub fn is_finite(&self) -> bool {
+        self.x.iter().all(|v| v.is_finite())
+            && self.s.iter().all(|v| v.is_finite())
+            && self.q.is_finite()
+            && self.qp.iter().all(|v| v.is_finite())
+    }
+
+    /// Names the first part holding a NaN or infinity, for diagnostics (S and q_θ only when
+    /// `sens`).
+    pub(super) fn nonfinite_part(&self, sens: bool) -> Option<&'static str> {
+        if !self.x.iter().all(|v| v.is_finite()) {
+            Some("state x")
+        } else if !self.q.is_finite() {
+            Some("running cost")
+        } else if sens && !self.s.iter().all(|v| v.is_finite()) {
+            Some("sensitivity S")
+        } else if sens && !self.qp.iter().all(|v| v.is_finite()) {
+            Some("running-cost gradient")
+        } else {
+            None
+        }
+    }
+}
+
+/// `y += a x` on raw slices.
+#[inline]
+pub(super) fn axpy_slice(y: &mut [f64], a: f64, x: &[f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+/// `o = Σ_i w_i v_i` elementwise over five slices, summed left to right.
+#[inline]
+fn mix5_slice(o: &mut [f64], w: &[f64; 5], v: [&[f64]; 5]) {
+    for i in 0..o.len() {
+        o[i] = w[0] * v[0][i] + w[1] * v[1][i] + w[2] * v[2][i] + w[3] * v[3][i] + w[4] * v[4][i];
+    }
+}
+
+/// Cubic Hermite weights (w₀, w₁, c) with y(θ) = y₀ + c (y₁ − y₀) + h (w₀ f₀ + w₁ f₁):
+/// c = 3θ² − 2θ³, w₀ = θ − 2θ² + θ³, w₁ = θ³ − θ².
+#[inline]
+fn hermite_weights(theta: f64) -> (f64, f64, f64) {
+    let t2 = theta * theta;
+    let t3 = t2 * theta;
+    (theta - 2.0 * t2 + t3, t3 - t2, 3.0 * t2 - 2.0 * t3)
+}
+
+/// d = a + c (b − a) + h (w₀ f₀ + w₁ f₁), elementwise.
+#[inline]
+fn hermite_slice(d: &mut [f64], a: &[f64], b: &[f64], f0: &[f64], f1: &[f64], h: f64, th: f64) {
+    let (w0, w1, c) = hermite_weights(th);
+    for ((((di, ai), bi), g0), g1) in d.iter_mut().zip(a).zip(b).zip(f0).zip(f1) {
+        *di = ai + c * (bi - ai) + h * (w0 * g0 + w1 * g1);
+    }
+}
+
+impl<N: Dim, P: Dim> StageVector for AugState<N, P>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    type Primary = OVector<f64, N>;
+
+    #[inline]
+    fn copy_from(&mut self, other: &Self) {
+        AugState::copy_from(self, other);
+    }
+
+    #[inline]
+    fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+        self.x.copy_from(&base.x);
+        self.q = base.q;
+        if all {
+            self.s.copy_from(&base.s);
+            self.qp.copy_from(&base.qp);
+        }
+        for (c, k) in coefs.iter().zip(ks) {
+            if *c == 0.0 {
+                continue;
+            }
+            let a = h * c;
+            axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
+            self.q += a * k.q;
+            if all {
+                axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
+                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+            }
+        }
+    }
+
+    #[inline]
+    fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+        self.x.fill(0.0);
+        self.q = 0.0;
+        if all {
+            self.s.fill(0.0);
+            self.qp.fill(0.0);
+        }
+        for (c, k) in coefs.iter().zip(ks) {
+            if *c == 0.0 {
+                continue;
+            }
+            let a = h * c;
+            axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
+            self.q += a * k.q;
+            if all {
+                axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
+                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+            }
+        }
+    }
+
+    #[inline]
+    fn axpy(&mut self, a: f64, other: &Self, all: bool) {
+        axpy_slice(self.x.as_mut_slice(), a, other.x.as_slice());
+        self.q += a * other.q;
+        if all {
+            axpy_slice(self.s.as_mut_slice(), a, other.s.as_slice());
+            axpy_slice(self.qp.as_mut_slice(), a, other.qp.as_slice());
+        }
+    }
+
+    #[inline]
+    fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], all: bool) {
+        Self::mix5_primary(&mut self.x, w, v);
+        self.q = w[0] * v[0].q + w[1] * v[1].q + w[2] * v[2].q + w[3] * v[3].q + w[4] * v[4].q;
+        if all {
+            mix5_slice(self.s.as_mut_slice(), w, v.map(|u| u.s.as_slice()));
+            mix5_slice(self.qp.as_mut_slice(), w, v.map(|u| u.qp.as_slice()));
+        }
+    }
+
+    #[inline]
+    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, all: bool) {
+        Self::hermite_primary(&mut self.x, y0, y1, f0, f1, h, th);
+        let mut q = [0.0];
+        hermite_slice(&mut q, &[y0.q], &[y1.q], &[f0.q], &[f1.q], h, th);
+        self.q = q[0];
+        if all {
+            let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.s.as_slice());
+            hermite_slice(self.s.as_mut_slice(), a, b, g0, g1, h, th);
+            let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.qp.as_slice());
+            hermite_slice(self.qp.as_mut_slice(), a, b, g0, g1, h, th);
+        }
+    }
+
+    #[inline]
+    fn is_finite(&self) -> bool {
+        AugState::is_finite(self)
+    }
+
+    #[inline]
+    fn primary_dist_sq(&self, other: &Self) -> f64 {
+        let mut sum = 0.0;
+        for (a, b) in self.x.iter().zip(other.x.iter()) {
+            let d = a - b;
+            sum += d * d;
+        }
+        sum
+    }
+
+    #[inline]
+    fn primary_into(&self, out: &mut OVector<f64, N>) {
+        out.copy_from(&self.x);
+    }
+
+    #[inline]
+    fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
+        out.copy_from(&base.x);
+        for (c, k) in coefs.iter().zip(ks) {
+            if *c != 0.0 {
+                axpy_slice(out.as_mut_slice(), h * c, k.x.as_slice());
+            }
+        }
+    }
+
+    #[inline]
+    fn mix5_primary(out: &mut OVector<f64, N>, w: &[f64; 5], v: [&Self; 5]) {
+        mix5_slice(out.as_mut_slice(), w, v.map(|u| u.x.as_slice()));
+    }
+
+    #[inline]
+    fn hermite_primary(
+        out: &mut OVector<f64, N>,
+        y0: &Self,
+        y1: &Self,
+        f0: &Self,
+        f1: &Self,
+        h: f64,
+        th: f64,
+    ) {
+        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.x.as_slice());
+        hermite_slice(out.as_mut_slice(), a, b, g0, g1, h, th);
+    }
+}
+
+/// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over x, q (with a running
+/// cost) and, under sensitivity error control (`sens_err`), S and q_θ. The weight is 1 on x
+/// and q and [`sens_weight`]`(θ_j)` on column j of S and on q_θ[j], so both are measured as
+/// the change θ_j·S_j they predict for a relative change of θ_j. Entries whose scale is 0 are
+/// not counted in N.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn weighted_rms<N: Dim, P: Dim>(
+    e: &AugState<N, P>,
+    y0: &AugState<N, P>,
+    y1: &AugState<N, P>,
+    atol: f64,
+    rtol: f64,
+    has_rc: bool,
+    sens_err: bool,
+    theta: &OVector<f64, P>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    let mut add = |e: &[f64], y0: &[f64], y1: &[f64], w: f64| {
+        for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
+            let scale = atol + rtol * w * a.abs().max(b.abs());
+            // A component with scale 0 (atol = 0 and y = 0 at both ends, as S at t = 0 when
+            // x₀ does not depend on θ) has no relative accuracy to hold: it is left out, rather
+            // than making the norm infinite and the (first) step zero.
+            if scale == 0.0 {
+                continue;
+            }
+            if *ei != 0.0 {
+                let r = w * ei / scale;
+                sum += r * r;
+            }
+            count += 1;
+        }
+    };
+    add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
+    if has_rc {
+        add(&[e.q], &[y0.q], &[y1.q], 1.0);
+    }
+    if sens_err {
+        let n = e.x.len();
+        for (j, th) in theta.iter().enumerate() {
+            let w = sens_weight(*th);
+            let col = j * n..(j + 1) * n;
+            add(
+                &e.s.as_slice()[col.clone()],
+                &y0.s.as_slice()[col.clone()],
+                &y1.s.as_slice()[col],
+                w,
+            );
+            if has_rc {
+                add(&[e.qp[j]], &[y0.qp[j]], &[y1.qp[j]], w);
+            }
+        }
+    }
+    if count == 0 {
+        return 0.0;
+    }
+    (sum / count as f64).sqrt()
+}
+
+/// The weight of parameter θ_j's sensitivities in the error norm: |θ_j|, or 1 when θ_j = 0
+/// (the parameter scaling `pbar` of CVODES). Unweighted, a parameter of size 1e-8 has
+/// sensitivities of size 1e8 whose rounding floor (ε·1e8) lies above any absolute
+/// tolerance, and one of size 1e8 has sensitivities too small to be controlled at all;
+/// weighted, every column is held to the accuracy the state itself is held to.
+pub(super) fn sens_weight(theta: f64) -> f64 {
+    if theta != 0.0 && theta.is_finite() {
+        theta.abs()
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn aug_state_axpy_and_combine() {
+        let n = Const::<2>;
+        let p = Const::<4>;
+        let mut a = AugState::zeros(n, p);
+        let mut b = AugState::zeros(n, p);
+        b.x[0] = 1.0;
+        b.s[(1, 3)] = 2.0;
+        b.q = 3.0;
+        b.qp[2] = 4.0;
+        a.axpy(2.0, &b);
+        assert_relative_eq!(a.x[0], 2.0);
+        assert_relative_eq!(a.s[(1, 3)], 4.0);
+        assert_relative_eq!(a.q, 6.0);
+        assert_relative_eq!(a.qp[2], 8.0);
+        let mut d = AugState::zeros(n, p);
+        d.combine(&a, 0.5, &[1.0, 0.0], &[b.clone(), a.clone()], false);
+        assert_relative_eq!(d.x[0], 2.5);
+        assert_relative_eq!(d.q, 7.5);
+        // all == false leaves S and q_θ of dst alone.
+        assert_relative_eq!(d.s[(1, 3)], 0.0);
+        d.combine(&a, 0.5, &[1.0], &[b], true);
+        assert_relative_eq!(d.s[(1, 3)], 5.0);
+        assert_relative_eq!(d.qp[2], 10.0);
+    }
+}

@@ -1,0 +1,153 @@
+//! Dense output of the last accepted step, and cutting a step short.
+//!
+//! After a step from (t_prev, Y₀) to (t, Y₁) of signed length h = t − t_prev, Y(t_prev + θh)
+//! for θ ∈ [0, 1] is the continuous extension of the scheme that took the step: 4th order for
+//! Tsit5 and Rodas5P, 9th for Verner (or, while Verner's interpolation stages are pending,
+//! the cubic Hermite interpolant of (Y₀, F₀, Y₁, F₁)). Works for either direction of time.
+
+use super::explicit::Tableau;
+use super::system::{ImplicitSystem, StageVector};
+use super::{rosenbrock, tsit5::TSIT5, verner, verner::VERNER9, Integrator, Scheme};
+
+impl<Sys: ImplicitSystem> Integrator<Sys> {
+    /// Dense output of the primary part (x) between t_prev and t (cheap; for root finding).
+    pub fn dense_x(&self, t: f64, out: &mut <Sys::Vector as StageVector>::Primary) {
+        if self.dense_h == 0.0 {
+            self.y.primary_into(out);
+            return;
+        }
+        let theta = (t - self.t_prev) / self.dense_h;
+        let (k, y0, y1, h) = (&self.k[..], &self.y_prev, self.end_state(), self.dense_h);
+        if self.dense_pending {
+            let f1 = &k[VERNER9.fsal_slot()];
+            Sys::Vector::hermite_primary(out, y0, y1, &k[0], f1, h, theta);
+            return;
+        }
+        match self.dense_scheme {
+            Scheme::Tsit5 => TSIT5.dense_primary(k, y0, h, theta, out),
+            Scheme::Verner9 => VERNER9.dense_primary(k, y0, h, theta, out),
+            Scheme::Rodas5P => rosenbrock::dense_primary(k, y0, y1, theta, out),
+        }
+    }
+
+    /// Dense output of every integrated part between t_prev and t.
+    pub fn dense(&self, t: f64, out: &mut Sys::Vector) {
+        if self.dense_h == 0.0 {
+            out.copy_from(&self.y);
+            return;
+        }
+        let theta = (t - self.t_prev) / self.dense_h;
+        if self.dense_pending {
+            let (k, all) = (&self.k, self.sys.all_parts());
+            let f1 = &k[VERNER9.fsal_slot()];
+            out.hermite(
+                &self.y_prev,
+                self.end_state(),
+                &k[0],
+                f1,
+                self.dense_h,
+                theta,
+                all,
+            );
+            return;
+        }
+        let all = self.sys.all_parts();
+        let (k, y0, y1) = (&self.k[..], &self.y_prev, self.end_state());
+        dense_into(self.dense_scheme, k, y0, y1, self.dense_h, theta, all, out);
+    }
+
+    /// The state at the end of the last accepted step (before any truncation).
+    fn end_state(&self) -> &Sys::Vector {
+        if self.truncated {
+            &self.y_end
+        } else {
+            &self.y
+        }
+    }
+
+    /// Cuts the last step at `t_cut` between t_prev and t: t() := t_cut, y() := dense(t_cut).
+    /// The dense output stays valid between t_prev and t_cut; the next step re-evaluates F at
+    /// the cut.
+    pub fn truncate(&mut self, t_cut: f64) {
+        let t_cut = t_cut.clamp(self.t_prev.min(self.t), self.t_prev.max(self.t));
+        if t_cut == self.t {
+            return;
+        }
+        self.ensure_dense();
+        if !self.truncated {
+            self.y_end.copy_from(&self.y);
+            self.truncated = true;
+        }
+        let theta = (t_cut - self.t_prev) / self.dense_h;
+        let all = self.sys.all_parts();
+        let (k, y0, y1) = (&self.k[..], &self.y_prev, &self.y_end);
+        dense_into(
+            self.dense_scheme,
+            k,
+            y0,
+            y1,
+            self.dense_h,
+            theta,
+            all,
+            &mut self.y,
+        );
+        self.t = t_cut;
+        self.k0_valid = false;
+        self.fsal_slot = None;
+        self.sys.invalidate();
+    }
+
+    /// Makes the full-order dense output of the last accepted step available (evaluates
+    /// Verner's pending interpolation stages; nothing for the other methods).
+    pub fn ensure_dense(&mut self) {
+        if self.dense_pending {
+            let h = self.dense_h;
+            self.explicit_interp_stages(
+                &VERNER9,
+                VERNER9.fsal_slot() + 1..verner::STAGES_WITH_DENSE,
+                h,
+            );
+            self.dense_pending = false;
+            self.stats.rhs_evals = self.sys.evals();
+        }
+    }
+
+    /// The interpolation stages of an accepted explicit step: all of them, or with
+    /// `lazy_dense` only the FSAL one (the rest wait for [`Integrator::ensure_dense`]).
+    pub(super) fn accepted_interp_stages<const S: usize, const K: usize, const D: usize>(
+        &mut self,
+        tab: &Tableau<S, K, D>,
+        h: f64,
+    ) {
+        if K == S {
+            return;
+        }
+        if self.lazy_dense {
+            let fsal = tab.fsal_slot();
+            self.explicit_interp_stages(tab, fsal..fsal + 1, h);
+            self.dense_pending = true;
+        } else {
+            self.explicit_interp_stages(tab, S..K, h);
+        }
+    }
+}
+
+/// Dense output of `scheme` at θ of a step of signed length h from y0 to y1 with stages `k`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn dense_into<V: StageVector>(
+    scheme: Scheme,
+    k: &[V],
+    y0: &V,
+    y1: &V,
+    h: f64,
+    theta: f64,
+    all: bool,
+    out: &mut V,
+) {
+    match scheme {
+        Scheme::Tsit5 => TSIT5.dense(k, y0, h, theta, all, out),
+        Scheme::Verner9 => VERNER9.dense(k, y0, h, theta, all, out),
+        Scheme::Rodas5P => rosenbrock::dense(k, y0, y1, theta, all, out),
+    }
+}

@@ -1,0 +1,439 @@
+//! The forward augmented system of one mode, the only place in `integrate/` that calls the
+//! model.
+//!
+//! With frozen mode m and switch bits, Y = (x, S, q, q_θ) and
+//!
+//! ```text
+//!   F(t, Y) = ( f(t, x, θ),  f_x S + f_θ,  ℓ(t, x, θ),  ℓ_x S + ℓ_θ )
+//! ```
+//!
+//! f and f_x S + f_θ come from [`HybridModel::rhs_sens`] (or f alone from
+//! [`HybridModel::rhs`] without sensitivities), ℓ, ℓ_x, ℓ_θ from
+//! [`HybridModel::running_cost_grad`] (only when the model has a running cost; otherwise q ≡ 0).
+//!
+//! ## The augmented Jacobian, factorised once (for Rodas5P)
+//! J = ∂F/∂Y is block lower triangular:
+//!
+//! ```text
+//!        x            S           q   q_θ
+//!   x  [ f_x          0           0   0 ]
+//!   S  [ B            I_p ⊗ f_x   0   0 ]     B v = ∂_x(f_x S₀ + f_θ) v
+//!   q  [ ℓ_x          0           0   0 ]
+//!   q_θ[ D            ℓ_xᵀ (·)    0   0 ]     D v = ∂_x(ℓ_x S₀ + ℓ_θ) v
+//! ```
+//!
+//! so with W = I − hγ f_x, factorised by [`WMatrix`] ONCE per attempt, every stage is solved
+//! exactly by block forward substitution:
+//! K_x = W⁻¹ hγ R_x, K_S = W⁻¹ hγ (R_S + B K_x) (all p columns against one factorisation),
+//! K_q = hγ (R_q + ℓ_x K_x), K_{q_θ} = hγ (R_{q_θ} + D K_x + K_Sᵀ ℓ_x).
+//! f_x is the model's symbolic Jacobian; the second-derivative actions B K_x and D K_x (the
+//! model has no second derivatives) are central directional differences of `rhs_sens` /
+//! `running_cost_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
+//! Central differences are exact when f_x S + f_θ is at most quadratic in x, and perturb J by
+//! O(1e-8) relative for cubic terms; the step is far larger than the usual ε^(1/3) because
+//! models with cancellation inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the
+//! rounding of x ± εK_x by 1/ε: with ε^(1/3) the sensitivity of the τ = 1e-8 lag had a 2e-6
+//! error floor, with 1e-4 it is 4e-8. F_t: ∂f/∂t is the model's `rhs_dt`; the S and q parts of
+//! F_t are central differences in t (only when f depends on t, resp. when there is a running
+//! cost), with step ε^(1/3)·max(|t₀|, |h|).
+//! The S and q_θ orders are verified empirically in the tests.
+
+use super::aug::{axpy_slice, weighted_rms, AugState};
+use super::rosenbrock::WMatrix;
+use super::system::{ImplicitSystem, OdeSystem};
+use super::Integrator;
+use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::solution::{Method, Options};
+use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+
+/// Relative size of the perturbation of x in the directional differences (see module doc).
+const FD_REL: f64 = 1e-4;
+/// Relative step of the central differences in t (ε^(1/3)).
+const FD_REL_T: f64 = 6.055_454_452_393_343e-6;
+
+/// The forward augmented system (x, S, q, q_θ) of `model` at parameters θ in one mode with
+/// frozen switch bits (see the module doc).
+pub struct Forward<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    rhs: Rhs<'a, M>,
+    /// S and q_θ are under error control.
+    sens_err: bool,
+    imp: ImplicitWork<M::N, M::P>,
+}
+
+/// Everything F needs, apart from the Rosenbrock buffers so both can be borrowed at once.
+struct Rhs<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    model: &'a M,
+    p: &'a OVector<f64, M::P>,
+    mode: usize,
+    sw: Switches,
+    /// S and q_θ are integrated.
+    sens: bool,
+    has_rc: bool,
+    /// ℓ_x scratch.
+    lx: OVector<f64, M::N>,
+    /// ℓ_θ scratch.
+    lp: OVector<f64, M::P>,
+    /// Evaluations of F.
+    evals: usize,
+}
+
+/// The Rodas5P buffers of the forward system (allocated once; empty for `Dyn` sizes when the
+/// method is never used).
+struct ImplicitWork<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// f_x and the factors of W.
+    w: WMatrix<N>,
+    /// ℓ_x at the step start (zeros without running cost).
+    lx0: OVector<f64, N>,
+    /// ℓ_θ scratch.
+    lp0: OVector<f64, P>,
+    /// F_t at the step start.
+    dt: AugState<N, P>,
+    /// Perturbed argument for the difference quotients.
+    ypert: AugState<N, P>,
+    fplus: AugState<N, P>,
+    fminus: AugState<N, P>,
+    /// (f_x, ℓ_x, F_t) belong to the current step start.
+    base_valid: bool,
+}
+
+impl<'a, M: HybridModel> Forward<'a, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// The forward system of `model` at `p` in its initial mode; allocates its buffers once
+    /// (the Rodas5P ones only when `opts.method` may use it).
+    pub fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
+        let n = model.nstates();
+        let np = model.nparams();
+        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
+        // Unused Rodas5P buffers: empty for Dyn sizes (no allocation).
+        let rn = if used || M::N::try_to_usize().is_some() {
+            n
+        } else {
+            M::N::from_usize(0)
+        };
+        let rp = if used || M::P::try_to_usize().is_some() {
+            np
+        } else {
+            M::P::from_usize(0)
+        };
+        Forward {
+            rhs: Rhs {
+                model,
+                p,
+                mode: model.info().initial_mode,
+                sw: 0,
+                sens: opts.sensitivities,
+                has_rc: model.info().has_running_cost,
+                lx: OVector::zeros_generic(n, Const::<1>),
+                lp: OVector::zeros_generic(np, Const::<1>),
+                evals: 0,
+            },
+            sens_err: opts.sens_error_control && opts.sensitivities,
+            imp: ImplicitWork {
+                w: WMatrix::new(n, used),
+                lx0: OVector::zeros_generic(rn, Const::<1>),
+                lp0: OVector::zeros_generic(rp, Const::<1>),
+                dt: AugState::zeros(rn, rp),
+                ypert: AugState::zeros(rn, rp),
+                fplus: AugState::zeros(rn, rp),
+                fminus: AugState::zeros(rn, rp),
+                base_valid: false,
+            },
+        }
+    }
+
+    /// Name of the current mode (or its index if the model names fewer modes).
+    fn mode_name(&self) -> String {
+        match self.rhs.model.info().modes.get(self.rhs.mode) {
+            Some(name) => name.clone(),
+            None => self.rhs.mode.to_string(),
+        }
+    }
+}
+
+impl<M: HybridModel> Rhs<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// out = F(t, y): (f, f_x S + f_θ, ℓ, ℓ_x S + ℓ_θ).
+    #[inline]
+    fn eval(&mut self, t: f64, y: &AugState<M::N, M::P>, out: &mut AugState<M::N, M::P>) {
+        self.evals += 1;
+        if self.sens {
+            self.model.rhs_sens(
+                self.mode, self.sw, t, &y.x, self.p, &y.s, &mut out.x, &mut out.s,
+            );
+        } else {
+            self.model
+                .rhs(self.mode, self.sw, t, &y.x, self.p, &mut out.x);
+        }
+        if !self.has_rc {
+            out.q = 0.0;
+            if self.sens {
+                out.qp.fill(0.0);
+            }
+        } else if self.sens {
+            out.q =
+                self.model
+                    .running_cost_grad(self.sw, t, &y.x, self.p, &mut self.lx, &mut self.lp);
+            out.qp.copy_from(&self.lp);
+            out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
+        } else {
+            out.q = self.model.running_cost(self.sw, t, &y.x, self.p);
+        }
+    }
+}
+
+impl<M: HybridModel> OdeSystem for Forward<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    type Vector = AugState<M::N, M::P>;
+
+    fn zeros(&self) -> Self::Vector {
+        AugState::zeros(self.rhs.model.nstates(), self.rhs.model.nparams())
+    }
+
+    #[inline]
+    fn all_parts(&self) -> bool {
+        self.rhs.sens
+    }
+
+    #[inline]
+    fn controls_all(&self) -> bool {
+        self.sens_err
+    }
+
+    /// out = F(t, y): (f, f_x S + f_θ, ℓ, ℓ_x S + ℓ_θ).
+    #[inline]
+    fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector) {
+        self.rhs.eval(t, y, out);
+    }
+
+    #[inline]
+    fn evals(&self) -> usize {
+        self.rhs.evals
+    }
+
+    /// `weighted_rms`: x, q (with a running cost) and, under sensitivity error control, S and
+    /// q_θ with column j weighted by |θ_j|.
+    #[inline]
+    fn error_norm(
+        &self,
+        e: &Self::Vector,
+        y0: &Self::Vector,
+        y1: &Self::Vector,
+        atol: f64,
+        rtol: f64,
+    ) -> f64 {
+        weighted_rms(
+            e,
+            y0,
+            y1,
+            atol,
+            rtol,
+            self.rhs.has_rc,
+            self.sens_err,
+            self.rhs.p,
+        )
+    }
+
+    fn nonfinite_part(&self, y: &Self::Vector) -> Option<&'static str> {
+        y.nonfinite_part(self.rhs.sens)
+    }
+
+    /// `flow of mode `m``.
+    fn flow_name(&self) -> String {
+        format!("flow of mode `{}`", self.mode_name())
+    }
+
+    /// `flow of mode `m``, its sensitivity equation, the running cost or its gradient.
+    fn stage_source(&self, k: &Self::Vector) -> String {
+        let mode = self.mode_name();
+        if !k.x.iter().all(|v| v.is_finite()) {
+            format!("flow of mode `{mode}`")
+        } else if !k.q.is_finite() {
+            "running cost".into()
+        } else if !k.s.iter().all(|v| v.is_finite()) {
+            format!("sensitivity equation of the flow of mode `{mode}`")
+        } else {
+            "running-cost gradient".into()
+        }
+    }
+}
+
+impl<M: HybridModel> ImplicitSystem for Forward<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0).
+    fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
+        let Forward { rhs, imp: w, .. } = self;
+        let (model, p, mode, sw) = (rhs.model, rhs.p, rhs.mode, rhs.sw);
+        model.rhs_jac_x(mode, sw, t0, &y0.x, p, &mut w.w.jac);
+        w.w.power_iteration();
+        if rhs.has_rc {
+            model.running_cost_grad(sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
+        } else {
+            w.lx0.fill(0.0);
+        }
+        // F_t: exact for x; central differences in t for the S and q parts.
+        let dep_t = model.rhs_depends_on_t(mode);
+        if (dep_t && rhs.sens) || rhs.has_rc {
+            let dt = FD_REL_T * t0.abs().max(h.abs()).max(f64::MIN_POSITIVE);
+            rhs.eval(t0 + dt, y0, &mut w.fplus);
+            rhs.eval(t0 - dt, y0, &mut w.fminus);
+            let s = 0.5 / dt;
+            w.dt.q = (w.fplus.q - w.fminus.q) * s;
+            if rhs.sens {
+                w.dt.s.fill(0.0);
+                axpy_slice(w.dt.s.as_mut_slice(), s, w.fplus.s.as_slice());
+                axpy_slice(w.dt.s.as_mut_slice(), -s, w.fminus.s.as_slice());
+                w.dt.qp.fill(0.0);
+                axpy_slice(w.dt.qp.as_mut_slice(), s, w.fplus.qp.as_slice());
+                axpy_slice(w.dt.qp.as_mut_slice(), -s, w.fminus.qp.as_slice());
+            }
+        } else {
+            w.dt.q = 0.0;
+            w.dt.s.fill(0.0);
+            w.dt.qp.fill(0.0);
+        }
+        if !dep_t {
+            w.dt.s.fill(0.0);
+        }
+        if !rhs.has_rc {
+            w.dt.q = 0.0;
+            w.dt.qp.fill(0.0);
+        }
+        model.rhs_dt(mode, sw, t0, &y0.x, p, &mut w.dt.x);
+        if rhs.sens {
+            w.ypert.s.copy_from(&y0.s);
+        }
+        w.base_valid = true;
+    }
+
+    fn prepared(&self) -> bool {
+        self.imp.base_valid
+    }
+
+    fn time_derivative(&self) -> &Self::Vector {
+        &self.imp.dt
+    }
+
+    fn factorise(&mut self, hg: f64) -> bool {
+        self.imp.w.factorise(hg)
+    }
+
+    fn factorised_for(&self) -> Option<f64> {
+        self.imp.w.factorised_for()
+    }
+
+    /// K = hγ (I − hγ J)⁻¹ R by block forward substitution (see the module doc).
+    fn solve_stage(
+        &mut self,
+        t0: f64,
+        y0: &Self::Vector,
+        hg: f64,
+        r: &Self::Vector,
+        k: &mut Self::Vector,
+    ) -> bool {
+        let Forward { rhs, imp: w, .. } = self;
+        if w.w.factorised_for().is_none() {
+            return false;
+        }
+        k.x.copy_from(&r.x);
+        k.x *= hg;
+        let ok_x = w.w.solve_mut(&mut k.x);
+        let lxk = w.lx0.dot(&k.x);
+        k.q = hg * (r.q + lxk);
+        if !rhs.sens {
+            return ok_x;
+        }
+        // B K_x and D K_x by central differences along K_x at (t0, x0, S0).
+        let nv = k.x.norm();
+        k.s.copy_from(&r.s);
+        k.qp.copy_from(&r.qp);
+        if nv > 0.0 && nv.is_finite() {
+            let eps = FD_REL * y0.x.norm().max(1.0) / nv;
+            w.ypert.x.copy_from(&y0.x);
+            w.ypert.x.axpy(eps, &k.x, 1.0);
+            rhs.eval(t0, &w.ypert, &mut w.fplus);
+            w.ypert.x.copy_from(&y0.x);
+            w.ypert.x.axpy(-eps, &k.x, 1.0);
+            rhs.eval(t0, &w.ypert, &mut w.fminus);
+            let s = 0.5 / eps;
+            axpy_slice(k.s.as_mut_slice(), s, w.fplus.s.as_slice());
+            axpy_slice(k.s.as_mut_slice(), -s, w.fminus.s.as_slice());
+            if rhs.has_rc {
+                axpy_slice(k.qp.as_mut_slice(), s, w.fplus.qp.as_slice());
+                axpy_slice(k.qp.as_mut_slice(), -s, w.fminus.qp.as_slice());
+            }
+        }
+        k.s *= hg;
+        let ok_s = w.w.solve_mut(&mut k.s);
+        if rhs.has_rc {
+            k.qp.gemv_tr(hg, &k.s, &w.lx0, hg);
+        } else {
+            k.qp.fill(0.0);
+        }
+        ok_x && ok_s
+    }
+
+    fn invalidate(&mut self) {
+        self.imp.base_valid = false;
+        self.imp.w.invalidate();
+    }
+
+    fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
+        let rhs = &self.rhs;
+        rhs.model
+            .rhs_jac_x(rhs.mode, rhs.sw, t, &y.x, rhs.p, &mut self.imp.w.jac);
+        self.imp.w.power_iteration()
+    }
+
+    fn jac_spectral_radius(&self) -> f64 {
+        self.imp.w.rho
+    }
+}
+
+impl<'a, M: HybridModel> Integrator<Forward<'a, M>>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// A new integrator of the forward augmented flow of `model` at parameters `p`; allocates
+    /// every buffer once. Call [`Integrator::restart`] before the first [`Integrator::step`].
+    pub fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
+        Integrator::with_system(Forward::new(model, p, opts), opts)
+    }
+
+    /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at
+    /// (t, y) in `mode` with frozen switch bits `sw`.
+    ///
+    /// Must be called at the start and after every event, mode switch or switch flip. Under
+    /// `auto` the method in use (explicit or implicit) is kept: stiffness is a property of the
+    /// model that usually survives an event, and the switch-back test runs on every step.
+    pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: Switches) {
+        self.sys.rhs.mode = mode;
+        self.sys.rhs.sw = sw;
+        self.restart_at(t, y);
+    }
+
+    /// Current mode.
+    pub fn mode(&self) -> usize {
+        self.sys.rhs.mode
+    }
+    /// Current frozen switch bits.
+    pub fn switches(&self) -> Switches {
+        self.sys.rhs.sw
+    }
+}

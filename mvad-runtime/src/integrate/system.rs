@@ -1,0 +1,152 @@
+//! The seam between the steppers and what they integrate.
+//!
+//! A stepper advances an autonomous-in-form system Ẏ = F(t, Y) over one step of signed length
+//! h (h < 0 integrates backwards in time, as an adjoint pass does). It needs only
+//!
+//! - the vector-space operations of its stage loop on Y ([`StageVector`]): Y₀ + h Σ c_j K_j,
+//!   h Σ c_j K_j, Y += a K, the fixed-weight mixes of the dense outputs, finiteness;
+//! - F itself and the weighted error norm of the system ([`OdeSystem`]);
+//! - for the linearly implicit method, the Jacobian J = ∂F/∂Y, F_t = ∂F/∂t and the stage
+//!   solve K = hγ (I − hγ J)⁻¹ R ([`ImplicitSystem`]).
+//!
+//! A vector has a *primary* part (the state the guards are evaluated on: x for the forward
+//! system) and *secondary* parts (sensitivities, quadratures) that a run may leave out: every
+//! operation takes `all`, and with `all == false` it touches the primary part and the scalar
+//! quadrature only. [`OdeSystem::all_parts`] says what a run integrates, and
+//! [`OdeSystem::controls_all`] which parts enter the error norm.
+//!
+//! The forward augmented system (x, S, q, q_θ) is [`super::Forward`] on [`super::AugState`];
+//! an adjoint (λ and its quadratures, integrated from T down to t₀) or a system with a QP in
+//! its flow implements the same three traits and reuses every method unchanged.
+
+/// The operations a Runge–Kutta or Rosenbrock stage loop performs on the integrated vector.
+///
+/// Every method works part by part on contiguous slices, without allocating, so stage counts
+/// known at compile time let the loops unroll. `ks` are stage derivatives; entries of `coefs`
+/// that are exactly 0 are skipped (so rows of a tableau may be shorter than `ks`).
+pub trait StageVector {
+    /// The primary part (x for the forward system): what dense output for root finding gives.
+    type Primary;
+
+    /// `self = other`, every part.
+    fn copy_from(&mut self, other: &Self);
+    /// `self = base + h Σ_j c_j k_j`.
+    fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool)
+    where
+        Self: Sized;
+    /// `self = h Σ_j c_j k_j`.
+    fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool)
+    where
+        Self: Sized;
+    /// `self += a · other`.
+    fn axpy(&mut self, a: f64, other: &Self, all: bool);
+    /// `self = Σ_i w_i v_i` over five vectors (the Rosenbrock dense output).
+    fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], all: bool);
+    /// Cubic Hermite interpolant y₀ + c (y₁ − y₀) + h (w₀ f₀ + w₁ f₁) with
+    /// c = 3θ² − 2θ³, w₀ = θ − 2θ² + θ³, w₁ = θ³ − θ².
+    #[allow(clippy::too_many_arguments)]
+    fn hermite(
+        &mut self,
+        y0: &Self,
+        y1: &Self,
+        f0: &Self,
+        f1: &Self,
+        h: f64,
+        theta: f64,
+        all: bool,
+    );
+    /// Whether every entry of every part is finite.
+    fn is_finite(&self) -> bool;
+    /// Σ_i (a_i − b_i)² over the primary part (Hairer's stiffness estimate).
+    fn primary_dist_sq(&self, other: &Self) -> f64;
+
+    /// `out = primary(self)`.
+    fn primary_into(&self, out: &mut Self::Primary);
+    /// `out = primary(base) + h Σ_j c_j primary(k_j)`.
+    fn combine_primary(out: &mut Self::Primary, base: &Self, h: f64, coefs: &[f64], ks: &[Self])
+    where
+        Self: Sized;
+    /// Primary part of [`StageVector::mix5`].
+    fn mix5_primary(out: &mut Self::Primary, w: &[f64; 5], v: [&Self; 5]);
+    /// Primary part of [`StageVector::hermite`].
+    #[allow(clippy::too_many_arguments)]
+    fn hermite_primary(
+        out: &mut Self::Primary,
+        y0: &Self,
+        y1: &Self,
+        f0: &Self,
+        f1: &Self,
+        h: f64,
+        theta: f64,
+    );
+}
+
+/// A system Ẏ = F(t, Y) the explicit methods can integrate, in either time direction.
+pub trait OdeSystem {
+    /// The integrated vector Y.
+    type Vector: StageVector;
+
+    /// A zero vector of the system's shape (allocates for `Dyn` sizes; called only when an
+    /// integrator is built).
+    fn zeros(&self) -> Self::Vector;
+    /// Whether the secondary parts are integrated (the `all` flag of every operation).
+    fn all_parts(&self) -> bool;
+    /// Whether the secondary parts enter the error norm (never more than [`Self::all_parts`]).
+    fn controls_all(&self) -> bool;
+    /// `out = F(t, y)`.
+    fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector);
+    /// Evaluations of F so far (including those for difference quotients).
+    fn evals(&self) -> usize;
+    /// The weighted RMS norm of the local error `e` of a step from `y0` to `y1`,
+    /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over the controlled
+    /// entries with the system's weights w_i. Also the norm of Hairer's initial-step heuristic
+    /// (with y0 = y1).
+    fn error_norm(
+        &self,
+        e: &Self::Vector,
+        y0: &Self::Vector,
+        y1: &Self::Vector,
+        atol: f64,
+        rtol: f64,
+    ) -> f64;
+    /// Names the first integrated part of `y` holding a NaN or infinity.
+    fn nonfinite_part(&self, y: &Self::Vector) -> Option<&'static str>;
+    /// Names the flow being integrated (for errors: "flow of mode `m`").
+    fn flow_name(&self) -> String;
+    /// Names the expression that produced the non-finite stage derivative `k` (for errors).
+    fn stage_source(&self, k: &Self::Vector) -> String;
+}
+
+/// What the linearly implicit (Rosenbrock) method needs beyond [`OdeSystem`]: one Jacobian
+/// J = ∂F/∂Y and F_t = ∂F/∂t per step start, one factorisation of I − hγ J per attempt, and
+/// the stage solves. The system owns J, its factors and its scratch; the stepper only asks.
+pub trait ImplicitSystem: OdeSystem {
+    /// Evaluates J and F_t at the step start (t₀, Y₀) for steps of size about h (h may set the
+    /// difference steps in t); afterwards [`Self::prepared`] holds until [`Self::invalidate`].
+    fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64);
+    /// J and F_t belong to the current step start.
+    fn prepared(&self) -> bool;
+    /// F_t at the step start (valid after [`Self::prepare`]).
+    fn time_derivative(&self) -> &Self::Vector;
+    /// Factorises W = I − hγ J for `hg` = hγ (any sign); false when W is singular.
+    fn factorise(&mut self, hg: f64) -> bool;
+    /// hγ of the current regular factorisation, if any.
+    fn factorised_for(&self) -> Option<f64>;
+    /// Solves the stage equation (I/(hγ) − J) K = R at the step start, i.e.
+    /// K = hγ (I − hγ J)⁻¹ R; false when the factors are missing or a solve failed.
+    fn solve_stage(
+        &mut self,
+        t0: f64,
+        y0: &Self::Vector,
+        hg: f64,
+        r: &Self::Vector,
+        k: &mut Self::Vector,
+    ) -> bool;
+    /// Forgets J, F_t and the factors (new step start, restart, truncation).
+    fn invalidate(&mut self);
+    /// Evaluates the Jacobian of the primary flow at (t, y) and returns an estimate of its
+    /// spectral radius (for the stiffness test of the explicit method).
+    fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64;
+    /// The spectral-radius estimate of the last Jacobian evaluated.
+    fn jac_spectral_radius(&self) -> f64;
+}
