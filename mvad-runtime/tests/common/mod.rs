@@ -4,6 +4,11 @@
 //! (no truncation error); they also differentiate the hand-derived closed forms.
 #![allow(dead_code)]
 
+pub mod ball;
+pub mod cases;
+pub mod check;
+pub mod models;
+
 use mvad_runtime::model::{HybridModel, ModelInfo, Switches};
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -260,6 +265,13 @@ impl<T: Spec> AdModel<T> {
             .collect();
         (td, xd, pd)
     }
+    /// The flow in dual numbers seeded at (t, x, p).
+    fn flow(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V) -> Vec<D> {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let mut f = vec![D::c(0.0); self.n()];
+        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        f
+    }
     fn split(&self, d: &D, gx: &mut [f64], gp: &mut [f64]) -> f64 {
         let n = self.n();
         gx.copy_from_slice(&d.g[1..1 + n]);
@@ -313,9 +325,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
             .rhs(m, sw, t, x.as_slice(), p.as_slice(), f.as_mut_slice());
     }
     fn rhs_jac_x(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fx: &mut Mx) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        let f = self.flow(m, sw, t, x, p);
         for r in 0..self.n() {
             for c in 0..self.n() {
                 fx[(r, c)] = f[r].g[1 + c];
@@ -323,9 +333,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         }
     }
     fn rhs_jac_p(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fp: &mut Mx) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        let f = self.flow(m, sw, t, x, p);
         for r in 0..self.n() {
             for c in 0..self.np() {
                 fp[(r, c)] = f[r].g[1 + self.n() + c];
@@ -333,9 +341,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         }
     }
     fn rhs_dt(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, ft: &mut V) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        let f = self.flow(m, sw, t, x, p);
         for r in 0..self.n() {
             ft[r] = f[r].g[0];
         }
@@ -419,7 +425,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
     }
 }
 
-/// Builds a `ModelInfo` quickly.
+/// Builds a `ModelInfo` quickly: running cost and horizon, no final cost.
 pub fn info(
     name: &str,
     states: &[&str],
@@ -441,7 +447,7 @@ pub fn info(
         observables: s(observables),
         switches,
         has_running_cost: true,
-        has_final_cost: true,
+        has_final_cost: false,
         has_horizon: true,
         jacobian_sparsity: vec![vec![]; modes.len()],
     }
