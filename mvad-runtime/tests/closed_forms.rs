@@ -14,7 +14,7 @@ use common::check::close;
 use common::models::thermostat_closed;
 use common::D;
 use mvad_runtime::fixtures::Ball;
-use mvad_runtime::solution::Method;
+use mvad_runtime::solution::{Method, Options};
 use nalgebra::DVector;
 
 /// Every case under every method it applies to, except the [`KNOWN_FAILURES`]; all
@@ -50,6 +50,17 @@ fn known_failures() {
     for (name, method, what) in KNOWN_FAILURES {
         let case = all.iter().find(|c| c.name == *name).expect("a listed case");
         let f = run(case, *method);
+        let opts = Options {
+            method: *method,
+            ..case.opts.clone()
+        };
+        if let Ok(sol) = (case.run)(&opts) {
+            let times: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
+            eprintln!(
+                "{name} under {method:?}: events at {times:?}, {:?}, {:?}",
+                sol.diagnostics, sol.stats
+            );
+        }
         eprintln!("{name} under {method:?} ({what}): {f:#?}");
         failures.extend(f);
     }
