@@ -46,6 +46,16 @@ fn allocations() -> usize {
     ALLOCATIONS.with(|c| c.get())
 }
 
+/// Options with the method and tolerances given.
+fn opts(method: Method, rtol: f64, atol: f64) -> Options {
+    Options {
+        method,
+        rtol,
+        atol,
+        ..Options::default()
+    }
+}
+
 /// (allocations, steps, events) of a solve of the E1 ball with `opts`.
 fn count(opts: &Options) -> (usize, usize, usize) {
     let ball = Ball::new();
@@ -60,18 +70,10 @@ fn count(opts: &Options) -> (usize, usize, usize) {
 fn allocations_do_not_grow_with_steps() {
     for method in Method::ALL {
         // Same events (two impacts), very different step counts.
-        let loose = Options {
-            method,
-            rtol: 1e-4,
-            atol: 1e-6,
-            ..Options::default()
-        };
+        let loose = opts(method, 1e-4, 1e-6);
         let tight = Options {
-            method,
-            rtol: 1e-12,
-            atol: 1e-14,
             sens_error_control: true,
-            ..Options::default()
+            ..opts(method, 1e-12, 1e-14)
         };
         let (a_loose, s_loose, e_loose) = count(&loose);
         let (a_tight, s_tight, e_tight) = count(&tight);
@@ -92,12 +94,7 @@ fn stepping_allocates_nothing_for_static_sizes() {
     let ball = Ball::new();
     let p = ball.default_params();
     for method in Method::ALL {
-        let o = Options {
-            method,
-            rtol: 1e-10,
-            atol: 1e-10,
-            ..Options::default()
-        };
+        let o = opts(method, 1e-10, 1e-10);
         let mut it = Integrator::new(&ball, &p, &o);
         let mut y0 = AugState::zeros(Const::<2>, Const::<4>);
         ball.initial_state(&p, &mut y0.x);

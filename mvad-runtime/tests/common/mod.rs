@@ -265,6 +265,20 @@ impl<T: Spec> AdModel<T> {
             .collect();
         (td, xd, pd)
     }
+    /// ∂/∂x and ∂/∂p of the scalar `f` at (t, x, p) into `gx`, `gp`; returns (f, ∂f/∂t).
+    fn scalar_grad(
+        &self,
+        t: f64,
+        x: &V,
+        p: &V,
+        gx: &mut V,
+        gp: &mut V,
+        f: impl Fn(D, &[D], &[D]) -> D,
+    ) -> (f64, f64) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let d = f(td, &xd, &pd);
+        (d.v, self.split(&d, gx.as_mut_slice(), gp.as_mut_slice()))
+    }
     /// The flow in dual numbers seeded at (t, x, p).
     fn flow(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V) -> Vec<D> {
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
@@ -353,9 +367,8 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.guard(k, t, x.as_slice(), p.as_slice())
     }
     fn guard_grad(&self, k: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let g = self.spec.guard(k, td, &xd, &pd);
-        self.split(&g, gx.as_mut_slice(), gp.as_mut_slice())
+        self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
+            .1
     }
     fn reset(&self, k: usize, t: f64, x: &V, p: &V, xp: &mut V) {
         self.spec
@@ -380,9 +393,8 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.switch(j, t, x.as_slice(), p.as_slice())
     }
     fn switch_grad(&self, j: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let g = self.spec.switch(j, td, &xd, &pd);
-        self.split(&g, gx.as_mut_slice(), gp.as_mut_slice())
+        self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
+            .1
     }
     fn observe(&self, t: f64, x: &V, p: &V, y: &mut [f64]) {
         self.spec.observe(t, x.as_slice(), p.as_slice(), y);
@@ -402,26 +414,22 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.running(sw, t, x.as_slice(), p.as_slice())
     }
     fn running_cost_grad(&self, sw: Switches, t: f64, x: &V, p: &V, lx: &mut V, lp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let l = self.spec.running(sw, td, &xd, &pd);
-        self.split(&l, lx.as_mut_slice(), lp.as_mut_slice());
-        l.v
+        self.scalar_grad(t, x, p, lx, lp, |t, x, p| self.spec.running(sw, t, x, p))
+            .0
     }
     fn event_cost(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
         self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
     }
     fn event_cost_grad(&self, k: usize, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let c = self.spec.event_cost(k, td, &xd, &pd);
-        self.split(&c, cx.as_mut_slice(), cp.as_mut_slice())
+        self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.event_cost(k, t, x, p))
+            .1
     }
     fn final_cost(&self, t: f64, x: &V, p: &V) -> f64 {
         self.spec.final_cost(t, x.as_slice(), p.as_slice())
     }
     fn final_cost_grad(&self, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let c = self.spec.final_cost(td, &xd, &pd);
-        self.split(&c, cx.as_mut_slice(), cp.as_mut_slice())
+        self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.final_cost(t, x, p))
+            .1
     }
 }
 
