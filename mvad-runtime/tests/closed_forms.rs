@@ -139,3 +139,28 @@ fn every_method_is_in_the_matrix() {
         assert!(all.iter().filter(|c| c.methods.contains(&method)).count() >= 40);
     }
 }
+
+/// The matrix can fail: a solution whose cost, gradient or event time is off by more than
+/// the tolerances is reported by its case's check.
+#[test]
+fn the_checks_catch_a_perturbed_solution() {
+    let all = cases();
+    let case = all.iter().find(|c| c.name == "E1 fixture").expect("E1");
+    let tol = common::cases::tol(Method::Auto);
+    let sol = (case.run)(&case.opts).expect("E1 solves");
+    let check = |sol: &mvad_runtime::solution::Solution| {
+        let mut r = common::check::Report::default();
+        (case.check)(sol, tol, 0.0, &mut r);
+        r.0
+    };
+    assert!(check(&sol).is_empty(), "{:?}", check(&sol));
+    let mut off = sol.clone();
+    off.cost *= 1.0 + 1e-8;
+    assert_eq!(check(&off).len(), 1);
+    let mut off = sol.clone();
+    off.gradient[0] *= 1.0 + 1e-7;
+    assert_eq!(check(&off).len(), 1);
+    let mut off = sol;
+    off.events[1].t += 1e-9;
+    assert_eq!(check(&off).len(), 1);
+}

@@ -516,9 +516,12 @@ fn inelastic() -> Case {
             1e-8 * tol.x,
             1e-12 * tol.x,
         );
-        if let Some(traj) = &sol.trajectory {
-            let (x, _) = traj.sample(1.5);
-            r.check(x[0].abs() < 1e-12 * tol.x, || format!("h(1.5) = {}", x[0]));
+        match &sol.trajectory {
+            Some(traj) => {
+                let (x, _) = traj.sample(1.5);
+                r.check(x[0].abs() < 1e-12 * tol.x, || format!("h(1.5) = {}", x[0]));
+            }
+            None => r.check(false, || "no trajectory recorded".into()),
         }
     });
     ad_case("inelastic ball".into(), spec, &p, opts, &Method::ALL, check)
