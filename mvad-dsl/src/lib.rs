@@ -234,16 +234,18 @@ mod tests {
         }
     }
 
-    fn temp_file(name: &str, text: &str) -> std::path::PathBuf {
-        let path = std::env::temp_dir().join(format!("mvad-dsl-{}-{name}", std::process::id()));
+    /// A temporary file `name` holding `text`, removed when the returned directory drops.
+    fn temp_file(name: &str, text: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        let path = dir.path().join(name);
         std::fs::write(&path, text).expect("write temp file");
-        path
+        (dir, path)
     }
 
     #[test]
     fn include_reads_the_file() {
         // An absolute path ignores CARGO_MANIFEST_DIR.
-        let good = temp_file(
+        let (_good_dir, good) = temp_file(
             "good.hyb",
             "model Inc { state x = 0; flow { der(x) = 1; } }\n",
         );
@@ -252,7 +254,7 @@ mod tests {
         assert!(!out.contains("compile_error"), "{out}");
         assert!(out.contains("Inc"), "{out}");
 
-        let bad = temp_file(
+        let (_bad_dir, bad) = temp_file(
             "bad.hyb",
             "model Bad {\n  state x = 0;\n  flow { der(x) = y; }\n}\n",
         );
@@ -264,8 +266,6 @@ mod tests {
 
         let out = expand_str("include \"/nonexistent/dir/model.hyb\"");
         assert!(out.contains("cannot read"), "{out}");
-        let _ = std::fs::remove_file(good);
-        let _ = std::fs::remove_file(bad);
     }
 
     #[test]

@@ -162,9 +162,7 @@ impl HybridModel for Ball {
         0.0
     }
     fn switch_grad(&self, _j: usize, _t: f64, _x: &X, _p: &Th, gx: &mut X, gp: &mut Th) -> f64 {
-        gx.fill(0.0);
-        gp.fill(0.0);
-        0.0
+        zero_grad(gx, gp)
     }
     fn observe(&self, _t: f64, x: &X, _p: &Th, y: &mut [f64]) {
         y[0] = x[0];
@@ -197,16 +195,19 @@ impl HybridModel for Ball {
         0.0
     }
     fn event_cost_grad(&self, _k: usize, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
-        cx.fill(0.0);
-        cp.fill(0.0);
-        0.0
+        zero_grad(cx, cp)
     }
     fn final_cost(&self, _t: f64, _x: &X, _p: &Th) -> f64 {
         0.0
     }
     fn final_cost_grad(&self, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
-        cx.fill(0.0);
-        cp.fill(0.0);
-        0.0
+        zero_grad(cx, cp)
     }
+}
+
+/// The gradient of a function that is identically zero: both parts zeroed, value 0.
+fn zero_grad(gx: &mut X, gp: &mut Th) -> f64 {
+    gx.fill(0.0);
+    gp.fill(0.0);
+    0.0
 }

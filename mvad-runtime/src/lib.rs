@@ -6,6 +6,8 @@
 //! and reduced to dC/dθ for the model's cost. Knows nothing of parsing: models come in
 //! through the [`HybridModel`] trait.
 
+#[cfg(any(test, feature = "test-fixtures"))]
+#[doc(hidden)]
 pub mod fixtures;
 pub mod model;
 

@@ -1,63 +1,79 @@
 //! The hot loop allocates nothing per step: a run's allocation count does not depend on
-//! how many steps it takes (counted with a global allocator wrapper).
+//! how many steps it takes, and the integrator's restart, steps, dense output and
+//! truncation allocate nothing at all (counted with a global allocator wrapper, per thread
+//! so that parallel tests do not interfere).
 
 use mvad_runtime::fixtures::Ball;
+use mvad_runtime::integrate::{AugState, Integrator};
 use mvad_runtime::solution::{Method, Options};
 use mvad_runtime::solve::solve;
+use mvad_runtime::HybridModel;
+use nalgebra::Const;
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
-struct Counting;
+struct CountingAlloc;
 
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
 
-unsafe impl GlobalAlloc for Counting {
+fn bump() {
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+// SAFETY: forwards to the system allocator; the counter is a const-initialised thread-local
+// `Cell` (touching it never allocates).
+unsafe impl GlobalAlloc for CountingAlloc {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        bump();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        bump();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAlloc = CountingAlloc;
 
+/// Allocations (and reallocations) made by this thread so far.
+fn allocations() -> usize {
+    ALLOCATIONS.with(|c| c.get())
+}
+
+/// Options with the method and tolerances given.
+fn opts(method: Method, rtol: f64, atol: f64) -> Options {
+    Options {
+        method,
+        rtol,
+        atol,
+        ..Options::default()
+    }
+}
+
+/// (allocations, steps, events) of a solve of the E1 ball with `opts`.
 fn count(opts: &Options) -> (usize, usize, usize) {
     let ball = Ball::new();
     let p = ball.default_params();
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = allocations();
     let sol = solve(&ball, &p, opts).unwrap();
-    let n = ALLOCS.load(Ordering::Relaxed) - before;
+    let n = allocations() - before;
     (n, sol.stats.steps, sol.events.len())
 }
 
 #[test]
 fn allocations_do_not_grow_with_steps() {
-    for method in [
-        Method::Tsit5,
-        Method::Auto,
-        Method::Verner9,
-        Method::Rosenbrock,
-    ] {
+    for method in Method::ALL {
         // Same events (two impacts), very different step counts.
-        let loose = Options {
-            method,
-            rtol: 1e-4,
-            atol: 1e-6,
-            ..Options::default()
-        };
+        let loose = opts(method, 1e-4, 1e-6);
         let tight = Options {
-            method,
-            rtol: 1e-12,
-            atol: 1e-14,
             sens_error_control: true,
-            ..Options::default()
+            ..opts(method, 1e-12, 1e-14)
         };
         let (a_loose, s_loose, e_loose) = count(&loose);
         let (a_tight, s_tight, e_tight) = count(&tight);
@@ -68,5 +84,40 @@ fn allocations_do_not_grow_with_steps() {
             a_loose, a_tight,
             "{method:?}: {a_loose} allocations for {s_loose} steps, {a_tight} for {s_tight}"
         );
+    }
+}
+
+#[test]
+fn stepping_allocates_nothing_for_static_sizes() {
+    // Restart, steps, dense output and truncation allocate nothing, with every method
+    // (Rodas5P factorises W in place in buffers allocated by `Integrator::new`).
+    let ball = Ball::new();
+    let p = ball.default_params();
+    for method in Method::ALL {
+        let o = opts(method, 1e-10, 1e-10);
+        let mut it = Integrator::new(&ball, &p, &o);
+        let mut y0 = AugState::zeros(Const::<2>, Const::<4>);
+        ball.initial_state(&p, &mut y0.x);
+        ball.initial_state_jac(&p, &mut y0.s);
+        let mut out = y0.clone();
+        let mut xo = y0.x;
+        let before = allocations();
+        for _ in 0..3 {
+            it.restart(0.0, &y0, 0, 0);
+            while it.t() < 0.6 {
+                it.step(0.6).unwrap();
+                let tm = 0.5 * (it.t_prev() + it.t());
+                it.dense(tm, &mut out);
+                it.dense_x(tm, &mut xo);
+            }
+            let tc = 0.5 * (it.t_prev() + it.t());
+            it.truncate(tc);
+            it.step(0.6).unwrap();
+        }
+        let n = allocations() - before;
+        if method == Method::Rosenbrock {
+            assert!(it.stats().factorizations > 3, "{:?}", it.stats());
+        }
+        assert_eq!(n, 0, "{method:?}: {:?}", it.stats());
     }
 }

@@ -1,148 +1,40 @@
-//! Event handling: the measure against dC/dθ and FD, Zeno, grazing, simultaneous events,
-//! exact zeros after resets, double crossings inside a step, errors.
+//! Event handling beyond the closed-form matrix (`closed_forms.rs`): the measure against
+//! dC/dθ and FD, exact zeros after resets, the trajectory, a parameter horizon with every
+//! cost kind, a long Zeno run and its measure, primal-only runs, errors.
 #![allow(clippy::needless_range_loop)] // index loops over params read clearer in tests
 
 mod common;
 
+use common::ball::{hops, phi, BallCost, BallSpec};
+use common::check::{assert_grad, close, fd_opts, recorded, tight};
 use common::{ev, info, AdModel, Sc, Spec, D};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::measure::measure;
 use mvad_runtime::model::{Direction, ModelInfo, Switches};
-use mvad_runtime::solution::{DiagnosticKind, Options};
+use mvad_runtime::solution::{DiagnosticKind, Options, Solution};
 use mvad_runtime::solve::solve;
 use nalgebra::DVector;
 
-fn tight() -> Options {
-    Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..Options::default()
-    }
+/// The E1 fixture ball solved at [`recorded`] options.
+fn e1_recorded() -> (Ball, nalgebra::SVector<f64, 4>, Solution) {
+    let ball = Ball::new();
+    let p = ball.default_params();
+    let sol = solve(&ball, &p, &recorded()).unwrap();
+    (ball, p, sol)
 }
 
-fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
-    (a - b).abs() <= rel * a.abs().max(b.abs()) + abs
-}
-
-/// Ball with restitution e, horizon T, cost ∫h dt (θ = e, g, h0, v0).
-struct ZenoBall {
-    t_end: f64,
-    e: f64,
-}
-
-impl Spec for ZenoBall {
-    fn info(&self) -> ModelInfo {
-        let mut i = info(
-            "ZenoBall",
-            &["h", "v"],
-            &[("e", self.e), ("g", 9.81), ("h0", 2.0), ("v0", 0.0)],
-            &["main"],
-            vec![ev("impact", Direction::Down, None, None, false)],
-            &["height"],
-            0,
-        );
-        i.has_final_cost = false;
-        i
-    }
-    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
-        x[0] = p[2];
-        x[1] = p[3];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(self.t_end))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
-        f[0] = x[1];
-        f[1] = -p[1];
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
-        xp[0] = x[0];
-        xp[1] = -(p[0] * x[1]);
-    }
-    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
-        y[0] = x[0];
-    }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-}
-
-/// Exact series for the ball's ∫h dt when T is past the accumulation time t*:
-/// first fall h0 t1 + v0 t1²/2 − g t1³/6 (t1 = (v0 + V)/g, V = √(v0² + 2 g h0)), then hops
-/// with launch speeds eᵏV, each contributing (2/3) u³/g², summed: (2/3) V³ e³ /(g² (1 − e³)).
-/// t* = t1 + 2 e V /(g (1 − e)).
-fn zeno_series<S: Sc>(e: S, g: S, h0: S, v0: S) -> (S, S) {
-    let v = (v0 * v0 + g * h0 * 2.0).sqrt();
-    let t1 = (v0 + v) / g;
-    let e3 = e * e * e;
-    let c = h0 * t1 + v0 * t1 * t1 / 2.0 - g * t1 * t1 * t1 / 6.0
-        + v * v * v * e3 * (2.0 / 3.0) / (g * g * (-e3 + 1.0));
-    let t_star = t1 + e * v * 2.0 / (g * (-e + 1.0));
-    (c, t_star)
-}
-
-#[test]
-fn zeno_ball_ends_at_accumulation_with_tail() {
-    let m = AdModel::new(ZenoBall { t_end: 3.0, e: 0.5 });
-    let p = m.defaults();
-    let d = |i: usize| D::var(p[i], i);
-    let (c, t_star) = zeno_series(d(0), d(1), d(2), d(3));
-    let start = std::time::Instant::now();
-    let sol = solve(&m, &p, &tight()).unwrap();
-    let wall = start.elapsed().as_secs_f64();
-    let z: Vec<_> = sol
-        .diagnostics
-        .iter()
-        .filter(|d| d.kind == DiagnosticKind::Zeno)
-        .collect();
-    assert_eq!(z.len(), 1, "{:?}", sol.diagnostics);
-    assert!(
-        (z[0].t - t_star.v).abs() < 1e-6,
-        "t* {} vs {}",
-        z[0].t,
-        t_star.v
-    );
-    assert!((sol.cost - c.v).abs() < 1e-6, "C {} vs {}", sol.cost, c.v);
-    for i in 0..4 {
-        assert!(
-            (sol.gradient[i] - c.g[i]).abs() < 1e-6,
-            "dC/dθ{i}: {} vs {}",
-            sol.gradient[i],
-            c.g[i]
-        );
-    }
-    assert!(wall < 0.5, "took {wall} s");
-    // Never through the floor.
-    assert!(
-        sol.x_final[0].abs() < 1e-6 && sol.x_final[1].abs() < 1e-3,
-        "{:?}",
-        sol.x_final
-    );
-    eprintln!(
-        "zeno: {} events, t* {} (exact {}), C err {:.2e}, grad errs {:?}, {:?}",
-        sol.events.len(),
-        z[0].t,
-        t_star.v,
-        sol.cost - c.v,
-        (0..4).map(|i| sol.gradient[i] - c.g[i]).collect::<Vec<_>>(),
-        sol.diagnostics
-    );
+/// d/dθ (h − h0) from the sensitivities `s` (column-major 2×4) of the fixture ball.
+fn height_change(s: &[f64]) -> Vec<f64> {
+    (0..4)
+        .map(|j| s[2 * j] - if j == Ball::H0 { 1.0 } else { 0.0 })
+        .collect()
 }
 
 /// The cumulative velocity measure μ_v([0, t]) is d/dθ ∫₀ᵗ v ds = d/dθ (h(t) − h0) =
 /// S_h(t) − ∂h0/∂θ at every t (atoms included once their event has passed).
 #[test]
 fn cumulative_measure_of_velocity_is_the_height_sensitivity() {
-    let ball = Ball::new();
-    let p = ball.default_params();
-    let opts = Options {
-        record: true,
-        ..tight()
-    };
-    let sol = solve(&ball, &p, &opts).unwrap();
+    let (ball, p, sol) = e1_recorded();
     let mv = measure(&ball, &p, &sol, 1).unwrap();
     let traj = sol.trajectory.as_ref().unwrap();
     let ts = [0.0, 0.3, 0.638, 0.639, 1.2, 1.66, 1.661, 2.0];
@@ -150,14 +42,7 @@ fn cumulative_measure_of_velocity_is_the_height_sensitivity() {
     assert_eq!(cum.len(), ts.len());
     for (t, m) in ts.iter().zip(&cum) {
         let (_, s) = traj.sample(*t);
-        for j in 0..4 {
-            let want = s[2 * j] - if j == Ball::H0 { 1.0 } else { 0.0 };
-            assert!(
-                close(m[j], want, 1e-8, 1e-10),
-                "t = {t}, param {j}: {} vs {want}",
-                m[j]
-            );
-        }
+        assert_grad(&format!("t = {t}"), m, &height_change(&s), 1e-8, 1e-10);
     }
     let total = mv.pair(|_| 1.0);
     for j in 0..4 {
@@ -169,13 +54,7 @@ fn cumulative_measure_of_velocity_is_the_height_sensitivity() {
 /// event records' atoms.
 #[test]
 fn measure_of_one_is_the_gradient_of_integral_h() {
-    let ball = Ball::new();
-    let p = ball.default_params();
-    let opts = Options {
-        record: true,
-        ..tight()
-    };
-    let sol = solve(&ball, &p, &opts).unwrap();
+    let (ball, p, sol) = e1_recorded();
     let mu = measure(&ball, &p, &sol, 0).unwrap();
     assert_eq!(mu.name, "height");
     assert_eq!(mu.atoms.len(), 2);
@@ -199,14 +78,7 @@ fn measure_of_one_is_the_gradient_of_integral_h() {
     // h(T) = sample of the trajectory; d h(T)/dθ = S_h(T) (horizon fixed), minus dh0/dθ.
     let traj = sol.trajectory.as_ref().unwrap();
     let (_, s) = traj.sample(2.0);
-    for j in 0..4 {
-        let want = s[2 * j] - if j == Ball::H0 { 1.0 } else { 0.0 };
-        assert!(
-            close(tv[j], want, 1e-8, 1e-10),
-            "param {j}: {} vs {want}",
-            tv[j]
-        );
-    }
+    assert_grad("⟨μ_v, 1⟩", &tv, &height_change(&s), 1e-8, 1e-10);
     assert!(measure(&ball, &p, &sol, 5).is_err());
     let unrecorded = solve(&ball, &p, &tight()).unwrap();
     assert!(measure(&ball, &p, &unrecorded, 0).is_err());
@@ -214,60 +86,15 @@ fn measure_of_one_is_the_gradient_of_integral_h() {
 
 /// Ball with cost ∫ φ(t) h dt for a fixed test function φ: the exact gradient from the
 /// run equals ⟨μ_height, φ⟩ and central differences of the cost.
-struct WeightedBall;
-
-fn phi(t: f64) -> f64 {
-    (3.0 * t).sin() + 0.5 * t * t - 0.2
-}
-
-impl Spec for WeightedBall {
-    fn info(&self) -> ModelInfo {
-        let mut i = ZenoBall { t_end: 2.0, e: 0.8 }.info();
-        i.name = "WeightedBall".into();
-        i
-    }
-    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
-        x[0] = p[2];
-        x[1] = p[3];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(2.0))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
-        f[0] = x[1];
-        f[1] = -p[1];
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
-        xp[0] = x[0];
-        xp[1] = -(p[0] * x[1]);
-    }
-    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
-        y[0] = x[0];
-    }
-    fn running<S: Sc>(&self, _sw: Switches, t: S, x: &[S], _p: &[S]) -> S {
-        ((t * 3.0).sin() + t * t * 0.5 - 0.2) * x[0]
-    }
-}
-
 #[test]
 fn measure_paired_with_phi_matches_fd() {
-    let m = AdModel::new(WeightedBall);
+    let m = AdModel::new(BallSpec::new(BallCost::Weighted, 2.0));
     let p = DVector::from_vec(vec![0.8, 9.81, 2.0, 0.3]);
-    let opts = Options {
-        record: true,
-        ..tight()
-    };
+    let opts = recorded();
     let sol = solve(&m, &p, &opts).unwrap();
     let mu = measure(&m, &p, &sol, 0).unwrap();
     let paired = mu.pair(phi);
-    let fd_opts = Options {
-        rtol: 1e-12,
-        atol: 1e-14,
-        ..Options::default()
-    };
+    let fd_opts = fd_opts();
     for j in 0..4 {
         let fd = mvad_runtime::fd::fd_gradient(&m, &p, &fd_opts, j, 1e-5).unwrap();
         assert!(
@@ -289,63 +116,24 @@ fn measure_paired_with_phi_matches_fd() {
     assert!(on.iter().flatten().all(|v| v.is_finite()));
 }
 
-/// A ball whose reset puts it *exactly* on the floor (h⁺ = 0), and one launched from the
-/// floor at t = 0: the zero guard neither re-triggers nor hides the next bounce.
-struct FloorBall {
-    exact_zero: bool,
-}
-
-impl Spec for FloorBall {
-    fn info(&self) -> ModelInfo {
-        let mut i = ZenoBall { t_end: 2.0, e: 0.8 }.info();
-        i.param_defaults = vec![0.8, 9.81, 0.0, 5.0];
-        i
-    }
-    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
-        x[0] = p[2];
-        x[1] = p[3];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(2.0))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
-        f[0] = x[1];
-        f[1] = -p[1];
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
-        xp[0] = if self.exact_zero { S::cst(0.0) } else { x[0] };
-        xp[1] = -(p[0] * x[1]);
-    }
-    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
-        y[0] = x[0];
-    }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
+/// A ball launched from the floor at t = 0 (h0 = 0, v0 = 5), whose reset puts it *exactly*
+/// on the floor (h⁺ = 0) or keeps h⁺ = h⁻.
+fn floor_ball(land_on_zero: bool) -> BallSpec {
+    BallSpec {
+        land_on_zero,
+        ..BallSpec::int_h(2.0, 0.8).defaults(&[0.8, 9.81, 0.0, 5.0])
     }
 }
 
+/// The zero guard neither re-triggers nor hides the next bounce.
 #[test]
 fn guard_exactly_zero_after_reset_and_at_start() {
     for exact_zero in [false, true] {
-        let m = AdModel::new(FloorBall { exact_zero });
+        let m = AdModel::new(floor_ball(exact_zero));
         let p = m.defaults();
         let sol = solve(&m, &p, &tight()).unwrap();
         // Launched from h = 0 with v0 = 5: hops of 2u/g with u = 5, 4, 3.2, ...
-        let g = 9.81;
-        let mut t = 0.0;
-        let mut u = 5.0;
-        let mut want = Vec::new();
-        loop {
-            t += 2.0 * u / g;
-            if t >= 2.0 {
-                break;
-            }
-            want.push(t);
-            u *= 0.8;
-        }
+        let want = hops(0.8, 9.81, 5.0, 2.0);
         let got: Vec<f64> = sol.events.iter().map(|e| e.t).collect();
         assert_eq!(
             got.len(),
@@ -356,11 +144,7 @@ fn guard_exactly_zero_after_reset_and_at_start() {
             assert!((a - b).abs() < 1e-12, "{got:?} vs {want:?}");
         }
         // Gradient against FD.
-        let fd_opts = Options {
-            rtol: 1e-12,
-            atol: 1e-14,
-            ..Options::default()
-        };
+        let fd_opts = fd_opts();
         for j in [0, 1, 3] {
             let fd = mvad_runtime::fd::fd_gradient(&m, &p, &fd_opts, j, 1e-5).unwrap();
             assert!(
@@ -371,134 +155,12 @@ fn guard_exactly_zero_after_reset_and_at_start() {
         }
     }
     // A ball that starts exactly on the floor moving down bounces at t = 0.
-    let m = AdModel::new(FloorBall { exact_zero: false });
+    let m = AdModel::new(floor_ball(false));
     let p = DVector::from_vec(vec![0.8, 9.81, 0.0, -3.0]);
     let sol = solve(&m, &p, &tight()).unwrap();
     assert_eq!(sol.events[0].t, 0.0);
     assert!((sol.events[0].x_after[1] - 2.4).abs() < 1e-12);
     assert!(sol.x_final[0] >= -1e-9, "fell through: {:?}", sol.x_final);
-}
-
-/// ẋ = 1; events `enter` when (x − c)² − w² ≤ 0 and `leave` when ≥ 0: a dip of width 2w
-/// that a coarse step straddles without any sign change at its samples.
-struct Dip;
-
-impl Spec for Dip {
-    fn info(&self) -> ModelInfo {
-        let mut i = info(
-            "Dip",
-            &["x"],
-            &[("c", 0.5), ("w", 1e-3)],
-            &["main"],
-            vec![
-                ev("enter", Direction::Down, None, None, false),
-                ev("leave", Direction::Up, None, None, false),
-            ],
-            &["x"],
-            0,
-        );
-        i.has_final_cost = false;
-        i
-    }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
-        f[0] = S::cst(1.0);
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
-        (x[0] - p[0]) * (x[0] - p[0]) - p[1] * p[1]
-    }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-}
-
-#[test]
-fn double_crossing_inside_one_step_is_found() {
-    let m = AdModel::new(Dip);
-    for w in [1e-2, 1e-3, 1e-5] {
-        let p = DVector::from_vec(vec![0.5, w]);
-        let sol = solve(&m, &p, &tight()).unwrap();
-        assert!(sol.stats.steps < 60, "{} steps", sol.stats.steps);
-        let names: Vec<usize> = sol.events.iter().map(|e| e.event).collect();
-        assert_eq!(names, vec![0, 1], "w = {w}: {:?}", sol.events);
-        assert!((sol.events[0].t - (0.5 - w)).abs() < 1e-13);
-        assert!((sol.events[1].t - (0.5 + w)).abs() < 1e-13);
-        // t' = (1, −1) and (1, 1): t_enter = c − w, t_leave = c + w.
-        assert!(
-            (sol.events[0].dt[0] - 1.0).abs() < 1e-9 && (sol.events[0].dt[1] + 1.0).abs() < 1e-9
-        );
-        assert!(
-            (sol.events[1].dt[0] - 1.0).abs() < 1e-9 && (sol.events[1].dt[1] - 1.0).abs() < 1e-9
-        );
-    }
-}
-
-/// Two events on the same guard: fired at the same time in declaration order, reported.
-struct Twin;
-
-impl Spec for Twin {
-    fn info(&self) -> ModelInfo {
-        let mut i = info(
-            "Twin",
-            &["x", "y"],
-            &[("c", 0.4)],
-            &["main"],
-            vec![
-                ev("a", Direction::Up, None, None, false),
-                ev("b", Direction::Up, None, None, false),
-            ],
-            &["y"],
-            0,
-        );
-        i.has_final_cost = false;
-        i
-    }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-        x[1] = S::cst(1.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
-        f[0] = S::cst(1.0);
-        f[1] = S::cst(0.0);
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
-        x[0] - p[0]
-    }
-    fn reset<S: Sc>(&self, k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
-        xp[0] = x[0];
-        xp[1] = if k == 0 { x[1] + 1.0 } else { x[1] * 2.0 };
-    }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
-        x[1]
-    }
-}
-
-#[test]
-fn simultaneous_events_in_declaration_order() {
-    let m = AdModel::new(Twin);
-    let p = m.defaults();
-    let sol = solve(&m, &p, &tight()).unwrap();
-    assert_eq!(
-        sol.events.iter().map(|e| e.event).collect::<Vec<_>>(),
-        vec![0, 1]
-    );
-    assert_eq!(sol.events[0].t, sol.events[1].t);
-    assert!((sol.x_final[1] - 4.0).abs() < 1e-14); // (1 + 1)·2, not 1·2 + 1
-    assert!(sol
-        .diagnostics
-        .iter()
-        .any(|d| d.kind == DiagnosticKind::SimultaneousEvents));
-    // C = 0.4·1 + 0.6·4 = 2.8, dC/dc = 1 − 4 = −3.
-    assert!((sol.cost - 2.8).abs() < 1e-12);
-    assert!((sol.gradient[0] + 3.0).abs() < 1e-9, "{:?}", sol.gradient);
 }
 
 /// A model that goes bad on purpose: ẋ = −1 from x = 1, and depending on `kind` a NaN in
@@ -523,7 +185,6 @@ impl Spec for Sick {
             &["x"],
             usize::from(self.kind == 3),
         );
-        i.has_final_cost = false;
         i.has_horizon = self.kind != 4;
         i
     }
@@ -678,17 +339,11 @@ fn failures_are_errors_that_say_where() {
 /// The e = 0.8 ball run far past its accumulation time, and the measure of a Zeno run.
 #[test]
 fn zeno_ball_e08_long_horizon_and_its_measure() {
-    let m = AdModel::new(ZenoBall {
-        t_end: 10.0,
-        e: 0.8,
-    });
+    let m = AdModel::new(BallSpec::int_h(10.0, 0.8));
     let p = m.defaults();
     let d = |i: usize| D::var(p[i], i);
-    let (c, t_star) = zeno_series(d(0), d(1), d(2), d(3));
-    let opts = Options {
-        record: true,
-        ..tight()
-    };
+    let (c, t_star) = common::ball::zeno_series(d(0), d(1), d(2), d(3));
+    let opts = recorded();
     let sol = solve(&m, &p, &opts).unwrap();
     let z = sol
         .diagnostics
@@ -740,15 +395,7 @@ fn zeno_ball_e08_long_horizon_and_its_measure() {
 fn trajectory_samples_match_closed_form() {
     let ball = Ball::new();
     let p = ball.default_params();
-    let sol = solve(
-        &ball,
-        &p,
-        &Options {
-            record: true,
-            ..tight()
-        },
-    )
-    .unwrap();
+    let sol = solve(&ball, &p, &recorded()).unwrap();
     let traj = sol.trajectory.as_ref().unwrap();
     assert_eq!(traj.segments.len(), 3);
     assert_eq!(traj.step_times().last().copied(), Some(2.0));
@@ -772,66 +419,14 @@ fn trajectory_samples_match_closed_form() {
 
 /// A parameter-dependent horizon T = θ_T and a final cost Φ = h(T)·v(T): the terms
 /// (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ, checked against central differences.
-struct HorizonBall;
-
-impl Spec for HorizonBall {
-    fn info(&self) -> ModelInfo {
-        let mut i = info(
-            "HorizonBall",
-            &["h", "v"],
-            &[("e", 0.8), ("g", 9.81), ("h0", 2.0), ("T", 1.9)],
-            &["main"],
-            vec![ev("impact", Direction::Down, None, None, true)],
-            &["height"],
-            0,
-        );
-        i.has_final_cost = true;
-        i
-    }
-    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
-        x[0] = p[2];
-        x[1] = S::cst(0.0);
-    }
-    fn horizon<S: Sc>(&self, p: &[S]) -> Option<S> {
-        Some(p[3])
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
-        f[0] = x[1];
-        f[1] = -p[1];
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
-        xp[0] = x[0];
-        xp[1] = -(p[0] * x[1]);
-    }
-    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
-        y[0] = x[0];
-    }
-    fn running<S: Sc>(&self, _sw: Switches, t: S, x: &[S], _p: &[S]) -> S {
-        x[0] * x[0] + t * x[1]
-    }
-    fn event_cost<S: Sc>(&self, _k: usize, t: S, x: &[S], p: &[S]) -> S {
-        x[1] * t * p[0]
-    }
-    fn final_cost<S: Sc>(&self, t: S, x: &[S], _p: &[S]) -> S {
-        x[0] * x[1] + t * t
-    }
-}
-
 #[test]
 fn parameter_dependent_horizon_and_all_cost_kinds_vs_fd() {
-    let m = AdModel::new(HorizonBall);
+    let m = AdModel::new(BallSpec::param_horizon());
     let p = m.defaults();
     let sol = solve(&m, &p, &tight()).unwrap();
     assert_eq!(sol.events.len(), 2);
     assert_eq!(sol.t_end, 1.9);
-    let fd_opts = Options {
-        rtol: 1e-12,
-        atol: 1e-14,
-        ..Options::default()
-    };
+    let fd_opts = fd_opts();
     let fd = mvad_runtime::fd::fd_full_gradient(&m, &p, &fd_opts, 1e-5).unwrap();
     for j in 0..4 {
         assert!(
@@ -856,98 +451,10 @@ fn parameter_dependent_horizon_and_all_cost_kinds_vs_fd() {
     assert!((sol.gradient[3] - fixed.gradient[3]).abs() > 1e-3);
 }
 
-/// Zeno balls from e = 0.3 to 0.99 run to T = 200 (far past t*): never through the floor,
-/// cost and gradient against the exact series.
+/// A primal-only run of the ball: no gradient, the same events and cost. (The model
+/// without parameters is a case of the closed-form matrix.)
 #[test]
-fn zeno_restitution_sweep() {
-    for e in [0.3, 0.9, 0.95, 0.97, 0.99] {
-        let m = AdModel::new(ZenoBall { t_end: 200.0, e });
-        let p = m.defaults();
-        let d = |i: usize| D::var(p[i], i);
-        let (c, t_star) = zeno_series(d(0), d(1), d(2), d(3));
-        let start = std::time::Instant::now();
-        let sol = solve(&m, &p, &tight()).unwrap();
-        let wall = start.elapsed().as_secs_f64();
-        let z = sol
-            .diagnostics
-            .iter()
-            .find(|d| d.kind == DiagnosticKind::Zeno)
-            .expect("zeno");
-        assert!(
-            close(z.t, t_star.v, 1e-9, 0.0),
-            "e={e}: t* {} vs {}",
-            z.t,
-            t_star.v
-        );
-        assert!(
-            close(sol.cost, c.v, 1e-9, 0.0),
-            "e={e}: C {} vs {}",
-            sol.cost,
-            c.v
-        );
-        for i in 0..4 {
-            assert!(
-                close(sol.gradient[i], c.g[i], 1e-6, 1e-9),
-                "e={e} θ{i}: {} vs {}",
-                sol.gradient[i],
-                c.g[i]
-            );
-        }
-        assert!(
-            sol.x_final[0] > -1e-9,
-            "e={e}: through the floor {:?}",
-            sol.x_final
-        );
-        assert!(wall < 1.0, "e={e}: {wall} s");
-    }
-}
-
-/// A model without parameters, and a primal-only run of the ball.
-struct Decay;
-
-impl Spec for Decay {
-    fn info(&self) -> ModelInfo {
-        let mut i = info(
-            "Decay",
-            &["x"],
-            &[],
-            &["main"],
-            vec![ev("half", Direction::Down, None, None, false)],
-            &["x"],
-            0,
-        );
-        i.has_final_cost = false;
-        i
-    }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(1.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(2.0))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
-        f[0] = -x[0];
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0] - 0.5
-    }
-    fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
-        xp[0] = x[0] * 0.5;
-    }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
-        x[0]
-    }
-}
-
-#[test]
-fn no_parameters_and_primal_only() {
-    let m = AdModel::new(Decay);
-    let sol = solve(&m, &DVector::zeros(0), &tight()).unwrap();
-    assert!(sol.gradient.is_empty());
-    assert_eq!(sol.events.len(), 1);
-    // x = e^{−t} until ln 2, then 0.25 e^{−(t − ln 2)}: ∫ = 0.5 + 0.25 (1 − e^{−(2 − ln 2)}).
-    let want = 0.5 + 0.25 * (1.0 - (-(2.0 - 2f64.ln())).exp());
-    assert!(close(sol.cost, want, 1e-9, 0.0), "{} vs {want}", sol.cost);
+fn primal_only_run_of_the_ball() {
     let ball = Ball::new();
     let p = ball.default_params();
     let primal = solve(
@@ -963,56 +470,4 @@ fn no_parameters_and_primal_only() {
     assert!(primal.gradient.is_empty() && primal.events[0].dt.is_empty());
     assert_eq!(primal.events.len(), 2);
     assert!((primal.cost - full.cost).abs() < 1e-12);
-}
-
-/// e = 0: the ball stops dead on the floor at the first impact and must stay there (the
-/// event cannot fire again, the flow would carry it through the floor).
-#[test]
-fn inelastic_ball_rests_on_the_floor() {
-    let m = AdModel::new(ZenoBall { t_end: 2.0, e: 0.0 });
-    let p = m.defaults();
-    let sol = solve(
-        &m,
-        &p,
-        &Options {
-            record: true,
-            ..tight()
-        },
-    )
-    .unwrap();
-    assert_eq!(sol.events.len(), 1);
-    assert!(
-        sol.diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::Zeno),
-        "{:?}",
-        sol.diagnostics
-    );
-    assert!(
-        sol.x_final[0].abs() < 1e-12 && sol.x_final[1].abs() < 1e-12,
-        "{:?}",
-        sol.x_final
-    );
-    // C = ∫ h over the fall = h0 t1 − g t1³/6 with t1 = √(2 h0/g); then h = 0.
-    let d = |i: usize| D::var(p[i], i);
-    let (g, h0) = (d(1), d(2));
-    let t1 = (h0 * 2.0 / g).sqrt();
-    let c = h0 * t1 - g * t1 * t1 * t1 / 6.0;
-    assert!(close(sol.cost, c.v, 1e-10, 0.0), "{} vs {}", sol.cost, c.v);
-    for i in 1..3 {
-        assert!(
-            close(sol.gradient[i], c.g[i], 1e-8, 1e-12),
-            "θ{i}: {} vs {}",
-            sol.gradient[i],
-            c.g[i]
-        );
-    }
-    let (x, _) = sol.trajectory.as_ref().unwrap().sample(1.5);
-    assert!(x[0].abs() < 1e-12);
-    // Pass-through events with identity resets are not "stuck": the dip test's `enter`
-    // event lets the state continue into the firing side.
-    let dip = AdModel::new(Dip);
-    let sol = solve(&dip, &dip.defaults(), &tight()).unwrap();
-    assert_eq!(sol.events.len(), 2);
-    assert!(sol.diagnostics.is_empty(), "{:?}", sol.diagnostics);
 }

@@ -28,7 +28,7 @@ impl Spec for Wall {
     fn info(&self) -> ModelInfo {
         let names = ["k", "d", "u", "c", "r"];
         let params: Vec<(&str, f64)> = names.iter().copied().zip(self.defaults).collect();
-        info(
+        let mut i = info(
             "Wall",
             &["x0", "x1"],
             &params,
@@ -36,7 +36,9 @@ impl Spec for Wall {
             vec![ev("hit", Direction::Up, None, None, true)],
             &["x0"],
             0,
-        )
+        );
+        i.has_final_cost = true;
+        i
     }
     fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
         x[0] = S::cst(0.0);

@@ -57,13 +57,17 @@ fn json(o: &Output) -> Value {
     serde_json::from_str(&stdout(o)).unwrap_or_else(|e| panic!("not JSON ({e}): {}", stdout(o)))
 }
 
-/// A scratch file holding `contents`; its path as text.
-fn scratch(name: &str, contents: &[u8]) -> String {
-    let dir = std::env::temp_dir().join(format!("mvad-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join(name);
+/// A scratch file `name` holding `contents` in a fresh temporary directory: the directory
+/// (removed when dropped) and the file's path as text.
+fn scratch(name: &str, contents: &[u8]) -> (tempfile::TempDir, String) {
+    let dir = tempfile::Builder::new()
+        .prefix("mvad-cli-")
+        .tempdir()
+        .expect("temp dir");
+    let path = dir.path().join(name);
     std::fs::write(&path, contents).expect("write");
-    path.to_string_lossy().into_owned()
+    let path = path.to_string_lossy().into_owned();
+    (dir, path)
 }
 
 const BALL: &str = "models/bouncing_ball.hyb";
@@ -260,7 +264,7 @@ fn simulate_csv_to_stdout_and_file() {
         "event table on stderr: {}",
         stderr(&o)
     );
-    let p = scratch("traj.csv", b"");
+    let (_dir, p) = scratch("traj.csv", b"");
     let o = run_status(&["simulate", BALL, "--out", &p], 0);
     assert!(stdout(&o).contains("impact"), "{}", stdout(&o));
     let csv = std::fs::read_to_string(&p).expect("csv written");
@@ -295,7 +299,7 @@ fn measure_json_and_plots() {
         max_relative = 1e-8
     );
     for ext in ["svg", "png"] {
-        let p = scratch(&format!("fig1.{ext}"), b"");
+        let (_dir, p) = scratch(&format!("fig1.{ext}"), b"");
         let o = run_status(
             &[
                 "measure",
@@ -395,7 +399,7 @@ fn sweep_table_two_on_e2() {
 
 #[test]
 fn workprec_table_and_plot() {
-    let p = scratch("wp.svg", b"");
+    let (_dir, p) = scratch("wp.svg", b"");
     let o = run_status(
         &[
             "workprec",
@@ -457,7 +461,7 @@ fn bad_options_and_usage_errors_exit_2() {
 
 #[test]
 fn a_model_without_horizon_needs_t_end() {
-    let p = scratch(
+    let (_dir, p) = scratch(
         "nohorizon.hyb",
         b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
     );
@@ -468,7 +472,7 @@ fn a_model_without_horizon_needs_t_end() {
 
 #[test]
 fn a_failed_run_exits_1_with_an_error_object() {
-    let p = scratch(
+    let (_dir, p) = scratch(
         "nan.hyb",
         b"model M {\n  state x = -1;\n  flow { der(x) = log(x); }\n  cost = integral(x);\n  horizon 1;\n}\n",
     );
@@ -484,7 +488,7 @@ fn a_failed_run_exits_1_with_an_error_object() {
     let o = run_status(&["grad", &p], 1);
     assert!(stdout(&o).is_empty());
     // A solution that blows up in finite time.
-    let p = scratch(
+    let (_dir, p) = scratch(
         "blowup.hyb",
         b"model M {\n  state x = 1;\n  flow { der(x) = x^2; }\n  cost = integral(x);\n  horizon 2;\n}\n",
     );
@@ -495,7 +499,7 @@ fn a_failed_run_exits_1_with_an_error_object() {
 /// Asserts a located error: exit 2, first stderr line `FILE:LINE:COL: error: ...` with the
 /// expected line and a message containing `fragment`, the line quoted, a caret.
 fn assert_located(name: &str, contents: &[u8], line: usize, fragment: &str) {
-    let p = scratch(name, contents);
+    let (_dir, p) = scratch(name, contents);
     for cmd in ["check", "grad"] {
         let o = run_status(&[cmd, &p], 2);
         let err = stderr(&o);
@@ -561,7 +565,7 @@ fn empty_blank_and_binary_files_are_located_errors() {
                 (s >> 24) as u8
             })
             .collect();
-        let p = scratch(&format!("garbage{size}.hyb"), &bytes);
+        let (_dir, p) = scratch(&format!("garbage{size}.hyb"), &bytes);
         let o = run_status(&["grad", &p], 2);
         assert!(stderr(&o).starts_with(&format!("{p}:")), "{}", stderr(&o));
     }
@@ -585,7 +589,7 @@ fn deep_nesting_is_an_error_not_a_crash() {
     let negations = format!("{}x", "-".repeat(depth));
     let powers = format!("x{}", "^x".repeat(depth));
     for (name, rhs) in [("deepneg", negations), ("deeppow", powers)] {
-        let p = scratch(&format!("{name}.hyb"), &one_state_model("1", &rhs));
+        let (_dir, p) = scratch(&format!("{name}.hyb"), &one_state_model("1", &rhs));
         run_status(&["check", &p], 2);
     }
 }

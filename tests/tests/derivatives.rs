@@ -9,55 +9,8 @@
 
 use mvad::interp::InterpretedModel;
 use mvad::{HybridModel, ModelAlloc};
+use mvad_tests::{model_files, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
-
-/// The language's every construct: modes, kinks in flows and ℓ, time dependence, event
-/// and final costs, a param-dependent horizon, observables using observables.
-pub const SINK: &str = include_str!("sink.hyb");
-
-mvad::hybrid!(include "tests/sink.hyb");
-
-/// The `.hyb` files of models/.
-pub fn model_files() -> Vec<(String, String)> {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../models");
-    let mut out: Vec<(String, String)> = std::fs::read_dir(dir)
-        .map(|rd| {
-            rd.filter_map(|e| e.ok())
-                .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|x| x == "hyb"))
-                .filter_map(|p| {
-                    Some((
-                        p.file_name()?.to_string_lossy().into_owned(),
-                        std::fs::read_to_string(&p).ok()?,
-                    ))
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    out.sort();
-    out
-}
-
-/// A small deterministic generator (splitmix64), uniform in [0, 1).
-pub struct Rng(u64);
-impl Rng {
-    /// A generator with the given seed.
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    /// The next number in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in [lo, hi).
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.uniform()
-    }
-}
 
 fn vn<M: HybridModel>(m: &M, v: &[f64]) -> OVector<f64, M::N>
 where
@@ -361,23 +314,13 @@ fn interpreted_models_match_finite_differences() {
     check_all(&m, 11, 60);
 }
 
-/// The example models compiled by `hybrid!`.
-mod compiled {
-    mvad::hybrid!(include "../models/bouncing_ball.hyb");
-    mvad::hybrid!(include "../models/ceiling.hyb");
-    mvad::hybrid!(include "../models/e2_sweep.hyb");
-    mvad::hybrid!(include "../models/stiff_relay.hyb");
-    mvad::hybrid!(include "../models/thermostat.hyb");
-    mvad::hybrid!(include "../models/zeno_ball.hyb");
-}
-
 #[test]
 fn compiled_models_match_finite_differences() {
-    check_all(&compiled::BouncingBall::new(), 1, 20);
-    check_all(&compiled::Ceiling::new(), 2, 20);
-    check_all(&compiled::E2Sweep::new(), 3, 20);
-    check_all(&compiled::StiffRelay::new(), 4, 20);
-    check_all(&compiled::Thermostat::new(), 5, 20);
-    check_all(&compiled::ZenoBall::new(), 6, 20);
+    check_all(&models::bouncing_ball::BouncingBall::new(), 1, 20);
+    check_all(&models::ceiling::Ceiling::new(), 2, 20);
+    check_all(&models::e2_sweep::E2Sweep::new(), 3, 20);
+    check_all(&models::stiff_relay::StiffRelay::new(), 4, 20);
+    check_all(&models::thermostat::Thermostat::new(), 5, 20);
+    check_all(&models::zeno_ball::ZenoBall::new(), 6, 20);
     check_all(&Sink::new(), 12, 60);
 }

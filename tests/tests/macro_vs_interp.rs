@@ -6,35 +6,15 @@
 //! words. The hand-written `mvad_runtime::fixtures::Ball` matches the compiled bouncing
 //! ball exactly.
 
+use models::bouncing_ball::{BouncingBall, BouncingBallParams};
 use mvad::interp::InterpretedModel;
 use mvad::{HybridModel, ModelAlloc};
+use mvad_tests::{model_source, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
+/// The smallest model: no params, no events, no observables, no cost, no horizon.
 mod compiled {
-    mvad::hybrid!(include "../models/bouncing_ball.hyb");
-    mvad::hybrid!(include "../models/ceiling.hyb");
-    mvad::hybrid!(include "../models/e2_sweep.hyb");
-    mvad::hybrid!(include "../models/stiff_relay.hyb");
-    mvad::hybrid!(include "../models/thermostat.hyb");
-    mvad::hybrid!(include "../models/zeno_ball.hyb");
-    mvad::hybrid!(include "tests/sink.hyb");
-    // The smallest model: no params, no events, no observables, no cost, no horizon.
     mvad::hybrid! { model Tiny { state x = 1; flow { der(x) = -x * t; } } }
-}
-
-/// Splitmix64, uniform in [0, 1).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
 }
 
 /// Every output of every method of `m` at one point, labelled, in a fixed order.
@@ -173,7 +153,7 @@ where
     assert_eq!(c.info(), i.info(), "ModelInfo differs");
     let info = c.info().clone();
     let (n, p) = (info.states.len(), info.params.len());
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let mut compared = 0usize;
     for _ in 0..50 {
         let x: Vec<f64> = (0..n).map(|_| rng.range(-3.0, 3.0)).collect();
@@ -184,7 +164,7 @@ where
             .collect();
         let s: Vec<f64> = (0..n * p).map(|_| rng.range(-2.0, 2.0)).collect();
         let t = rng.range(0.0, 3.0);
-        let sw = (rng.next() * 2f64.powi(info.switches.min(52) as i32)) as u64;
+        let sw = (rng.uniform() * 2f64.powi(info.switches.min(52) as i32)) as u64;
         let a = snapshot(c, &x, &th, t, sw, &s);
         let b = snapshot_interp(&i, &x, &th, t, sw, &s);
         assert_eq!(a.len(), b.len());
@@ -205,16 +185,22 @@ where
 
 #[test]
 fn compiled_and_interpreted_models_agree() {
-    let m = |f: &str| {
-        std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f)
-    };
-    agree(&compiled::BouncingBall::new(), &m("bouncing_ball.hyb"), 1);
-    agree(&compiled::Ceiling::new(), &m("ceiling.hyb"), 2);
-    agree(&compiled::E2Sweep::new(), &m("e2_sweep.hyb"), 3);
-    agree(&compiled::StiffRelay::new(), &m("stiff_relay.hyb"), 4);
-    agree(&compiled::Thermostat::new(), &m("thermostat.hyb"), 5);
-    agree(&compiled::ZenoBall::new(), &m("zeno_ball.hyb"), 6);
-    agree(&compiled::Sink::new(), include_str!("sink.hyb"), 7);
+    let m = model_source;
+    agree(&BouncingBall::new(), &m("bouncing_ball.hyb"), 1);
+    agree(&models::ceiling::Ceiling::new(), &m("ceiling.hyb"), 2);
+    agree(&models::e2_sweep::E2Sweep::new(), &m("e2_sweep.hyb"), 3);
+    agree(
+        &models::stiff_relay::StiffRelay::new(),
+        &m("stiff_relay.hyb"),
+        4,
+    );
+    agree(
+        &models::thermostat::Thermostat::new(),
+        &m("thermostat.hyb"),
+        5,
+    );
+    agree(&models::zeno_ball::ZenoBall::new(), &m("zeno_ball.hyb"), 6);
+    agree(&Sink::new(), SINK, 7);
     agree(
         &compiled::Tiny::new(),
         "model Tiny { state x = 1; flow { der(x) = -x * t; } }",
@@ -224,10 +210,10 @@ fn compiled_and_interpreted_models_agree() {
 
 #[test]
 fn hand_written_ball_matches_compiled_exactly() {
-    let hand = mvad::fixtures::Ball::new();
-    let gen = compiled::BouncingBall::new();
+    let hand = mvad_runtime::fixtures::Ball::new();
+    let gen = BouncingBall::new();
     assert_eq!(hand.info(), gen.info());
-    let mut rng = Rng(99);
+    let mut rng = Rng::new(99);
     for _ in 0..50 {
         let x: Vec<f64> = (0..2).map(|_| rng.range(-3.0, 3.0)).collect();
         let th: Vec<f64> = (0..4).map(|_| rng.range(-2.0, 10.0)).collect();
@@ -241,15 +227,15 @@ fn hand_written_ball_matches_compiled_exactly() {
 
 #[test]
 fn params_struct_round_trips() {
-    let p = compiled::BouncingBallParams::default();
+    let p = BouncingBallParams::default();
     assert_eq!((p.e, p.g, p.h0, p.v0), (0.8, 9.81, 2.0, 0.0));
     let v = p.to_vector();
-    assert_eq!(v, compiled::BouncingBall::new().default_params());
-    assert_eq!(compiled::BouncingBallParams::from_vector(&v), p);
+    assert_eq!(v, BouncingBall::new().default_params());
+    assert_eq!(BouncingBallParams::from_vector(&v), p);
     let v2: nalgebra::SVector<f64, 4> = p.into();
     assert_eq!(v2, v);
-    assert_eq!(compiled::Sink::NSTATES, 3);
-    assert_eq!(compiled::Sink::NPARAMS, 3);
+    assert_eq!(Sink::NSTATES, 3);
+    assert_eq!(Sink::NPARAMS, 3);
 }
 
 /// Wall time per call of `f`, best of several batches (robust on a shared machine).
@@ -275,22 +261,17 @@ fn loaded_gradient_within_5x_of_compiled() {
         atol: 1e-12,
         ..Default::default()
     };
-    let m = |f: &str| {
-        std::fs::read_to_string(format!("{}/../models/{f}", env!("CARGO_MANIFEST_DIR"))).expect(f)
-    };
+    let m = model_source;
     let mut worst: f64 = 0.0;
     for (file, compiled_grad) in [
-        (
-            "bouncing_ball.hyb",
-            grad_time(&compiled::BouncingBall::new(), &opts),
-        ),
+        ("bouncing_ball.hyb", grad_time(&BouncingBall::new(), &opts)),
         (
             "thermostat.hyb",
-            grad_time(&compiled::Thermostat::new(), &opts),
+            grad_time(&models::thermostat::Thermostat::new(), &opts),
         ),
         (
             "stiff_relay.hyb",
-            grad_time(&compiled::StiffRelay::new(), &opts),
+            grad_time(&models::stiff_relay::StiffRelay::new(), &opts),
         ),
     ] {
         let i = InterpretedModel::from_source(&m(file)).expect("loads");

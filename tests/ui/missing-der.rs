@@ -2,12 +2,9 @@ use mvad::hybrid;
 
 hybrid! {
     model Ball {
-        param g = 9.81;
         state h = 2.0;
         state v = 0.0;
-        flow {
-            der(h) = v;
-        }
+        flow { der(h) = v; }
     }
 }
 

@@ -4,9 +4,7 @@ hybrid! {
     model Wave {
         param sin = 0.5;
         state x = 0.0;
-        flow {
-            der(x) = sin;
-        }
+        flow { der(x) = -sin; }
     }
 }
 

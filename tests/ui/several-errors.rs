@@ -5,10 +5,7 @@ hybrid! {
         param g = 9.81;
         state h = 2.0;
         state v = 0.0;
-        flow {
-            der(h) = vv;
-            der(v) = -gg;
-        }
+        flow { der(h) = vv; der(v) = -gg; }
         event impact when h <= 0 -> nowhere;
     }
 }

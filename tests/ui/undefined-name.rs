@@ -1,14 +1,10 @@
 use mvad::hybrid;
 
 hybrid! {
-    model Ball {
+    model Fall {
         param g = 9.81;
-        state h = 2.0;
         state v = 0.0;
-        flow {
-            der(h) = vv;
-            der(v) = -g;
-        }
+        flow { der(v) = -g * vv; }
     }
 }
 

@@ -1,12 +1,9 @@
 use mvad::hybrid;
 
 hybrid! {
-    model Decay {
-        param k = 0.5;
+    model Clip {
         state x = 1.0;
-        flow {
-            der(x) = -k * max(x);
-        }
+        flow { der(x) = -max(x); }
     }
 }
 

@@ -4,6 +4,11 @@
 //! (no truncation error); they also differentiate the hand-derived closed forms.
 #![allow(dead_code)]
 
+pub mod ball;
+pub mod cases;
+pub mod check;
+pub mod models;
+
 use mvad_runtime::model::{HybridModel, ModelInfo, Switches};
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -260,6 +265,27 @@ impl<T: Spec> AdModel<T> {
             .collect();
         (td, xd, pd)
     }
+    /// ∂/∂x and ∂/∂p of the scalar `f` at (t, x, p) into `gx`, `gp`; returns (f, ∂f/∂t).
+    fn scalar_grad(
+        &self,
+        t: f64,
+        x: &V,
+        p: &V,
+        gx: &mut V,
+        gp: &mut V,
+        f: impl Fn(D, &[D], &[D]) -> D,
+    ) -> (f64, f64) {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let d = f(td, &xd, &pd);
+        (d.v, self.split(&d, gx.as_mut_slice(), gp.as_mut_slice()))
+    }
+    /// The flow in dual numbers seeded at (t, x, p).
+    fn flow(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V) -> Vec<D> {
+        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let mut f = vec![D::c(0.0); self.n()];
+        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        f
+    }
     fn split(&self, d: &D, gx: &mut [f64], gp: &mut [f64]) -> f64 {
         let n = self.n();
         gx.copy_from_slice(&d.g[1..1 + n]);
@@ -313,9 +339,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
             .rhs(m, sw, t, x.as_slice(), p.as_slice(), f.as_mut_slice());
     }
     fn rhs_jac_x(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fx: &mut Mx) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        let f = self.flow(m, sw, t, x, p);
         for r in 0..self.n() {
             for c in 0..self.n() {
                 fx[(r, c)] = f[r].g[1 + c];
@@ -323,9 +347,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         }
     }
     fn rhs_jac_p(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fp: &mut Mx) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        let f = self.flow(m, sw, t, x, p);
         for r in 0..self.n() {
             for c in 0..self.np() {
                 fp[(r, c)] = f[r].g[1 + self.n() + c];
@@ -333,9 +355,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         }
     }
     fn rhs_dt(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, ft: &mut V) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        let f = self.flow(m, sw, t, x, p);
         for r in 0..self.n() {
             ft[r] = f[r].g[0];
         }
@@ -347,9 +367,8 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.guard(k, t, x.as_slice(), p.as_slice())
     }
     fn guard_grad(&self, k: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let g = self.spec.guard(k, td, &xd, &pd);
-        self.split(&g, gx.as_mut_slice(), gp.as_mut_slice())
+        self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
+            .1
     }
     fn reset(&self, k: usize, t: f64, x: &V, p: &V, xp: &mut V) {
         self.spec
@@ -374,9 +393,8 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.switch(j, t, x.as_slice(), p.as_slice())
     }
     fn switch_grad(&self, j: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let g = self.spec.switch(j, td, &xd, &pd);
-        self.split(&g, gx.as_mut_slice(), gp.as_mut_slice())
+        self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
+            .1
     }
     fn observe(&self, t: f64, x: &V, p: &V, y: &mut [f64]) {
         self.spec.observe(t, x.as_slice(), p.as_slice(), y);
@@ -396,30 +414,26 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.running(sw, t, x.as_slice(), p.as_slice())
     }
     fn running_cost_grad(&self, sw: Switches, t: f64, x: &V, p: &V, lx: &mut V, lp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let l = self.spec.running(sw, td, &xd, &pd);
-        self.split(&l, lx.as_mut_slice(), lp.as_mut_slice());
-        l.v
+        self.scalar_grad(t, x, p, lx, lp, |t, x, p| self.spec.running(sw, t, x, p))
+            .0
     }
     fn event_cost(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
         self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
     }
     fn event_cost_grad(&self, k: usize, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let c = self.spec.event_cost(k, td, &xd, &pd);
-        self.split(&c, cx.as_mut_slice(), cp.as_mut_slice())
+        self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.event_cost(k, t, x, p))
+            .1
     }
     fn final_cost(&self, t: f64, x: &V, p: &V) -> f64 {
         self.spec.final_cost(t, x.as_slice(), p.as_slice())
     }
     fn final_cost_grad(&self, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
-        let c = self.spec.final_cost(td, &xd, &pd);
-        self.split(&c, cx.as_mut_slice(), cp.as_mut_slice())
+        self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.final_cost(t, x, p))
+            .1
     }
 }
 
-/// Builds a `ModelInfo` quickly.
+/// Builds a `ModelInfo` quickly: running cost and horizon, no final cost.
 pub fn info(
     name: &str,
     states: &[&str],
@@ -441,7 +455,7 @@ pub fn info(
         observables: s(observables),
         switches,
         has_running_cost: true,
-        has_final_cost: true,
+        has_final_cost: false,
         has_horizon: true,
         jacobian_sparsity: vec![vec![]; modes.len()],
     }
