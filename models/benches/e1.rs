@@ -58,7 +58,16 @@ fn median_us(mut f: impl FnMut() -> f64) -> f64 {
     v[v.len() / 2]
 }
 
-fn e1(c: &mut Criterion) {
+/// E1 through both doors: the compiled model with its θ, and `bouncing_ball.hyb` loaded at
+/// run time with the same θ.
+struct E1 {
+    compiled: BouncingBall,
+    p: nalgebra::SVector<f64, 4>,
+    loaded: mvad::interp::InterpretedModel,
+    pl: nalgebra::DVector<f64>,
+}
+
+fn setup() -> E1 {
     let compiled = BouncingBall::new();
     let p = BouncingBallParams::default().to_vector();
     let loaded = mvad::load::load(std::path::Path::new(concat!(
@@ -67,6 +76,21 @@ fn e1(c: &mut Criterion) {
     )))
     .expect("bouncing_ball.hyb loads");
     let pl = nalgebra::DVector::from_column_slice(p.as_slice());
+    E1 {
+        compiled,
+        p,
+        loaded,
+        pl,
+    }
+}
+
+fn e1(c: &mut Criterion) {
+    let E1 {
+        compiled,
+        p,
+        loaded,
+        pl,
+    } = setup();
     let (grad, primal) = opts();
 
     let compiled_grad = || solve(&compiled, black_box(&p), &grad).unwrap().gradient[0];
@@ -95,14 +119,12 @@ criterion_group!(benches, e1);
 
 fn main() {
     if let Ok(which) = std::env::var("E1_PROFILE") {
-        let compiled = BouncingBall::new();
-        let p = BouncingBallParams::default().to_vector();
-        let loaded = mvad::load::load(std::path::Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/bouncing_ball.hyb"
-        )))
-        .expect("bouncing_ball.hyb loads");
-        let pl = nalgebra::DVector::from_column_slice(p.as_slice());
+        let E1 {
+            compiled,
+            p,
+            loaded,
+            pl,
+        } = setup();
         let (grad, primal) = opts();
         let stats = |s: &mvad::solution::Stats| {
             format!(

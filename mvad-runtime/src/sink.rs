@@ -11,31 +11,22 @@
 
 use crate::solution::EventRecord;
 
-/// One user event as the event loop sees it when the event fires. The slices borrow the
-/// loop's buffers and are valid only for the call.
+/// One user event as the event loop sees it when the event fires: the scalar fields of
+/// [`EventRecord`] (same names, same meaning) and borrowed slices of the loop's buffers,
+/// valid only for the call; the jumps and atoms follow from them ([`EventView::to_record`]).
 #[derive(Clone, Copy, Debug)]
+#[allow(missing_docs)]
 pub struct EventView<'a> {
-    /// Position in the run (0, 1, …).
     pub index: usize,
-    /// Index of the event in the model's declaration order.
     pub event: usize,
-    /// Event time t_k.
     pub t: f64,
-    /// Mode before the event.
     pub mode_before: usize,
-    /// Mode after the event.
     pub mode_after: usize,
-    /// ∇g·f⁻ at the event.
     pub guard_slope: f64,
-    /// ∂g/∂t at the event.
     pub guard_dt: f64,
-    /// False when the crossing grazes (see `Options::grazing_tol`).
     pub transversal: bool,
-    /// dt_k/dθ, one per parameter (empty without sensitivities).
     pub dt: &'a [f64],
-    /// x(t_k⁻).
     pub x_before: &'a [f64],
-    /// x(t_k⁺).
     pub x_after: &'a [f64],
     /// The observables at (t_k, x⁻).
     pub observables_before: &'a [f64],

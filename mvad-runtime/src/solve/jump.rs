@@ -92,14 +92,7 @@ where
             let slope = self.gx.dot(&self.f_minus);
             return Ok(Approach { slope, gt, grazing });
         }
-        let (slope, denom) = sens::event_time_sensitivity(
-            &self.gx,
-            &self.gp,
-            gt,
-            &self.f_minus,
-            &self.y.s,
-            &mut self.dt,
-        );
+        let (slope, denom) = self.crossing_time_sensitivity(gt);
         if !self.dt.iter().all(|v| v.is_finite()) {
             return Err(SolveError::NonFinite {
                 t,
@@ -109,6 +102,20 @@ where
             });
         }
         Ok(Approach { slope, gt, grazing })
+    }
+
+    /// t' = −(∇g·S⁻ + ∂g/∂θ)/(∇g·f⁻ + ∂g/∂t) into `self.dt`, from ∇g and ∂g/∂θ in
+    /// `self.gx`, `self.gp`, f⁻ in `self.f_minus` and `gt` = ∂g/∂t (g a guard or a switching
+    /// function); returns (∇g·f⁻, ∇g·f⁻ + ∂g/∂t).
+    fn crossing_time_sensitivity(&mut self, gt: f64) -> (f64, f64) {
+        sens::event_time_sensitivity(
+            &self.gx,
+            &self.gp,
+            gt,
+            &self.f_minus,
+            &self.y.s,
+            &mut self.dt,
+        )
     }
 
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (returned, bits
@@ -259,14 +266,7 @@ where
         })?;
         if self.sens {
             let gt = model.switch_grad(j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
-            sens::event_time_sensitivity(
-                &self.gx,
-                &self.gp,
-                gt,
-                &self.f_minus,
-                &self.y.s,
-                &mut self.dt,
-            );
+            self.crossing_time_sensitivity(gt);
             if !self.dt.iter().all(|v| v.is_finite()) {
                 return Err(SolveError::NonFinite {
                     t,
