@@ -73,7 +73,10 @@ mod tests {
     fn the_gradient_in_tau_is_right_at_every_tolerance_with_default_options() {
         let m = StiffRelay::new();
         let p = StiffRelayParams::default().to_vector();
-        for method in [mvad::solution::Method::Auto, mvad::solution::Method::Rosenbrock] {
+        for method in [
+            mvad::solution::Method::Auto,
+            mvad::solution::Method::Rosenbrock,
+        ] {
             for rtol in [1e-3, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12] {
                 let opts = Options {
                     method,

@@ -282,7 +282,10 @@ impl<'a> Lowerer<'a> {
                         match event_index.get(event.name.as_str()) {
                             Some(&k) => (&mut per_event[k], v),
                             None => {
-                                self.internal(event.span, format!("unknown event `{}`", event.name));
+                                self.internal(
+                                    event.span,
+                                    format!("unknown event `{}`", event.name),
+                                );
                                 continue;
                             }
                         }
@@ -736,14 +739,19 @@ mod tests {
         ];
         for src in bad {
             let model = crate::parse::parse(src).unwrap_or_else(|e| panic!("parse {src}: {e:?}"));
-            assert!(!crate::check::check(&model).is_empty(), "the checker accepts {src}");
+            assert!(
+                !crate::check::check(&model).is_empty(),
+                "the checker accepts {src}"
+            );
             let diags = match std::panic::catch_unwind(|| lower(&model)) {
                 Ok(Err(d)) => d,
                 Ok(Ok(_)) => panic!("lowered without an error: {src}"),
                 Err(_) => panic!("lower panicked on {src}"),
             };
             assert!(
-                diags.iter().all(|d| d.message.starts_with("internal error: ")),
+                diags
+                    .iter()
+                    .all(|d| d.message.starts_with("internal error: ")),
                 "{src}: {diags:?}"
             );
         }

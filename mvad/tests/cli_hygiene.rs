@@ -108,7 +108,10 @@ fn simulate_event_table_is_capped_and_json_is_complete() {
     let out = ok(&["simulate", model, "--out", path_str(&csv)]);
     assert!(out.contains(&format!("{n} events up to T")), "{out}");
     assert_eq!(event_rows(&out), ROWS, "{out}");
-    assert!(out.contains(&format!("… and {} more events", n - ROWS)), "{out}");
+    assert!(
+        out.contains(&format!("… and {} more events", n - ROWS)),
+        "{out}"
+    );
     // The CSV keeps both sides of every event.
     let rows = fs::read_to_string(&csv).expect("the CSV").lines().count();
     assert!(rows > 2 * n, "{rows} CSV lines for {n} events");
@@ -123,7 +126,10 @@ fn measure_atom_table_is_capped_and_json_is_complete() {
     let n = event_count(model);
     let out = ok(&["measure", model, "--observable", "y"]);
     assert!(out.contains(&format!("atoms ({n}):")), "{out}");
-    assert!(out.contains(&format!("… and {} more events", n - ROWS)), "{out}");
+    assert!(
+        out.contains(&format!("… and {} more events", n - ROWS)),
+        "{out}"
+    );
     let v = json(&["measure", model, "--observable", "y", "--json"]);
     assert_eq!(v["atoms"].as_array().map(Vec::len), Some(n));
 }

@@ -313,11 +313,17 @@ mod tests {
         assert_eq!(join_or(&names, ", ", "-"), "e, g, h0");
         assert_eq!(join_or::<String>(&[], ", ", "-"), "-");
         let seven: Vec<String> = (1..=7).map(|i| i.to_string()).collect();
-        assert_eq!(capped_list(&seven, "; ", "-"), "1; 2; 3; 4; 5; … and 2 more");
+        assert_eq!(
+            capped_list(&seven, "; ", "-"),
+            "1; 2; 3; 4; 5; … and 2 more"
+        );
         assert_eq!(capped_list(&seven[..5], "; ", "-"), "1; 2; 3; 4; 5");
         assert_eq!(capped_list::<String>(&[], "; ", "-"), "-");
         assert_eq!(more_events(MAX_EVENT_ROWS), "");
-        assert_eq!(more_events(12_000), "… and 11980 more events (--json prints all)\n");
+        assert_eq!(
+            more_events(12_000),
+            "… and 11980 more events (--json prints all)\n"
+        );
     }
 
     #[test]
