@@ -21,7 +21,8 @@ pub struct GradArgs {
     /// Common options.
     #[command(flatten)]
     pub common: Common,
-    /// Sensitivity mode: `forward` (sensitivities carried along the run) or `adjoint`.
+    /// Sensitivity mode: `forward` (sensitivities carried along the run). `adjoint` is in the
+    /// spec but not implemented yet: it is refused with exit status 2.
     #[arg(long, default_value = "forward", value_parser = ["forward", "adjoint"])]
     pub mode: String,
 }
