@@ -5,8 +5,8 @@
 //! [`SolveError::diagnostic`] turns the numerical failures into the spec's diagnostic kinds
 //! (`max_events`, `max_steps`, `step_size_underflow`, `nonfinite`) for callers that print both alike.
 //!
-//! The messages name no command-line flags: the runtime knows no front end. The CLI adds its
-//! hints (`--t-end`, `--method`) when it reports an error (`mvad::cli::solve_err`).
+//! The messages name no command-line flags: the runtime knows no front end. The `mvad`
+//! binary adds its hints (`--t-end`, `--method`) when it reports an error (`cli::solve_err`).
 
 use crate::integrate::StepError;
 use crate::solution::{Diagnostic, DiagnosticKind};
