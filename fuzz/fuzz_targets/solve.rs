@@ -18,8 +18,8 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let params = model.default_params();
-    // The model's own horizon (with dT/dθ) when it is short; otherwise the cap. A missing,
-    // infinite or non-positive horizon takes the solver's own error path.
+    // The model's own horizon (with dT/dθ) when it is short; a longer or infinite one is
+    // capped. A missing, NaN or non-positive horizon takes the solver's own error path.
     let t_end = match mvad::HybridModel::horizon(&model, &params) {
         Some(t) if t > T_CAP => Some(T_CAP),
         _ => None,
