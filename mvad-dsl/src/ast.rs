@@ -436,14 +436,6 @@ impl Model {
         })
     }
 
-    /// Top-level events (armed in every mode), in source order.
-    pub fn top_events(&self) -> impl Iterator<Item = &Event> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Event(e) => Some(e),
-            _ => None,
-        })
-    }
-
     /// Every event with the mode it belongs to (`None`: top level), in source order
     /// (the order that defines the global event index K of `event_K`).
     pub fn all_events(&self) -> Vec<(Option<&Mode>, &Event)> {

@@ -34,7 +34,13 @@ const MAX_LOWER_DEPTH: usize = 1024;
 /// The most switching functions a model may have (bits of the switch word).
 pub const MAX_SWITCHES: usize = 64;
 
-/// Lowers a checked model to a [`Program`]; every problem found is reported.
+/// Lowers a checked model to a [`Program`].
+///
+/// The one user error found here is a model with more than [`MAX_SWITCHES`] kinks (known
+/// only once the switching functions are deduplicated). Everything else lowering relies on
+/// (names resolve, modes and events exist, guards and `if` conditions are comparisons,
+/// constant expressions are constant, depths are bounded) is [`crate::check`]'s job; a model
+/// that breaks it anyway yields `internal error: ...` diagnostics, never a panic.
 pub fn lower(model: &ast::Model) -> Result<Program, Vec<Diagnostic>> {
     let mut lw = Lowerer::new(model);
     let program = lw.program(model);
@@ -105,6 +111,17 @@ impl<'a> Lowerer<'a> {
         self.diags.push(Diagnostic::new(span, msg));
     }
 
+    /// A broken invariant that [`crate::check`] establishes: a bug if it is ever reported.
+    fn internal(&mut self, span: Span, msg: impl Into<String>) {
+        self.diags.push(Diagnostic::new(
+            span,
+            format!(
+                "internal error: {} (the checker should have rejected this model)",
+                msg.into()
+            ),
+        ));
+    }
+
     /// Evaluates a constant expression (numbers and earlier consts).
     fn constant(&mut self, e: &'a ast::Expr, what: &str) -> f64 {
         self.consts_only = true;
@@ -113,7 +130,7 @@ impl<'a> Lowerer<'a> {
         match self.ar.as_const(id) {
             Some(v) => v,
             None => {
-                self.error(e.span, format!("{what} must be a constant expression"));
+                self.internal(e.span, format!("{what} must be a constant expression"));
                 f64::NAN
             }
         }
@@ -165,7 +182,7 @@ impl<'a> Lowerer<'a> {
             });
         }
         if modes.is_empty() {
-            self.error(
+            self.internal(
                 model.name.span,
                 format!("model `{}` has no `flow` and no `mode`", model.name.name),
             );
@@ -174,7 +191,7 @@ impl<'a> Lowerer<'a> {
             Some(im) => match mode_index.get(im.mode.name.as_str()) {
                 Some(&i) => i,
                 None => {
-                    self.error(im.mode.span, format!("unknown mode `{}`", im.mode.name));
+                    self.internal(im.mode.span, format!("unknown mode `{}`", im.mode.name));
                     0
                 }
             },
@@ -192,7 +209,7 @@ impl<'a> Lowerer<'a> {
                 .map_or_else(|| format!("event_{k}"), |i| i.name.clone());
             event_index.insert(name.clone(), k);
             let Some(cmp) = ev.comparison() else {
-                self.error(
+                self.internal(
                     ev.guard.span(),
                     "the guard of an event must be a comparison",
                 );
@@ -210,7 +227,7 @@ impl<'a> Lowerer<'a> {
                 Some(t) => match mode_index.get(t.name.as_str()) {
                     Some(&i) => Some(i),
                     None => {
-                        self.error(t.span, format!("unknown mode `{}`", t.name));
+                        self.internal(t.span, format!("unknown mode `{}`", t.name));
                         None
                     }
                 },
@@ -221,7 +238,7 @@ impl<'a> Lowerer<'a> {
                 for a in resets {
                     match self.names.get(a.state.name.as_str()) {
                         Some(&Sym::State(i)) => reset[i] = self.expr(&a.value, Ctx::Pointwise),
-                        _ => self.error(
+                        _ => self.internal(
                             a.state.span,
                             format!("reset of `{}`, which is not a state", a.state.name),
                         ),
@@ -265,7 +282,10 @@ impl<'a> Lowerer<'a> {
                         match event_index.get(event.name.as_str()) {
                             Some(&k) => (&mut per_event[k], v),
                             None => {
-                                self.error(event.span, format!("unknown event `{}`", event.name));
+                                self.internal(
+                                    event.span,
+                                    format!("unknown event `{}`", event.name),
+                                );
                                 continue;
                             }
                         }
@@ -312,7 +332,7 @@ impl<'a> Lowerer<'a> {
             .ar
             .depends_on(id, |n| matches!(n, Node::State(_) | Node::Time))
         {
-            self.error(span, format!("{what} may use only params and consts"));
+            self.internal(span, format!("{what} may use only params and consts"));
         }
     }
 
@@ -321,7 +341,7 @@ impl<'a> Lowerer<'a> {
         for d in ders {
             match self.names.get(d.state.name.as_str()) {
                 Some(&Sym::State(i)) => f[i] = Some(self.expr(&d.value, Ctx::Frozen)),
-                _ => self.error(
+                _ => self.internal(
                     d.state.span,
                     format!("`der` of `{}`, which is not a state", d.state.name),
                 ),
@@ -331,7 +351,7 @@ impl<'a> Lowerer<'a> {
             .enumerate()
             .map(|(i, e)| {
                 e.unwrap_or_else(|| {
-                    self.error(
+                    self.internal(
                         span,
                         format!("state number {} has no `der` in mode `{mode}`", i + 1),
                     );
@@ -348,7 +368,7 @@ impl<'a> Lowerer<'a> {
             return id;
         }
         if self.depth >= MAX_LOWER_DEPTH {
-            self.error(e.span, "expression nested too deeply");
+            self.internal(e.span, "expression nested too deeply");
             return self.ar.constant(f64::NAN);
         }
         self.depth += 1;
@@ -365,7 +385,7 @@ impl<'a> Lowerer<'a> {
             ExprKind::Number(v) => self.ar.constant(*v),
             ExprKind::Time => {
                 if self.consts_only {
-                    self.error(e.span, "`t` cannot be used in a constant expression");
+                    self.internal(e.span, "`t` cannot be used in a constant expression");
                 }
                 self.ar.time()
             }
@@ -388,7 +408,7 @@ impl<'a> Lowerer<'a> {
             ExprKind::Call { func, args } => self.call(e, func, args, ctx),
             ExprKind::If { cond, then, els } => {
                 let Some(cmp) = cond.comparison() else {
-                    self.error(cond.span(), "the condition of `if` must be a comparison");
+                    self.internal(cond.span(), "the condition of `if` must be a comparison");
                     return self.ar.constant(f64::NAN);
                 };
                 let a = self.expr(then, ctx);
@@ -423,7 +443,7 @@ impl<'a> Lowerer<'a> {
         match sym {
             Some(Sym::Const(v)) => self.ar.constant(v),
             Some(_) if self.consts_only => {
-                self.error(id.span, format!("`{}` is not a const; a constant expression may use only numbers and consts", id.name));
+                self.internal(id.span, format!("`{}` is not a const; a constant expression may use only numbers and consts", id.name));
                 self.ar.constant(f64::NAN)
             }
             Some(Sym::State(i)) => self.ar.state(i),
@@ -431,7 +451,7 @@ impl<'a> Lowerer<'a> {
             Some(Sym::Observable(e)) => {
                 let key = e as *const ast::Expr;
                 if self.inlining.contains(&key) {
-                    self.error(
+                    self.internal(
                         id.span,
                         format!("observable `{}` refers to itself", id.name),
                     );
@@ -443,7 +463,7 @@ impl<'a> Lowerer<'a> {
                 r
             }
             None => {
-                self.error(id.span, format!("undefined name `{}`", id.name));
+                self.internal(id.span, format!("undefined name `{}`", id.name));
                 self.ar.constant(f64::NAN)
             }
         }
@@ -462,11 +482,11 @@ impl<'a> Lowerer<'a> {
             _ => 1,
         };
         if Func::from_name(name).is_none() && want == 1 {
-            self.error(func.span, format!("unknown function `{name}`"));
+            self.internal(func.span, format!("unknown function `{name}`"));
             return self.ar.constant(f64::NAN);
         }
         if args.len() != want {
-            self.error(
+            self.internal(
                 func.span,
                 format!(
                     "`{name}` takes {want} argument{}, found {}",
@@ -690,6 +710,51 @@ mod tests {
         many.push_str("; } }");
         let e = errors(&many);
         assert!(e.iter().any(|m| m.contains("kinks")), "{e:?}");
+    }
+
+    /// Models the checker rejects, lowered without it: every broken invariant comes back
+    /// as an `internal error: ...` diagnostic, never a panic or a user-facing duplicate.
+    #[test]
+    fn unchecked_models_give_internal_errors_not_panics() {
+        let bad = [
+            // undefined name, unknown function, wrong argument counts
+            "model M { state x = 1; flow { der(x) = y; } }",
+            "model M { state x = 1; flow { der(x) = foo(x); } }",
+            "model M { state x = 1; flow { der(x) = min(x) + max(x, x, x) + pow(x); } }",
+            "model M { state x = 1; flow { der(x) = sin(); } }",
+            // `der` of a non-state, a missing `der`, no flow at all
+            "model M { param p = 1; state x = 1; flow { der(p) = 1; } }",
+            "model M { state x = 1; state z = 2; flow { der(x) = 1; } }",
+            "model M { state x = 1; }",
+            // unknown modes, unknown event in `sum`, reset of a non-state
+            "model M { state x = 1; mode a { der(x) = 1; } initial mode b; }",
+            "model M { state x = 1; mode a { der(x) = 1; } event when x >= 2 -> b; }",
+            "model M { state x = 1; flow { der(x) = 1; } cost = sum(nope, x); }",
+            "model M { param p = 1; state x = 1; flow { der(x) = 1; } event when x >= 2 { p = 0; } }",
+            // non-constant consts and defaults, state or time where only params may appear
+            "model M { state x = 1; const c = x; param p = t; flow { der(x) = c + p; } }",
+            "model M { param p = 1; state x = 1; state y = x + t; flow { der(x) = 1; der(y) = 1; } horizon x; }",
+            // self-referential observables
+            "model M { state x = 1; flow { der(x) = a; } observe a = b; observe b = a; }",
+        ];
+        for src in bad {
+            let model = crate::parse::parse(src).unwrap_or_else(|e| panic!("parse {src}: {e:?}"));
+            assert!(
+                !crate::check::check(&model).is_empty(),
+                "the checker accepts {src}"
+            );
+            let diags = match std::panic::catch_unwind(|| lower(&model)) {
+                Ok(Err(d)) => d,
+                Ok(Ok(_)) => panic!("lowered without an error: {src}"),
+                Err(_) => panic!("lower panicked on {src}"),
+            };
+            assert!(
+                diags
+                    .iter()
+                    .all(|d| d.message.starts_with("internal error: ")),
+                "{src}: {diags:?}"
+            );
+        }
     }
 }
 

@@ -4,6 +4,9 @@
 //! `Solution::diagnostics`; a `SolveError` means there is no trustworthy cost or gradient.
 //! [`SolveError::diagnostic`] turns the numerical failures into the spec's diagnostic kinds
 //! (`max_events`, `max_steps`, `step_size_underflow`, `nonfinite`) for callers that print both alike.
+//!
+//! The messages name no command-line flags: the runtime knows no front end. The `mvad`
+//! binary adds its hints (`--t-end`, `--method`) when it reports an error (`cli::solve_err`).
 
 use crate::integrate::StepError;
 use crate::solution::{Diagnostic, DiagnosticKind};
@@ -114,7 +117,7 @@ impl fmt::Display for SolveError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             SolveError::NoHorizon => {
-                write!(f, "the model declares no horizon; give one with --t-end")
+                write!(f, "the model declares no horizon and no end time was given")
             }
             SolveError::BadHorizon { t_end } => {
                 write!(f, "the horizon must be finite and positive, got {t_end}")
@@ -133,7 +136,7 @@ impl fmt::Display for SolveError {
             SolveError::MaxSteps { t, steps } => write!(
                 f,
                 "gave up after {steps} steps at t = {t} (max_steps); the model is probably \
-                 stiff: try --method auto or --method rosenbrock"
+                 stiff: try the method auto or rosenbrock"
             ),
             SolveError::MaxEvents { t, count } => {
                 write!(f, "stopped after {count} events at t = {t} (max_events)")

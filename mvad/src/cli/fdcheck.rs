@@ -12,7 +12,7 @@ use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
 use super::output::{
-    cosine, diagnostics_json, diagnostics_text, g, join_or, json_text, num, Table,
+    capped_list, cosine, diagnostics_json, diagnostics_text, g, json_text, num, Table,
 };
 use super::{check_step, setup, solve_err, CliError, CmdResult, Common};
 
@@ -134,7 +134,7 @@ where
     out.push_str(&format!("events K           {}\n", times.len()));
     out.push_str(&format!(
         "event times (s)    {}\n",
-        join_or(
+        capped_list(
             &times.iter().map(|&t| g(t, 6)).collect::<Vec<_>>(),
             "; ",
             "-"

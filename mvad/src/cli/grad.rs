@@ -10,8 +10,8 @@ use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
 use super::output::{
-    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, num, param_header,
-    stats_json, Table,
+    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, more_events, num,
+    param_header, stats_json, Table, MAX_EVENT_ROWS,
 };
 use super::{setup, solve_err, CliError, CmdResult, Common};
 
@@ -21,7 +21,8 @@ pub struct GradArgs {
     /// Common options.
     #[command(flatten)]
     pub common: Common,
-    /// Sensitivity mode: `forward` (sensitivities carried along the run) or `adjoint`.
+    /// Sensitivity mode: `forward` (sensitivities carried along the run). `adjoint` is in the
+    /// spec but not implemented yet: it is refused with exit status 2.
     #[arg(long, default_value = "forward", value_parser = ["forward", "adjoint"])]
     pub mode: String,
 }
@@ -99,7 +100,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
             &info.params,
             wrt,
         ));
-        for e in &sol.events {
+        for e in sol.events.iter().take(MAX_EVENT_ROWS) {
             let name = info
                 .events
                 .get(e.event)
@@ -125,6 +126,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
             t.row(row);
         }
         s.push_str(&t.render());
+        s.push_str(&more_events(sol.events.len()));
 
         // Jumps and atoms of the observables that jump.
         let mut t = Table::new(&param_header(
@@ -133,7 +135,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
             &info.params,
             wrt,
         ));
-        for e in &sol.events {
+        for e in sol.events.iter().take(MAX_EVENT_ROWS) {
             for (i, o) in info.observables.iter().enumerate() {
                 let jump = e.jump_observables.get(i).copied().unwrap_or(0.0);
                 if jump == 0.0 {
@@ -153,6 +155,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
         } else {
             s.push_str("\natoms α = −J t' of the observables that jump:\n");
             s.push_str(&t.render());
+            s.push_str(&more_events(sol.events.len()));
         }
     }
     let diags = diagnostics_text(&sol.diagnostics);

@@ -23,7 +23,10 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
 use serde_json::{Map, Value};
 
-use super::output::{diagnostics_json, diagnostics_text, g, json_text, num, param_header, Table};
+use super::output::{
+    diagnostics_json, diagnostics_text, g, json_text, more_events, num, param_header, Table,
+    MAX_EVENT_ROWS,
+};
 use super::plot::{figure1, format_of, Figure1};
 use super::{check_step, observable_index, setup, solve_err, xvec, CliError, CmdResult, Common};
 
@@ -177,7 +180,7 @@ where
     if !mu.atoms.is_empty() {
         let header = param_header(&["#", "t", "jump J"], "α d/d", &info.params, wrt);
         let mut t = Table::new(&header);
-        for (e, (tk, a)) in sol.events.iter().zip(&mu.atoms) {
+        for (e, (tk, a)) in sol.events.iter().zip(&mu.atoms).take(MAX_EVENT_ROWS) {
             let mut row = vec![
                 e.index.to_string(),
                 g(*tk, 10),
@@ -187,6 +190,7 @@ where
             t.row(row);
         }
         out.push_str(&t.render());
+        out.push_str(&more_events(mu.atoms.len()));
     }
     out.push_str("\ndensity on the grid:\n");
     let mut t = Table::new(&param_header(&["t"], "d/d", &info.params, wrt));

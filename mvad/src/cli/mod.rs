@@ -395,8 +395,14 @@ pub fn check_step(step: f64) -> Result<(), CliError> {
 
 /// Maps a runtime failure to an exit status: bad input (options, parameters, horizon)
 /// is 2, a model that ran and failed (non-finite values, step size underflow, too many
-/// events) is 1.
+/// events) is 1. The runtime's messages name no flags; the hints naming this CLI's flags
+/// are added here, in one place.
 pub fn solve_err(e: SolveError) -> CliError {
+    let hint = match &e {
+        SolveError::NoHorizon => "; give one with --t-end",
+        SolveError::MaxSteps { .. } => " (--method auto or --method rosenbrock)",
+        _ => "",
+    };
     match e {
         SolveError::NoHorizon
         | SolveError::BadHorizon { .. }
@@ -404,8 +410,8 @@ pub fn solve_err(e: SolveError) -> CliError {
         | SolveError::BadParam { .. }
         | SolveError::BadOption { .. }
         | SolveError::NoSuchObservable { .. }
-        | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}")),
-        _ => CliError::Run(format!("error: the run failed: {e}")),
+        | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}{hint}")),
+        _ => CliError::Run(format!("error: the run failed: {e}{hint}")),
     }
 }
 

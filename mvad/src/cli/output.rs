@@ -217,6 +217,36 @@ pub fn join_or<S: AsRef<str>>(items: &[S], sep: &str, empty: &str) -> String {
     }
 }
 
+/// The most event rows a human-readable table shows (`--json` always prints them all).
+pub const MAX_EVENT_ROWS: usize = 20;
+
+/// The most event times a one-line list shows (`fdcheck`).
+pub const MAX_LISTED_TIMES: usize = 5;
+
+/// The line after a table cut at [`MAX_EVENT_ROWS`] of `total` events; empty when nothing
+/// was cut.
+pub fn more_events(total: usize) -> String {
+    if total > MAX_EVENT_ROWS {
+        format!(
+            "… and {} more events (--json prints all)\n",
+            total - MAX_EVENT_ROWS
+        )
+    } else {
+        String::new()
+    }
+}
+
+/// The first [`MAX_LISTED_TIMES`] of `items` joined by `sep`, then `… and N more`; `empty`
+/// when there are none.
+pub fn capped_list<S: AsRef<str>>(items: &[S], sep: &str, empty: &str) -> String {
+    let shown = items.len().min(MAX_LISTED_TIMES);
+    let mut s = join_or(&items[..shown], sep, empty);
+    if items.len() > shown {
+        s.push_str(&format!("{sep}… and {} more", items.len() - shown));
+    }
+    s
+}
+
 /// Diagnostics as text lines (`warning: zeno at t = 1.9: ...`), empty if none.
 pub fn diagnostics_text(diags: &[Diagnostic]) -> String {
     let mut s = String::new();
@@ -282,6 +312,18 @@ mod tests {
         );
         assert_eq!(join_or(&names, ", ", "-"), "e, g, h0");
         assert_eq!(join_or::<String>(&[], ", ", "-"), "-");
+        let seven: Vec<String> = (1..=7).map(|i| i.to_string()).collect();
+        assert_eq!(
+            capped_list(&seven, "; ", "-"),
+            "1; 2; 3; 4; 5; … and 2 more"
+        );
+        assert_eq!(capped_list(&seven[..5], "; ", "-"), "1; 2; 3; 4; 5");
+        assert_eq!(capped_list::<String>(&[], "; ", "-"), "-");
+        assert_eq!(more_events(MAX_EVENT_ROWS), "");
+        assert_eq!(
+            more_events(12_000),
+            "… and 11980 more events (--json prints all)\n"
+        );
     }
 
     #[test]

@@ -15,7 +15,10 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
-use super::output::{diagnostics_json, diagnostics_text, g, json_text, num, stats_json, Table};
+use super::output::{
+    diagnostics_json, diagnostics_text, g, json_text, more_events, num, stats_json, Table,
+    MAX_EVENT_ROWS,
+};
 use super::{setup, solve_err, write_stderr, xvec, CliError, CmdResult, Common};
 
 /// Arguments of `mvad simulate`.
@@ -255,7 +258,7 @@ where
         let mut header = vec!["#".to_string(), "event".into(), "t".into(), "mode".into()];
         header.extend(info.states.iter().map(|n| format!("{n}⁻ -> {n}⁺")));
         let mut t = Table::new(&header);
-        for e in &sol.events {
+        for e in sol.events.iter().take(MAX_EVENT_ROWS) {
             let mut row = vec![
                 e.index.to_string(),
                 info.events
@@ -283,6 +286,7 @@ where
             t.row(row);
         }
         s.push_str(&t.render());
+        s.push_str(&more_events(sol.events.len()));
     }
     s.push_str(&diagnostics_text(&sol.diagnostics));
     s
