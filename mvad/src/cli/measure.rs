@@ -404,10 +404,8 @@ mod tests {
 
     #[test]
     fn velocity_has_atoms_and_the_plot_compares_with_fd() {
-        let svg = scratch_dir("measure")
-            .join("fig.svg")
-            .to_string_lossy()
-            .to_string();
+        let dir = scratch_dir("measure");
+        let svg = dir.path().join("fig.svg").to_string_lossy().to_string();
         let out = on_ball(
             run,
             &[

@@ -516,11 +516,12 @@ pub mod test_support {
         serde_json::from_str(out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
     }
 
-    /// A scratch directory for the files of the test named `tag`.
-    pub fn scratch_dir(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("mvad-{tag}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("a scratch directory");
-        dir
+    /// A scratch directory for the files of the test named `tag`, removed when dropped.
+    pub fn scratch_dir(tag: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("mvad-{tag}-"))
+            .tempdir()
+            .expect("a scratch directory")
     }
 }
 

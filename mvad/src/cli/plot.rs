@@ -634,19 +634,20 @@ mod tests {
         }
     }
 
-    fn tmp(name: &str) -> std::path::PathBuf {
-        crate::cli::test_support::scratch_dir("plot").join(name)
+    fn scratch() -> tempfile::TempDir {
+        crate::cli::test_support::scratch_dir("plot")
     }
 
     #[test]
     fn figure1_svg_and_png() {
+        let dir = scratch();
         let fig = sample_figure();
-        let svg = tmp("fig.svg");
+        let svg = dir.path().join("fig.svg");
         figure1(&svg, &fig).expect("svg");
         let text = std::fs::read_to_string(&svg).expect("written");
         assert!(text.starts_with("<svg"), "{}", &text[..50.min(text.len())]);
         assert!(text.contains("density and atoms"));
-        let png = tmp("fig.png");
+        let png = dir.path().join("fig.png");
         figure1(&png, &fig).expect("png");
         let bytes = std::fs::read(&png).expect("written");
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
@@ -654,6 +655,7 @@ mod tests {
 
     #[test]
     fn workprec_svg_and_png() {
+        let dir = scratch();
         let curves = vec![
             Curve {
                 label: "MV-AD".into(),
@@ -668,7 +670,7 @@ mod tests {
             ("C".to_string(), curves.clone()),
             ("dC/de".to_string(), curves),
         ];
-        let svg = tmp("wp.svg");
+        let svg = dir.path().join("wp.svg");
         workprec(&svg, "wp", &panels).expect("svg");
         let text = std::fs::read_to_string(&svg).expect("written");
         // The exact zero sits on the floor, and the legend says so; labels are decades.
@@ -682,7 +684,7 @@ mod tests {
             labels.iter().all(|l| l.starts_with("1e")),
             "a label that is not a decade: {labels:?}"
         );
-        workprec(&tmp("wp.png"), "wp", &panels).expect("png");
+        workprec(&dir.path().join("wp.png"), "wp", &panels).expect("png");
         // Without a floored point there is no floor entry.
         let clean = vec![("C".to_string(), vec![panels[0].1[1].clone()])];
         workprec(&svg, "wp", &clean).expect("svg");
@@ -692,6 +694,7 @@ mod tests {
 
     #[test]
     fn bad_paths_are_errors_not_panics() {
+        let dir = scratch();
         assert_eq!(
             format_of(Path::new("a.pdf")).err().map(|e| e.status()),
             Some(2)
@@ -707,7 +710,7 @@ mod tests {
         assert_eq!(err.map(|e| e.status()), Some(1));
         // Degenerate data: empty and non-finite series.
         let empty = Figure1::default();
-        figure1(&tmp("empty.svg"), &empty).expect("empty figure draws");
+        figure1(&dir.path().join("empty.svg"), &empty).expect("empty figure draws");
     }
 
     #[test]

@@ -341,7 +341,8 @@ mod tests {
 
     #[test]
     fn out_file_and_json() {
-        let path = scratch_dir("simulate").join("traj.csv");
+        let dir = scratch_dir("simulate");
+        let path = dir.path().join("traj.csv");
         let p = path.to_string_lossy().to_string();
         let out = on_ball(run, &["--out", &p]).expect("runs");
         assert!(out.contains("impact"), "{out}");
