@@ -18,19 +18,6 @@ use mvad::solve::solve;
 use std::hint::black_box;
 use std::time::Instant;
 
-fn opts() -> (Options, Options) {
-    let grad = Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..Options::default()
-    };
-    let primal = Options {
-        sensitivities: false,
-        ..grad.clone()
-    };
-    (grad, primal)
-}
-
 /// Median over 15 batches of the mean time per call of `f`, in µs.
 fn median_us(mut f: impl FnMut() -> f64) -> f64 {
     let mut batch = 200usize;
@@ -60,11 +47,14 @@ fn median_us(mut f: impl FnMut() -> f64) -> f64 {
 
 /// E1 through both doors: the compiled model with its θ, and `bouncing_ball.hyb` loaded at
 /// run time with the same θ.
+/// and the options: rtol 1e-10, atol 1e-12, with and without sensitivities.
 struct E1 {
     compiled: BouncingBall,
     p: nalgebra::SVector<f64, 4>,
     loaded: mvad::interp::InterpretedModel,
     pl: nalgebra::DVector<f64>,
+    grad: Options,
+    primal: Options,
 }
 
 fn setup() -> E1 {
@@ -76,11 +66,22 @@ fn setup() -> E1 {
     )))
     .expect("bouncing_ball.hyb loads");
     let pl = nalgebra::DVector::from_column_slice(p.as_slice());
+    let grad = Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..Options::default()
+    };
+    let primal = Options {
+        sensitivities: false,
+        ..grad.clone()
+    };
     E1 {
         compiled,
         p,
         loaded,
         pl,
+        grad,
+        primal,
     }
 }
 
@@ -90,8 +91,9 @@ fn e1(c: &mut Criterion) {
         p,
         loaded,
         pl,
+        grad,
+        primal,
     } = setup();
-    let (grad, primal) = opts();
 
     let compiled_grad = || solve(&compiled, black_box(&p), &grad).unwrap().gradient[0];
     let compiled_primal = || solve(&compiled, black_box(&p), &primal).unwrap().cost;
@@ -119,13 +121,7 @@ criterion_group!(benches, e1);
 
 fn main() {
     if let Ok(which) = std::env::var("E1_PROFILE") {
-        let E1 {
-            compiled,
-            p,
-            loaded,
-            pl,
-        } = setup();
-        let (grad, primal) = opts();
+        let e = setup();
         let stats = |s: &mvad::solution::Stats| {
             format!(
                 "steps {} rejected {} rhs_evals {} events {}",
@@ -135,9 +131,9 @@ fn main() {
         let mut acc = 0.0;
         for i in 0..1000 {
             let sol = match which.as_str() {
-                "grad" => solve(&compiled, black_box(&p), &grad),
-                "primal" => solve(&compiled, black_box(&p), &primal),
-                _ => solve(&loaded, black_box(&pl), &grad),
+                "grad" => solve(&e.compiled, black_box(&e.p), &e.grad),
+                "primal" => solve(&e.compiled, black_box(&e.p), &e.primal),
+                _ => solve(&e.loaded, black_box(&e.pl), &e.grad),
             }
             .unwrap();
             if i == 0 {
