@@ -3,7 +3,9 @@
 //! [`Ball`] is the seed paper's E1 bouncing ball: ḣ = v, v̇ = −g, event `impact` when
 //! h ≤ 0 with v⁺ = −e v⁻, C = ∫₀ᵀ h dt, T = 2. Parameters θ = (e, g, h0, v0).
 
-use crate::model::{Direction, EventInfo, HybridModel, ModelInfo, Switches};
+use crate::model::{
+    Direction, EventInfo, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+};
 use nalgebra::{Const, OMatrix, OVector};
 
 type N = Const<2>;
@@ -67,7 +69,11 @@ impl Ball {
     }
 }
 
-impl HybridModel for Ball {
+impl ModelSens for Ball {}
+impl ModelAdjoint for Ball {}
+impl ModelSecondOrder for Ball {}
+
+impl ModelCore for Ball {
     type N = N;
     type P = P;
     fn info(&self) -> &ModelInfo {
@@ -177,7 +183,7 @@ impl HybridModel for Ball {
     fn running_cost(&self, _sw: Switches, _t: f64, x: &X, _p: &Th) -> f64 {
         x[0]
     }
-    fn running_cost_grad(
+    fn running_cost_value_grad(
         &self,
         _sw: Switches,
         _t: f64,

@@ -143,11 +143,21 @@ impl ModelInfo {
     }
 }
 
-/// A hybrid model with symbolic first derivatives, generic over its dimensions.
+/// The core of a hybrid model: sizes, structure, and the values and first derivatives of
+/// x₀, T, f, g, R, σ, h, ℓ, φ and Φ that the forward method needs.
 ///
 /// `N` is the state dimension, `P` the parameter dimension: `Const<_>` for models
-/// compiled by `hybrid!`, `Dyn` for models loaded at run time.
-pub trait HybridModel
+/// compiled by `hybrid!`, `Dyn` for models loaded at run time. Callers bound on
+/// [`HybridModel`], which bundles this trait with the capability traits.
+///
+/// ## Gradient convention
+/// Every `*_grad(.., gx, gp) -> f64` method of a scalar function u(t, x, θ) *overwrites*
+/// `gx` with ∇ₓu and `gp` with ∂u/∂θ and **returns ∂u/∂t**. The one method that returns
+/// the value instead is named for it: [`ModelCore::running_cost_value_grad`] returns ℓ
+/// (the quadrature needs ℓ with its gradient, never ∂ℓ/∂t). Vector functions have `*_jac`
+/// methods that fill every block they name (∂R/∂t included). Functions of θ alone (x₀, T)
+/// have no x or t part.
+pub trait ModelCore
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
 {
@@ -222,30 +232,6 @@ where
     );
     /// Whether f_m depends on t explicitly.
     fn rhs_depends_on_t(&self, mode: usize) -> bool;
-
-    /// The forward-sensitivity right-hand side: f and Ṡ = f_x S + f_θ.
-    ///
-    /// Generated models override this with sparse straight-line code; the default
-    /// goes through the dense Jacobians and allocates scratch (dynamic sizes only).
-    #[allow(clippy::too_many_arguments)]
-    fn rhs_sens(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        s: &OMatrix<f64, Self::N, Self::P>,
-        f: &mut OVector<f64, Self::N>,
-        ds: &mut OMatrix<f64, Self::N, Self::P>,
-    ) {
-        let n = self.nstates();
-        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
-        self.rhs(mode, sw, t, x, p, f);
-        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
-        self.rhs_jac_p(mode, sw, t, x, p, ds);
-        ds.gemm(1.0, &fx, s, 1.0);
-    }
 
     // ---- events -----------------------------------------------------------------------
 
@@ -334,8 +320,8 @@ where
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
     ) -> f64;
-    /// ℓ_x into `lx`, ℓ_θ into `lp`; returns ℓ.
-    fn running_cost_grad(
+    /// ℓ_x into `lx`, ℓ_θ into `lp`; returns the value ℓ (not ∂ℓ/∂t, which no caller needs).
+    fn running_cost_value_grad(
         &self,
         sw: Switches,
         t: f64,
@@ -373,4 +359,128 @@ where
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
+}
+
+/// Capability: the forward-sensitivity right-hand side.
+///
+/// The default goes through the dense Jacobians of [`ModelCore`] and allocates an n×n
+/// scratch matrix (on the heap for dynamic sizes); generated models override it with
+/// sparse straight-line code that allocates nothing.
+pub trait ModelSens: ModelCore
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// f = f_m(t, x, θ) and Ṡ = f_x S + f_θ (n×p), with the frozen branches `sw`.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_sens(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        f: &mut OVector<f64, Self::N>,
+        ds: &mut OMatrix<f64, Self::N, Self::P>,
+    ) {
+        let n = self.nstates();
+        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
+        self.rhs(mode, sw, t, x, p, f);
+        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
+        self.rhs_jac_p(mode, sw, t, x, p, ds);
+        ds.gemm(1.0, &fx, s, 1.0);
+    }
+}
+
+/// Capability: vector–Jacobian products of the flow, for an adjoint (backward) pass.
+///
+/// The default forms the dense Jacobians f_x, f_θ and multiplies (it allocates both for
+/// dynamic sizes); a model with a cheaper reverse-mode form overrides it.
+pub trait ModelAdjoint: ModelCore
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// λᵀf_x into `vx` (n) and λᵀf_θ into `vp` (p), for f = f_m(t, x, θ) under `sw`:
+    /// vx_j = Σᵢ λᵢ ∂fᵢ/∂x_j, vp_k = Σᵢ λᵢ ∂fᵢ/∂θ_k. Both outputs are overwritten.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_vjp(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        lambda: &OVector<f64, Self::N>,
+        vx: &mut OVector<f64, Self::N>,
+        vp: &mut OVector<f64, Self::P>,
+    ) {
+        let (n, np) = (self.nstates(), self.nparams());
+        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
+        let mut fp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
+        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
+        self.rhs_jac_p(mode, sw, t, x, p, &mut fp);
+        fx.tr_mul_to(lambda, vx);
+        fp.tr_mul_to(lambda, vp);
+    }
+}
+
+/// Capability: second-derivative directional products, for the implicit method's
+/// Jacobian of the sensitivity equations.
+///
+/// The default differentiates [`ModelSens::rhs_sens`] by central differences along v with
+/// the step h = ε^{1/3} (1 + ‖x‖∞) / ‖v‖∞ (ε the machine epsilon; truncation and rounding
+/// errors balance at O(ε^{2/3})); it allocates scratch. A model with symbolic second
+/// derivatives overrides it with the exact product.
+pub trait ModelSecondOrder: ModelSens
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// (∂/∂x (f_x S + f_θ)) · v into `out` (n×p): out = Σᵢ vᵢ ∂(f_x S + f_θ)/∂xᵢ, the
+    /// derivative of the sensitivity right-hand side along the state direction v.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_sens_dir_x(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        v: &OVector<f64, Self::N>,
+        out: &mut OMatrix<f64, Self::N, Self::P>,
+    ) {
+        let vmax = v.amax();
+        if vmax == 0.0 || !vmax.is_finite() {
+            out.fill(if vmax == 0.0 { 0.0 } else { f64::NAN });
+            return;
+        }
+        let h = f64::EPSILON.cbrt() * (1.0 + x.amax()) / vmax;
+        let mut f = x.clone_owned();
+        let mut xs = x.clone_owned();
+        let mut minus = out.clone_owned();
+        xs.axpy(h, v, 1.0);
+        self.rhs_sens(mode, sw, t, &xs, p, s, &mut f, out);
+        xs.copy_from(x);
+        xs.axpy(-h, v, 1.0);
+        self.rhs_sens(mode, sw, t, &xs, p, s, &mut f, &mut minus);
+        *out -= &minus;
+        *out /= 2.0 * h;
+    }
+}
+
+/// A hybrid model with every capability: what the integrators, the event code and the
+/// reductions bound on. Implemented for every type that implements [`ModelCore`] and the
+/// capability traits ([`ModelSens`], [`ModelAdjoint`], [`ModelSecondOrder`]); a model that
+/// has no better form of a capability opts into its default with an empty `impl`.
+pub trait HybridModel: ModelCore + ModelSens + ModelAdjoint + ModelSecondOrder
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+}
+
+impl<T> HybridModel for T
+where
+    T: ModelCore + ModelSens + ModelAdjoint + ModelSecondOrder,
+    DefaultAllocator: ModelAlloc<T::N, T::P>,
+{
 }

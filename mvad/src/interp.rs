@@ -14,7 +14,9 @@ use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Point};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
-use mvad_runtime::{EventInfo, HybridModel, ModelInfo, Switches};
+use mvad_runtime::{
+    EventInfo, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+};
 use nalgebra::{DMatrix, DVector, Dyn};
 
 /// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
@@ -242,7 +244,7 @@ fn pt<'a>(t: f64, x: &'a X, p: &'a X, sw: Switches) -> Point<'a> {
     }
 }
 
-impl HybridModel for InterpretedModel {
+impl ModelCore for InterpretedModel {
     type N = Dyn;
     type P = Dyn;
 
@@ -323,47 +325,6 @@ impl HybridModel for InterpretedModel {
     }
     fn rhs_depends_on_t(&self, mode: usize) -> bool {
         self.mode(mode).is_some_and(|m| m.depends_on_t)
-    }
-
-    fn rhs_sens(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &X,
-        p: &X,
-        s: &M,
-        f: &mut X,
-        ds: &mut M,
-    ) {
-        let Some(m) = self.mode(mode) else {
-            f.fill(f64::NAN);
-            ds.fill(f64::NAN);
-            return;
-        };
-        let (n, np) = (self.n, self.p);
-        let nnz = m.sparsity.len();
-        if s.nrows() != n || s.ncols() != np || ds.nrows() != n || ds.ncols() != np {
-            f.fill(f64::NAN);
-            ds.fill(f64::NAN);
-            return;
-        }
-        let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
-        m.sens.eval(&pt(t, x, p, sw), regs, out);
-        copy_into(f.as_mut_slice(), &out[..n]);
-        let fp = &out[n + nnz..n + nnz + n * np];
-        for r in 0..n {
-            for c in 0..np {
-                ds[(r, c)] = fp[r * np + c];
-            }
-        }
-        for (e, &(r, k)) in m.sparsity.iter().enumerate() {
-            let a = out[n + e];
-            for c in 0..np {
-                ds[(r, c)] += a * s[(k, c)];
-            }
-        }
     }
 
     fn guard(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
@@ -469,7 +430,15 @@ impl HybridModel for InterpretedModel {
             None => 0.0,
         }
     }
-    fn running_cost_grad(&self, sw: Switches, t: f64, x: &X, p: &X, lx: &mut X, lp: &mut X) -> f64 {
+    fn running_cost_value_grad(
+        &self,
+        sw: Switches,
+        t: f64,
+        x: &X,
+        p: &X,
+        lx: &mut X,
+        lp: &mut X,
+    ) -> f64 {
         match &self.running_cost {
             Some(c) => self.grad(c, &pt(t, x, p, sw), lx, lp),
             None => {
@@ -512,3 +481,49 @@ impl HybridModel for InterpretedModel {
         }
     }
 }
+
+impl ModelSens for InterpretedModel {
+    fn rhs_sens(
+        &self,
+        mode: usize,
+        sw: Switches,
+        t: f64,
+        x: &X,
+        p: &X,
+        s: &M,
+        f: &mut X,
+        ds: &mut M,
+    ) {
+        let Some(m) = self.mode(mode) else {
+            f.fill(f64::NAN);
+            ds.fill(f64::NAN);
+            return;
+        };
+        let (n, np) = (self.n, self.p);
+        let nnz = m.sparsity.len();
+        if s.nrows() != n || s.ncols() != np || ds.nrows() != n || ds.ncols() != np {
+            f.fill(f64::NAN);
+            ds.fill(f64::NAN);
+            return;
+        }
+        let mut sc = self.scratch.borrow_mut();
+        let Scratch { regs, out } = &mut *sc;
+        m.sens.eval(&pt(t, x, p, sw), regs, out);
+        copy_into(f.as_mut_slice(), &out[..n]);
+        let fp = &out[n + nnz..n + nnz + n * np];
+        for r in 0..n {
+            for c in 0..np {
+                ds[(r, c)] = fp[r * np + c];
+            }
+        }
+        for (e, &(r, k)) in m.sparsity.iter().enumerate() {
+            let a = out[n + e];
+            for c in 0..np {
+                ds[(r, c)] += a * s[(k, c)];
+            }
+        }
+    }
+}
+
+impl ModelAdjoint for InterpretedModel {}
+impl ModelSecondOrder for InterpretedModel {}

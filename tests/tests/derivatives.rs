@@ -8,7 +8,7 @@
 //! Both doors are checked: the interpreted model and the `hybrid!`-compiled one.
 
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{HybridModel, ModelAlloc, ModelCore};
 use mvad_tests::{model_files, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -252,8 +252,8 @@ where
     // Costs.
     let l = |q: &Pt| vec![m.running_cost(sw, q.t, &vn(m, &q.x), &vp(m, &q.p))];
     let (mut lx, mut lp) = (zn(), zp());
-    let lv = m.running_cost_grad(sw, t, &x, &pv, &mut lx, &mut lp);
-    assert_eq!(lv, l(pt)[0], "running_cost_grad returns ℓ");
+    let lv = m.running_cost_value_grad(sw, t, &x, &pv, &mut lx, &mut lp);
+    assert_eq!(lv, l(pt)[0], "running_cost_value_grad returns ℓ");
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
     let phi = |q: &Pt| vec![m.final_cost(q.t, &vn(m, &q.x), &vp(m, &q.p))];

@@ -8,7 +8,7 @@
 
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{HybridModel, ModelAlloc, ModelCore};
 use mvad_tests::{model_source, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -118,7 +118,7 @@ where
     put("yp".into(), &yp);
     put("l".into(), &[m.running_cost(sw, t, &xv, &pv)]);
     let (mut lx, mut lp) = (zn(), zp());
-    let l2 = m.running_cost_grad(sw, t, &xv, &pv, &mut lx, &mut lp);
+    let l2 = m.running_cost_value_grad(sw, t, &xv, &pv, &mut lx, &mut lp);
     put("lx".into(), lx.as_slice());
     put("lp".into(), lp.as_slice());
     put("l2".into(), &[l2]);

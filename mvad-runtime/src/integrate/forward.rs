@@ -9,7 +9,7 @@
 //!
 //! f and f_x S + f_θ come from [`HybridModel::rhs_sens`] (or f alone from
 //! [`HybridModel::rhs`] without sensitivities), ℓ, ℓ_x, ℓ_θ from
-//! [`HybridModel::running_cost_grad`] (only when the model has a running cost; otherwise q ≡ 0).
+//! [`HybridModel::running_cost_value_grad`] (only when the model has a running cost; otherwise q ≡ 0).
 //!
 //! ## The augmented Jacobian, factorised once (for Rodas5P)
 //! J = ∂F/∂Y is block lower triangular:
@@ -28,7 +28,7 @@
 //! K_q = hγ (R_q + ℓ_x K_x), K_{q_θ} = hγ (R_{q_θ} + D K_x + K_Sᵀ ℓ_x).
 //! f_x is the model's symbolic Jacobian; the second-derivative actions B K_x and D K_x (the
 //! model has no second derivatives) are central directional differences of `rhs_sens` /
-//! `running_cost_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
+//! `running_cost_value_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
 //! Central differences are exact when f_x S + f_θ is at most quadratic in x, and perturb J by
 //! O(1e-8) relative for cubic terms; the step is far larger than the usual ε^(1/3) because
 //! models with cancellation inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the
@@ -183,9 +183,14 @@ where
                 out.qp.fill(0.0);
             }
         } else if self.sens {
-            out.q =
-                self.model
-                    .running_cost_grad(self.sw, t, &y.x, self.p, &mut self.lx, &mut self.lp);
+            out.q = self.model.running_cost_value_grad(
+                self.sw,
+                t,
+                &y.x,
+                self.p,
+                &mut self.lx,
+                &mut self.lp,
+            );
             out.qp.copy_from(&self.lp);
             out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
         } else {
@@ -283,7 +288,7 @@ where
         model.rhs_jac_x(mode, sw, t0, &y0.x, p, &mut w.w.jac);
         w.w.power_iteration();
         if rhs.has_rc {
-            model.running_cost_grad(sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
+            model.running_cost_value_grad(sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
         } else {
             w.lx0.fill(0.0);
         }

@@ -3,7 +3,7 @@
 
 use super::{AugState, Integrator, StepError};
 use crate::fixtures::Ball;
-use crate::model::{HybridModel, ModelInfo, Switches};
+use crate::model::{ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -41,7 +41,11 @@ fn parts(y: &AugState<N, P>) -> [f64; 4] {
     [y.x[0], y.s[(0, 0)], y.q, y.qp[0]]
 }
 
-impl HybridModel for Decay {
+impl ModelSens for Decay {}
+impl ModelAdjoint for Decay {}
+impl ModelSecondOrder for Decay {}
+
+impl ModelCore for Decay {
     type N = N;
     type P = P;
     fn info(&self) -> &ModelInfo {
@@ -134,7 +138,7 @@ impl HybridModel for Decay {
     fn running_cost(&self, _sw: Switches, _t: f64, x: &X, _p: &Th) -> f64 {
         x[0]
     }
-    fn running_cost_grad(
+    fn running_cost_value_grad(
         &self,
         _sw: Switches,
         _t: f64,

@@ -263,7 +263,8 @@ where
             let (c0, r0) = (0.5 * (t_star + t_end), 0.5 * (t_end - t_star));
             for &(xi, wi) in &GL8 {
                 let t = c0 + r0 * xi;
-                let l = model.running_cost_grad(self.sw, t, x_final, p, &mut fw.cx, &mut fw.cp);
+                let l =
+                    model.running_cost_value_grad(self.sw, t, x_final, p, &mut fw.cx, &mut fw.cp);
                 cost += wi * r0 * l;
                 if sens {
                     grad.gemv_tr(wi * r0, s_final, &fw.cx, 1.0);

@@ -9,7 +9,9 @@ pub mod cases;
 pub mod check;
 pub mod models;
 
-use mvad_runtime::model::{HybridModel, ModelInfo, Switches};
+use mvad_runtime::model::{
+    ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+};
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -297,7 +299,11 @@ impl<T: Spec> AdModel<T> {
 type V = OVector<f64, Dyn>;
 type Mx = OMatrix<f64, Dyn, Dyn>;
 
-impl<T: Spec> HybridModel for AdModel<T> {
+impl<T: Spec> ModelSens for AdModel<T> {}
+impl<T: Spec> ModelAdjoint for AdModel<T> {}
+impl<T: Spec> ModelSecondOrder for AdModel<T> {}
+
+impl<T: Spec> ModelCore for AdModel<T> {
     type N = Dyn;
     type P = Dyn;
     fn info(&self) -> &ModelInfo {
@@ -413,7 +419,15 @@ impl<T: Spec> HybridModel for AdModel<T> {
     fn running_cost(&self, sw: Switches, t: f64, x: &V, p: &V) -> f64 {
         self.spec.running(sw, t, x.as_slice(), p.as_slice())
     }
-    fn running_cost_grad(&self, sw: Switches, t: f64, x: &V, p: &V, lx: &mut V, lp: &mut V) -> f64 {
+    fn running_cost_value_grad(
+        &self,
+        sw: Switches,
+        t: f64,
+        x: &V,
+        p: &V,
+        lx: &mut V,
+        lp: &mut V,
+    ) -> f64 {
         self.scalar_grad(t, x, p, lx, lp, |t, x, p| self.spec.running(sw, t, x, p))
             .0
     }
