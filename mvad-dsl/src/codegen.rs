@@ -398,10 +398,20 @@ impl Gen<'_> {
                 }
             }
             Node::Switch(j, a, b) => {
-                let mask = Literal::u64_suffixed(1u64.checked_shl(j).unwrap_or(0));
                 let (a, b) = (get(a).tokens, get(b).tokens);
+                // Bits 0..64 with a constant mask on the inline word; the rest through `get`.
+                let on = match 1u64.checked_shl(j) {
+                    Some(m) => {
+                        let mask = Literal::u64_suffixed(m);
+                        quote!(sw.low_word() & #mask != 0)
+                    }
+                    None => {
+                        let j = usize_lit(j as usize);
+                        quote!(sw.get(#j))
+                    }
+                };
                 Rendered {
-                    tokens: quote!(if sw & #mask != 0 { #a } else { #b }),
+                    tokens: quote!(if #on { #a } else { #b }),
                     prec: Prec::If,
                 }
             }
@@ -773,7 +783,7 @@ impl Gen<'_> {
         };
 
         let sens_methods = quote! {
-            fn rhs_sens(&self, mode: usize, sw: #sw_t, t: f64, x: &#xv, p: &#pv, s: &#mnp, f: &mut #xv, ds: &mut #mnp) { #sens }
+            fn rhs_sens(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, s: &#mnp, f: &mut #xv, ds: &mut #mnp) { #sens }
         };
         let core = quote! {
             fn info(&self) -> &#pr::ModelInfo { &self.info }
@@ -783,10 +793,10 @@ impl Gen<'_> {
             fn initial_state_jac(&self, p: &#pv, dx0: &mut #mnp) { #x0j }
             fn horizon(&self, p: &#pv) -> ::core::option::Option<f64> { #hz }
             fn horizon_grad(&self, p: &#pv, dt: &mut #pv) { #hzg }
-            fn rhs(&self, mode: usize, sw: #sw_t, t: f64, x: &#xv, p: &#pv, f: &mut #xv) { #rhs }
-            fn rhs_jac_x(&self, mode: usize, sw: #sw_t, t: f64, x: &#xv, p: &#pv, fx: &mut #mnn) { #jx }
-            fn rhs_jac_p(&self, mode: usize, sw: #sw_t, t: f64, x: &#xv, p: &#pv, fp: &mut #mnp) { #jp }
-            fn rhs_dt(&self, mode: usize, sw: #sw_t, t: f64, x: &#xv, p: &#pv, ft: &mut #xv) { #dt }
+            fn rhs(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, f: &mut #xv) { #rhs }
+            fn rhs_jac_x(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, fx: &mut #mnn) { #jx }
+            fn rhs_jac_p(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, fp: &mut #mnp) { #jp }
+            fn rhs_dt(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, ft: &mut #xv) { #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
             fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
@@ -796,8 +806,8 @@ impl Gen<'_> {
             fn switch_grad(&self, j: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #swg }
             fn observe(&self, t: f64, x: &#xv, p: &#pv, y: &mut [f64]) { #obs }
             fn observe_jac(&self, t: f64, x: &#xv, p: &#pv, yx: &mut [f64], yp: &mut [f64]) { #obs_jac }
-            fn running_cost(&self, sw: #sw_t, t: f64, x: &#xv, p: &#pv) -> f64 { #rc }
-            fn running_cost_value_grad(&self, sw: #sw_t, t: f64, x: &#xv, p: &#pv, lx: &mut #xv, lp: &mut #pv) -> f64 { #rcg }
+            fn running_cost(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv) -> f64 { #rc }
+            fn running_cost_value_grad(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, lx: &mut #xv, lp: &mut #pv) -> f64 { #rcg }
             fn event_cost(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #ecost }
             fn event_cost_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #ecost_grad }
             fn final_cost(&self, t: f64, x: &#xv, p: &#pv) -> f64 { #fc }

@@ -100,14 +100,14 @@ impl ModelCore for Ball {
     fn horizon_grad(&self, _p: &Th, dt: &mut Th) {
         dt.fill(0.0);
     }
-    fn rhs(&self, _m: usize, _sw: Switches, _t: f64, x: &X, p: &Th, f: &mut X) {
+    fn rhs(&self, _m: usize, _sw: &Switches, _t: f64, x: &X, p: &Th, f: &mut X) {
         f[0] = x[1];
         f[1] = -p[1];
     }
     fn rhs_jac_x(
         &self,
         _m: usize,
-        _sw: Switches,
+        _sw: &Switches,
         _t: f64,
         _x: &X,
         _p: &Th,
@@ -119,7 +119,7 @@ impl ModelCore for Ball {
     fn rhs_jac_p(
         &self,
         _m: usize,
-        _sw: Switches,
+        _sw: &Switches,
         _t: f64,
         _x: &X,
         _p: &Th,
@@ -128,7 +128,7 @@ impl ModelCore for Ball {
         fp.fill(0.0);
         fp[(1, 1)] = -1.0;
     }
-    fn rhs_dt(&self, _m: usize, _sw: Switches, _t: f64, _x: &X, _p: &Th, ft: &mut X) {
+    fn rhs_dt(&self, _m: usize, _sw: &Switches, _t: f64, _x: &X, _p: &Th, ft: &mut X) {
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
@@ -180,12 +180,12 @@ impl ModelCore for Ball {
         yx[3] = 1.0; // ∂velocity/∂v
         yp.fill(0.0);
     }
-    fn running_cost(&self, _sw: Switches, _t: f64, x: &X, _p: &Th) -> f64 {
+    fn running_cost(&self, _sw: &Switches, _t: f64, x: &X, _p: &Th) -> f64 {
         x[0]
     }
     fn running_cost_value_grad(
         &self,
-        _sw: Switches,
+        _sw: &Switches,
         _t: f64,
         x: &X,
         _p: &Th,

@@ -13,7 +13,7 @@ pub mod model;
 
 pub use model::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelCore, ModelInfo,
-    ModelSecondOrder, ModelSens, Switches, MAX_SWITCHES,
+    ModelSecondOrder, ModelSens, Switches,
 };
 
 pub mod error;

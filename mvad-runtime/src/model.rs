@@ -41,10 +41,81 @@ impl<N: Dim, P: Dim, A> ModelAlloc<N, P> for A where
 }
 
 /// Frozen branches of the switching functions: bit j set iff σ_j's positive branch is active.
-pub type Switches = u64;
+///
+/// Any number of switching functions: bits 0..64 live in an inline word (so a model with at
+/// most 64 kinks never touches the heap, and generated code reads its bits from
+/// [`Switches::low_word`] with a constant mask); bits 64.. live in words allocated once, by
+/// [`Switches::new`], for the run. Copy one into another with `clone_from`, which reuses the
+/// destination's words, so no step or event allocates.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Switches {
+    lo: u64,
+    hi: Vec<u64>,
+}
 
-/// The most switching functions a model may have (bits of [`Switches`]).
-pub const MAX_SWITCHES: usize = 64;
+impl Switches {
+    /// All branches negative, with room for `n` switching functions.
+    pub fn new(n: usize) -> Self {
+        Switches {
+            lo: 0,
+            hi: vec![0; n.saturating_sub(64).div_ceil(64)],
+        }
+    }
+    /// Bits 0..64 from a word (for at most 64 switching functions).
+    pub fn from_bits(bits: u64) -> Self {
+        Switches {
+            lo: bits,
+            hi: Vec::new(),
+        }
+    }
+    /// Bits 0..64 (bit j of the word is bit j of the set).
+    #[inline(always)]
+    pub fn low_word(&self) -> u64 {
+        self.lo
+    }
+    /// Bit j: whether σ_j's positive branch is active (false beyond the allocated words).
+    #[inline(always)]
+    pub fn get(&self, j: usize) -> bool {
+        if j < 64 {
+            self.lo >> j & 1 != 0
+        } else {
+            self.hi
+                .get((j - 64) / 64)
+                .is_some_and(|w| w >> ((j - 64) % 64) & 1 != 0)
+        }
+    }
+    /// Sets bit j to `on` (grows the words if j is beyond them: allocate with [`Switches::new`]).
+    pub fn set(&mut self, j: usize, on: bool) {
+        let (w, b) = if j < 64 {
+            (&mut self.lo, j)
+        } else {
+            let k = (j - 64) / 64;
+            if k >= self.hi.len() {
+                self.hi.resize(k + 1, 0);
+            }
+            (&mut self.hi[k], (j - 64) % 64)
+        };
+        if on {
+            *w |= 1 << b;
+        } else {
+            *w &= !(1 << b);
+        }
+    }
+    /// Flips bit j.
+    pub fn flip(&mut self, j: usize) {
+        let on = self.get(j);
+        self.set(j, !on);
+    }
+    /// Clears every bit (keeps the words).
+    pub fn clear(&mut self) {
+        self.lo = 0;
+        self.hi.fill(0);
+    }
+    /// Bits 64.. as words: bit j ≥ 64 is bit (j − 64) % 64 of word (j − 64) / 64.
+    pub fn high_words(&self) -> &[u64] {
+        &self.hi
+    }
+}
 
 /// The direction in which a guard g = LHS − RHS fires.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -108,7 +179,7 @@ pub struct ModelInfo {
     pub events: Vec<EventInfo>,
     /// Observable names, in declaration order.
     pub observables: Vec<String>,
-    /// Number of switching functions σ_j (kinks of flows and ℓ), at most [`MAX_SWITCHES`].
+    /// Number of switching functions σ_j (kinks of flows and ℓ); any number (see [`Switches`]).
     pub switches: usize,
     /// Whether the cost has `integral(..)` terms (ℓ ≢ 0).
     pub has_running_cost: bool,
@@ -194,7 +265,7 @@ where
     fn rhs(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -204,7 +275,7 @@ where
     fn rhs_jac_x(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -214,7 +285,7 @@ where
     fn rhs_jac_p(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -224,7 +295,7 @@ where
     fn rhs_dt(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -315,7 +386,7 @@ where
     /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors).
     fn running_cost(
         &self,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -323,7 +394,7 @@ where
     /// ℓ_x into `lx`, ℓ_θ into `lp`; returns the value ℓ (not ∂ℓ/∂t, which no caller needs).
     fn running_cost_value_grad(
         &self,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -375,7 +446,7 @@ where
     fn rhs_sens(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -406,7 +477,7 @@ where
     fn rhs_vjp(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -441,7 +512,7 @@ where
     fn rhs_sens_dir_x(
         &self,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,

@@ -137,6 +137,7 @@ pub fn check_model<M: HybridModel>(m: &M, pt: &Pt, sw: u64, rng: &mut Rng)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let sw = &mvad::Switches::from_bits(sw);
     let info = m.info().clone();
     let n = pt.x.len();
     let p = pt.p.len();

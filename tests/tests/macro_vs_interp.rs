@@ -30,6 +30,7 @@ fn snapshot<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let sw = &mvad::Switches::from_bits(sw);
     let info = m.info().clone();
     let (nd, pd) = (m.nstates(), m.nparams());
     let zn = || OVector::<f64, M::N>::zeros_generic(nd, Const::<1>);

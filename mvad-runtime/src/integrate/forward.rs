@@ -131,7 +131,7 @@ where
                 model,
                 p,
                 mode: model.info().initial_mode,
-                sw: 0,
+                sw: Switches::new(model.info().switches),
                 sens: opts.sensitivities,
                 has_rc: model.info().has_running_cost,
                 lx: OVector::zeros_generic(n, Const::<1>),
@@ -171,11 +171,11 @@ where
         self.evals += 1;
         if self.sens {
             self.model.rhs_sens(
-                self.mode, self.sw, t, &y.x, self.p, &y.s, &mut out.x, &mut out.s,
+                self.mode, &self.sw, t, &y.x, self.p, &y.s, &mut out.x, &mut out.s,
             );
         } else {
             self.model
-                .rhs(self.mode, self.sw, t, &y.x, self.p, &mut out.x);
+                .rhs(self.mode, &self.sw, t, &y.x, self.p, &mut out.x);
         }
         if !self.has_rc {
             out.q = 0.0;
@@ -184,7 +184,7 @@ where
             }
         } else if self.sens {
             out.q = self.model.running_cost_value_grad(
-                self.sw,
+                &self.sw,
                 t,
                 &y.x,
                 self.p,
@@ -194,7 +194,7 @@ where
             out.qp.copy_from(&self.lp);
             out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
         } else {
-            out.q = self.model.running_cost(self.sw, t, &y.x, self.p);
+            out.q = self.model.running_cost(&self.sw, t, &y.x, self.p);
         }
     }
 }
@@ -284,11 +284,11 @@ where
     /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0).
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
         let Forward { rhs, imp: w, .. } = self;
-        let (model, p, mode, sw) = (rhs.model, rhs.p, rhs.mode, rhs.sw);
-        model.rhs_jac_x(mode, sw, t0, &y0.x, p, &mut w.w.jac);
+        let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
+        model.rhs_jac_x(mode, &rhs.sw, t0, &y0.x, p, &mut w.w.jac);
         w.w.power_iteration();
         if rhs.has_rc {
-            model.running_cost_value_grad(sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
+            model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
         } else {
             w.lx0.fill(0.0);
         }
@@ -320,7 +320,7 @@ where
             w.dt.q = 0.0;
             w.dt.qp.fill(0.0);
         }
-        model.rhs_dt(mode, sw, t0, &y0.x, p, &mut w.dt.x);
+        model.rhs_dt(mode, &rhs.sw, t0, &y0.x, p, &mut w.dt.x);
         if rhs.sens {
             w.ypert.s.copy_from(&y0.s);
         }
@@ -402,7 +402,7 @@ where
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
         rhs.model
-            .rhs_jac_x(rhs.mode, rhs.sw, t, &y.x, rhs.p, &mut self.imp.w.jac);
+            .rhs_jac_x(rhs.mode, &rhs.sw, t, &y.x, rhs.p, &mut self.imp.w.jac);
         self.imp.w.power_iteration()
     }
 
@@ -427,9 +427,9 @@ where
     /// Must be called at the start and after every event, mode switch or switch flip. Under
     /// `auto` the method in use (explicit or implicit) is kept: stiffness is a property of the
     /// model that usually survives an event, and the switch-back test runs on every step.
-    pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: Switches) {
+    pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: &Switches) {
         self.sys.rhs.mode = mode;
-        self.sys.rhs.sw = sw;
+        self.sys.rhs.sw.clone_from(sw);
         self.restart_at(t, y);
     }
 
@@ -438,7 +438,7 @@ where
         self.sys.rhs.mode
     }
     /// Current frozen switch bits.
-    pub fn switches(&self) -> Switches {
-        self.sys.rhs.sw
+    pub fn switches(&self) -> &Switches {
+        &self.sys.rhs.sw
     }
 }
