@@ -3,7 +3,7 @@
 //! y(T) = Σᵢ (cᵢ² + (aT − cᵢ)²)/(2a) for the cᵢ crossed before T (and Σᵢ (cᵢ − a t) dt beyond).
 
 use mvad::interp::InterpretedModel;
-use mvad::{solve, HybridModel, ModelAlloc, ModelCore, Options};
+use mvad::{solve, HybridModel, ModelAlloc, Options};
 use nalgebra::{DefaultAllocator, OVector};
 
 mvad::hybrid! {
