@@ -783,7 +783,8 @@ impl Gen<'_> {
         };
 
         let sens_methods = quote! {
-            fn rhs_sens(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, s: &#mnp, f: &mut #xv, ds: &mut #mnp) { #sens }
+            fn rhs_sens(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, f: &mut #xv, ds: &mut #mnp) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #sens }
         };
         let core = quote! {
             fn info(&self) -> &#pr::ModelInfo { &self.info }
@@ -793,10 +794,14 @@ impl Gen<'_> {
             fn initial_state_jac(&self, p: &#pv, dx0: &mut #mnp) { #x0j }
             fn horizon(&self, p: &#pv) -> ::core::option::Option<f64> { #hz }
             fn horizon_grad(&self, p: &#pv, dt: &mut #pv) { #hzg }
-            fn rhs(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, f: &mut #xv) { #rhs }
-            fn rhs_jac_x(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, fx: &mut #mnn) { #jx }
-            fn rhs_jac_p(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, fp: &mut #mnp) { #jp }
-            fn rhs_dt(&self, mode: usize, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, ft: &mut #xv) { #dt }
+            fn rhs(&self, pt: #pr::Point<'_, Self::N, Self::P>, f: &mut #xv) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
+            fn rhs_jac_x(&self, pt: #pr::Point<'_, Self::N, Self::P>, fx: &mut #mnn) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #jx }
+            fn rhs_jac_p(&self, pt: #pr::Point<'_, Self::N, Self::P>, fp: &mut #mnp) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #jp }
+            fn rhs_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, ft: &mut #xv) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
             fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }

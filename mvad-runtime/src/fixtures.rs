@@ -4,7 +4,8 @@
 //! h ≤ 0 with v⁺ = −e v⁻, C = ∫₀ᵀ h dt, T = 2. Parameters θ = (e, g, h0, v0).
 
 use crate::model::{
-    Direction, EventInfo, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+    Direction, EventInfo, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Point,
+    Switches,
 };
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -100,35 +101,47 @@ impl ModelCore for Ball {
     fn horizon_grad(&self, _p: &Th, dt: &mut Th) {
         dt.fill(0.0);
     }
-    fn rhs(&self, _m: usize, _sw: &Switches, _t: f64, x: &X, p: &Th, f: &mut X) {
+    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x,
+            p,
+        } = pt;
         f[0] = x[1];
         f[1] = -p[1];
     }
-    fn rhs_jac_x(
-        &self,
-        _m: usize,
-        _sw: &Switches,
-        _t: f64,
-        _x: &X,
-        _p: &Th,
-        fx: &mut OMatrix<f64, N, N>,
-    ) {
+    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         fx.fill(0.0);
         fx[(0, 1)] = 1.0;
     }
-    fn rhs_jac_p(
-        &self,
-        _m: usize,
-        _sw: &Switches,
-        _t: f64,
-        _x: &X,
-        _p: &Th,
-        fp: &mut OMatrix<f64, N, P>,
-    ) {
+    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         fp.fill(0.0);
         fp[(1, 1)] = -1.0;
     }
-    fn rhs_dt(&self, _m: usize, _sw: &Switches, _t: f64, _x: &X, _p: &Th, ft: &mut X) {
+    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {

@@ -13,7 +13,7 @@ pub mod model;
 
 pub use model::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelCore, ModelInfo,
-    ModelSecondOrder, ModelSens, Switches,
+    ModelSecondOrder, ModelSens, Point, Switches,
 };
 
 pub mod error;

@@ -117,6 +117,56 @@ impl Switches {
     }
 }
 
+/// One evaluation point of the flow: mode m, frozen branches, t, x and θ.
+///
+/// The flow-side methods ([`ModelCore::rhs`] and its derivatives, and the capability
+/// products) take one `Point` instead of five arguments, so every source of flow
+/// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
+/// words, passed by value.
+pub struct Point<'a, N: Dim, P: Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<P>,
+{
+    /// The mode m.
+    pub mode: usize,
+    /// The frozen branches of the switching functions.
+    pub sw: &'a Switches,
+    /// Time t.
+    pub t: f64,
+    /// State x.
+    pub x: &'a OVector<f64, N>,
+    /// Parameters θ.
+    pub p: &'a OVector<f64, P>,
+}
+
+impl<'a, N: Dim, P: Dim> Point<'a, N, P>
+where
+    DefaultAllocator: Allocator<N> + Allocator<P>,
+{
+    /// The point (m, sw, t, x, θ).
+    #[inline(always)]
+    pub fn new(
+        mode: usize,
+        sw: &'a Switches,
+        t: f64,
+        x: &'a OVector<f64, N>,
+        p: &'a OVector<f64, P>,
+    ) -> Self {
+        Point { mode, sw, t, x, p }
+    }
+}
+
+impl<N: Dim, P: Dim> Clone for Point<'_, N, P>
+where
+    DefaultAllocator: Allocator<N> + Allocator<P>,
+{
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<N: Dim, P: Dim> Copy for Point<'_, N, P> where DefaultAllocator: Allocator<N> + Allocator<P> {}
+
 /// The direction in which a guard g = LHS − RHS fires.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Direction {
@@ -262,45 +312,13 @@ where
     // ---- flow -------------------------------------------------------------------------
 
     /// f_m(t, x, θ) with the frozen branches `sw`.
-    fn rhs(
-        &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        f: &mut OVector<f64, Self::N>,
-    );
+    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut OVector<f64, Self::N>);
     /// ∂f_m/∂x (n×n).
-    fn rhs_jac_x(
-        &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        fx: &mut OMatrix<f64, Self::N, Self::N>,
-    );
+    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, Self::N, Self::N>);
     /// ∂f_m/∂θ (n×p).
-    fn rhs_jac_p(
-        &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        fp: &mut OMatrix<f64, Self::N, Self::P>,
-    );
+    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, Self::N, Self::P>);
     /// ∂f_m/∂t (zeros for an autonomous flow).
-    fn rhs_dt(
-        &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        ft: &mut OVector<f64, Self::N>,
-    );
+    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut OVector<f64, Self::N>);
     /// Whether f_m depends on t explicitly.
     fn rhs_depends_on_t(&self, mode: usize) -> bool;
 
@@ -445,20 +463,17 @@ where
     #[allow(clippy::too_many_arguments)]
     fn rhs_sens(
         &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        pt: Point<'_, Self::N, Self::P>,
         s: &OMatrix<f64, Self::N, Self::P>,
         f: &mut OVector<f64, Self::N>,
         ds: &mut OMatrix<f64, Self::N, Self::P>,
     ) {
+        let Point { mode, sw, t, x, p } = pt;
         let n = self.nstates();
         let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
-        self.rhs(mode, sw, t, x, p, f);
-        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
-        self.rhs_jac_p(mode, sw, t, x, p, ds);
+        self.rhs(Point::new(mode, sw, t, x, p), f);
+        self.rhs_jac_x(Point::new(mode, sw, t, x, p), &mut fx);
+        self.rhs_jac_p(Point::new(mode, sw, t, x, p), ds);
         ds.gemm(1.0, &fx, s, 1.0);
     }
 }
@@ -476,20 +491,17 @@ where
     #[allow(clippy::too_many_arguments)]
     fn rhs_vjp(
         &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        pt: Point<'_, Self::N, Self::P>,
         lambda: &OVector<f64, Self::N>,
         vx: &mut OVector<f64, Self::N>,
         vp: &mut OVector<f64, Self::P>,
     ) {
+        let Point { mode, sw, t, x, p } = pt;
         let (n, np) = (self.nstates(), self.nparams());
         let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
         let mut fp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
-        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
-        self.rhs_jac_p(mode, sw, t, x, p, &mut fp);
+        self.rhs_jac_x(Point::new(mode, sw, t, x, p), &mut fx);
+        self.rhs_jac_p(Point::new(mode, sw, t, x, p), &mut fp);
         fx.tr_mul_to(lambda, vx);
         fp.tr_mul_to(lambda, vp);
     }
@@ -511,15 +523,12 @@ where
     #[allow(clippy::too_many_arguments)]
     fn rhs_sens_dir_x(
         &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        pt: Point<'_, Self::N, Self::P>,
         s: &OMatrix<f64, Self::N, Self::P>,
         v: &OVector<f64, Self::N>,
         out: &mut OMatrix<f64, Self::N, Self::P>,
     ) {
+        let Point { mode, sw, t, x, p } = pt;
         let vmax = v.amax();
         if vmax == 0.0 || !vmax.is_finite() {
             out.fill(if vmax == 0.0 { 0.0 } else { f64::NAN });
@@ -530,10 +539,10 @@ where
         let mut xs = x.clone_owned();
         let mut minus = out.clone_owned();
         xs.axpy(h, v, 1.0);
-        self.rhs_sens(mode, sw, t, &xs, p, s, &mut f, out);
+        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, out);
         xs.copy_from(x);
         xs.axpy(-h, v, 1.0);
-        self.rhs_sens(mode, sw, t, &xs, p, s, &mut f, &mut minus);
+        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, &mut minus);
         *out -= &minus;
         *out /= 2.0 * h;
     }

@@ -5,7 +5,7 @@
 pub use mvad_dsl::ir::sign;
 pub use mvad_runtime::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder,
-    ModelSens, Switches,
+    ModelSens, Point, Switches,
 };
 pub use nalgebra::{Const, OMatrix, OVector};
 

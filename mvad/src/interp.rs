@@ -242,7 +242,7 @@ struct At<'a> {
 }
 
 /// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
-fn pt<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
+fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
     At {
         pt: Point {
             t,
@@ -314,27 +314,31 @@ impl ModelCore for InterpretedModel {
         }
     }
 
-    fn rhs(&self, mode: usize, sw: &Switches, t: f64, x: &X, p: &X, f: &mut X) {
+    fn rhs(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, f: &mut X) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) => self.vec_out(&m.rhs, &pt(t, x, p, sw), f),
+            Some(m) => self.vec_out(&m.rhs, &at_sw(t, x, p, sw), f),
             None => f.fill(f64::NAN),
         }
     }
-    fn rhs_jac_x(&self, mode: usize, sw: &Switches, t: f64, x: &X, p: &X, fx: &mut M) {
+    fn rhs_jac_x(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fx: &mut M) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) => self.mat(&m.jac_x, &pt(t, x, p, sw), fx, self.n),
+            Some(m) => self.mat(&m.jac_x, &at_sw(t, x, p, sw), fx, self.n),
             None => fx.fill(f64::NAN),
         }
     }
-    fn rhs_jac_p(&self, mode: usize, sw: &Switches, t: f64, x: &X, p: &X, fp: &mut M) {
+    fn rhs_jac_p(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fp: &mut M) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) => self.mat(&m.jac_p, &pt(t, x, p, sw), fp, self.p),
+            Some(m) => self.mat(&m.jac_p, &at_sw(t, x, p, sw), fp, self.p),
             None => fp.fill(f64::NAN),
         }
     }
-    fn rhs_dt(&self, mode: usize, sw: &Switches, t: f64, x: &X, p: &X, ft: &mut X) {
+    fn rhs_dt(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, ft: &mut X) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &pt(t, x, p, sw), ft),
+            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &at_sw(t, x, p, sw), ft),
             Some(_) => ft.fill(0.0),
             None => ft.fill(f64::NAN),
         }
@@ -443,7 +447,7 @@ impl ModelCore for InterpretedModel {
 
     fn running_cost(&self, sw: &Switches, t: f64, x: &X, p: &X) -> f64 {
         match &self.running_cost {
-            Some(c) => self.scalar(&c.value, &pt(t, x, p, sw)),
+            Some(c) => self.scalar(&c.value, &at_sw(t, x, p, sw)),
             None => 0.0,
         }
     }
@@ -457,7 +461,7 @@ impl ModelCore for InterpretedModel {
         lp: &mut X,
     ) -> f64 {
         match &self.running_cost {
-            Some(c) => self.grad(c, &pt(t, x, p, sw), lx, lp),
+            Some(c) => self.grad(c, &at_sw(t, x, p, sw), lx, lp),
             None => {
                 lx.fill(0.0);
                 lp.fill(0.0);
@@ -502,15 +506,12 @@ impl ModelCore for InterpretedModel {
 impl ModelSens for InterpretedModel {
     fn rhs_sens(
         &self,
-        mode: usize,
-        sw: &Switches,
-        t: f64,
-        x: &X,
-        p: &X,
+        pt: mvad_runtime::Point<'_, Self::N, Self::P>,
         s: &M,
         f: &mut X,
         ds: &mut M,
     ) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         let Some(m) = self.mode(mode) else {
             f.fill(f64::NAN);
             ds.fill(f64::NAN);
@@ -525,7 +526,7 @@ impl ModelSens for InterpretedModel {
         }
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        let at = pt(t, x, p, sw);
+        let at = at_sw(t, x, p, sw);
         m.sens.eval_with(&at.pt, at.hi, regs, out);
         copy_into(f.as_mut_slice(), &out[..n]);
         let fp = &out[n + nnz..n + nnz + n * np];

@@ -21,11 +21,7 @@ fn adjoint_products_are_lambda_times_the_jacobians() {
     let lam = Vector2::new(1.5, -2.0);
     let (mut vx, mut vp) = (Vector2::zeros(), Vector1::zeros());
     m.rhs_vjp(
-        0,
-        &Switches::default(),
-        0.0,
-        &xv,
-        &pv,
+        mvad::Point::new(0, &Switches::default(), 0.0, &xv, &pv),
         &lam,
         &mut vx,
         &mut vp,
@@ -48,7 +44,12 @@ fn second_order_default_is_the_directional_derivative_of_the_sensitivity_rhs() {
     let s = Matrix2x1::new(0.3, -0.8);
     let v = Vector2::new(0.9, 2.0);
     let mut out = Matrix2x1::zeros();
-    m.rhs_sens_dir_x(0, &Switches::default(), 0.0, &xv, &pv, &s, &v, &mut out);
+    m.rhs_sens_dir_x(
+        mvad::Point::new(0, &Switches::default(), 0.0, &xv, &pv),
+        &s,
+        &v,
+        &mut out,
+    );
     // Σᵢ vᵢ ∂(f_x S + f_θ)/∂xᵢ: only x enters, so v₀ (∂f_x/∂x S + ∂f_θ/∂x).
     let want = [
         v[0] * (2.0 * a * s[0] + 2.0 * x),

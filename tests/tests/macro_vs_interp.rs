@@ -59,23 +59,28 @@ where
 
     for mode in 0..info.modes.len() {
         let mut f = zn();
-        m.rhs(mode, sw, t, &xv, &pv, &mut f);
+        m.rhs(mvad::Point::new(mode, sw, t, &xv, &pv), &mut f);
         put(format!("f{mode}"), f.as_slice());
         let mut fx = znn();
-        m.rhs_jac_x(mode, sw, t, &xv, &pv, &mut fx);
+        m.rhs_jac_x(mvad::Point::new(mode, sw, t, &xv, &pv), &mut fx);
         put(format!("fx{mode}"), fx.as_slice());
         let mut fp = znp();
-        m.rhs_jac_p(mode, sw, t, &xv, &pv, &mut fp);
+        m.rhs_jac_p(mvad::Point::new(mode, sw, t, &xv, &pv), &mut fp);
         put(format!("fp{mode}"), fp.as_slice());
         let mut ft = zn();
-        m.rhs_dt(mode, sw, t, &xv, &pv, &mut ft);
+        m.rhs_dt(mvad::Point::new(mode, sw, t, &xv, &pv), &mut ft);
         put(format!("ft{mode}"), ft.as_slice());
         put(
             format!("dep_t{mode}"),
             &[f64::from(u8::from(m.rhs_depends_on_t(mode)))],
         );
         let (mut f2, mut ds) = (zn(), znp());
-        m.rhs_sens(mode, sw, t, &xv, &pv, &sv, &mut f2, &mut ds);
+        m.rhs_sens(
+            mvad::Point::new(mode, sw, t, &xv, &pv),
+            &sv,
+            &mut f2,
+            &mut ds,
+        );
         put(format!("sens_f{mode}"), f2.as_slice());
         put(format!("sens_ds{mode}"), ds.as_slice());
     }

@@ -42,7 +42,7 @@ use super::aug::{axpy_slice, weighted_rms, AugState};
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem};
 use super::Integrator;
-use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -171,11 +171,14 @@ where
         self.evals += 1;
         if self.sens {
             self.model.rhs_sens(
-                self.mode, &self.sw, t, &y.x, self.p, &y.s, &mut out.x, &mut out.s,
+                Point::new(self.mode, &self.sw, t, &y.x, self.p),
+                &y.s,
+                &mut out.x,
+                &mut out.s,
             );
         } else {
             self.model
-                .rhs(self.mode, &self.sw, t, &y.x, self.p, &mut out.x);
+                .rhs(Point::new(self.mode, &self.sw, t, &y.x, self.p), &mut out.x);
         }
         if !self.has_rc {
             out.q = 0.0;
@@ -285,7 +288,7 @@ where
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
         let Forward { rhs, imp: w, .. } = self;
         let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
-        model.rhs_jac_x(mode, &rhs.sw, t0, &y0.x, p, &mut w.w.jac);
+        model.rhs_jac_x(Point::new(mode, &rhs.sw, t0, &y0.x, p), &mut w.w.jac);
         w.w.power_iteration();
         if rhs.has_rc {
             model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
@@ -320,7 +323,7 @@ where
             w.dt.q = 0.0;
             w.dt.qp.fill(0.0);
         }
-        model.rhs_dt(mode, &rhs.sw, t0, &y0.x, p, &mut w.dt.x);
+        model.rhs_dt(Point::new(mode, &rhs.sw, t0, &y0.x, p), &mut w.dt.x);
         if rhs.sens {
             w.ypert.s.copy_from(&y0.s);
         }
@@ -401,8 +404,10 @@ where
 
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
-        rhs.model
-            .rhs_jac_x(rhs.mode, &rhs.sw, t, &y.x, rhs.p, &mut self.imp.w.jac);
+        rhs.model.rhs_jac_x(
+            Point::new(rhs.mode, &rhs.sw, t, &y.x, rhs.p),
+            &mut self.imp.w.jac,
+        );
         self.imp.w.power_iteration()
     }
 

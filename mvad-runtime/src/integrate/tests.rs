@@ -3,7 +3,9 @@
 
 use super::{AugState, Integrator, StepError};
 use crate::fixtures::Ball;
-use crate::model::{ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches};
+use crate::model::{
+    ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Point, Switches,
+};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -69,32 +71,44 @@ impl ModelCore for Decay {
     fn horizon_grad(&self, _p: &Th, dt: &mut Th) {
         dt.fill(0.0);
     }
-    fn rhs(&self, _m: usize, _sw: &Switches, _t: f64, x: &X, p: &Th, f: &mut X) {
+    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x,
+            p,
+        } = pt;
         f[0] = -p[0] * x[0];
     }
-    fn rhs_jac_x(
-        &self,
-        _m: usize,
-        _sw: &Switches,
-        _t: f64,
-        _x: &X,
-        p: &Th,
-        fx: &mut OMatrix<f64, N, N>,
-    ) {
+    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p,
+        } = pt;
         fx[(0, 0)] = -p[0];
     }
-    fn rhs_jac_p(
-        &self,
-        _m: usize,
-        _sw: &Switches,
-        _t: f64,
-        x: &X,
-        _p: &Th,
-        fp: &mut OMatrix<f64, N, P>,
-    ) {
+    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x,
+            p: _p,
+        } = pt;
         fp[(0, 0)] = -x[0];
     }
-    fn rhs_dt(&self, _m: usize, _sw: &Switches, _t: f64, _x: &X, _p: &Th, ft: &mut X) {
+    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {

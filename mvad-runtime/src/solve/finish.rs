@@ -4,7 +4,7 @@
 use super::zeno::ZENO_RATIOS;
 use super::Driver;
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{final_terms, FinalWork};
 use crate::solution::{Diagnostic, DiagnosticKind, Solution, Stats};
 use nalgebra::{Const, DefaultAllocator, OVector};
@@ -47,7 +47,7 @@ where
             cost = y.q + self.c_ev;
             grad.copy_from(&y.qp);
             grad += &self.g_ev;
-            model.rhs(self.mode, &self.sw, t_end, &y.x, p, &mut fw.f);
+            model.rhs(Point::new(self.mode, &self.sw, t_end, &y.x, p), &mut fw.f);
             f_end = fw.f.clone();
         }
         cost += final_terms(

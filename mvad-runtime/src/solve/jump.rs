@@ -4,7 +4,7 @@
 
 use super::Driver;
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::sens;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind};
@@ -72,7 +72,10 @@ where
         let info = model.info();
         let name = &info.events[k].name;
         self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
-        model.rhs(self.mode, &self.sw, t, &self.y.x, p, &mut self.f_minus);
+        model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, p),
+            &mut self.f_minus,
+        );
         self.nonfinite_x(t, &self.f_minus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
@@ -131,11 +134,7 @@ where
         self.mode = mode_after;
         self.switch_bits(t, true, true);
         model.rhs(
-            mode_after,
-            &self.sw_next,
-            t,
-            &self.x_plus,
-            p,
+            Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
             &mut self.f_plus,
         );
         self.nonfinite_x(t, &self.f_plus, || {
@@ -259,8 +258,14 @@ where
         let info = model.info();
         self.sw_next.clone_from(&self.sw);
         self.sw_next.flip(j);
-        model.rhs(self.mode, &self.sw, t, &self.y.x, p, &mut self.f_minus);
-        model.rhs(self.mode, &self.sw_next, t, &self.y.x, p, &mut self.f_plus);
+        model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, p),
+            &mut self.f_minus,
+        );
+        model.rhs(
+            Point::new(self.mode, &self.sw_next, t, &self.y.x, p),
+            &mut self.f_plus,
+        );
         self.nonfinite_x(t, &self.f_plus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;

@@ -32,7 +32,7 @@ mod zeno;
 use crate::error::SolveError;
 use crate::event::{Scanner, Watch};
 use crate::integrate::{AugState, Forward, Integrator};
-use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, Options, Solution};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
@@ -313,8 +313,10 @@ where
             } else {
                 self.y.x.clone()
             };
-            self.model
-                .rhs(self.mode, &self.sw_next, t, &x, self.p, &mut self.work);
+            self.model.rhs(
+                Point::new(self.mode, &self.sw_next, t, &x, self.p),
+                &mut self.work,
+            );
             for j in 0..nsw {
                 if self.sw_undecided.get(j) {
                     let st = self

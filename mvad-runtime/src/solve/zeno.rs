@@ -13,7 +13,7 @@
 //! −ℓ(t*, x*) dt*/dθ + ∫ (ℓ_x dx*/dθ + ℓ_θ) dt.
 
 use super::Driver;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{aitken_iterated, FinalWork, GL8};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -210,7 +210,10 @@ where
         let v_plus = d * model.guard(k, t, &self.x_plus, p);
         self.xs.copy_from(&self.x_plus);
         self.xs.axpy(delta, &self.f_plus, 1.0);
-        model.rhs(mode, &self.sw_next, t + delta, &self.xs, p, &mut self.work);
+        model.rhs(
+            Point::new(mode, &self.sw_next, t + delta, &self.xs, p),
+            &mut self.work,
+        );
         self.xe.copy_from(&self.x_plus);
         self.xe.axpy(0.5 * delta, &self.f_plus, 1.0);
         self.xe.axpy(0.5 * delta, &self.work, 1.0);

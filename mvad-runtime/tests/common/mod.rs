@@ -340,7 +340,14 @@ impl<T: Spec> ModelCore for AdModel<T> {
             }
         }
     }
-    fn rhs(&self, m: usize, sw: &Switches, t: f64, x: &V, p: &V, f: &mut V) {
+    fn rhs(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, f: &mut V) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
         self.spec.rhs(
             m,
             sw.low_word(),
@@ -350,7 +357,14 @@ impl<T: Spec> ModelCore for AdModel<T> {
             f.as_mut_slice(),
         );
     }
-    fn rhs_jac_x(&self, m: usize, sw: &Switches, t: f64, x: &V, p: &V, fx: &mut Mx) {
+    fn rhs_jac_x(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fx: &mut Mx) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
         let f = self.flow(m, sw.low_word(), t, x, p);
         for r in 0..self.n() {
             for c in 0..self.n() {
@@ -358,7 +372,14 @@ impl<T: Spec> ModelCore for AdModel<T> {
             }
         }
     }
-    fn rhs_jac_p(&self, m: usize, sw: &Switches, t: f64, x: &V, p: &V, fp: &mut Mx) {
+    fn rhs_jac_p(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fp: &mut Mx) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
         let f = self.flow(m, sw.low_word(), t, x, p);
         for r in 0..self.n() {
             for c in 0..self.np() {
@@ -366,7 +387,14 @@ impl<T: Spec> ModelCore for AdModel<T> {
             }
         }
     }
-    fn rhs_dt(&self, m: usize, sw: &Switches, t: f64, x: &V, p: &V, ft: &mut V) {
+    fn rhs_dt(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, ft: &mut V) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
         let f = self.flow(m, sw.low_word(), t, x, p);
         for r in 0..self.n() {
             ft[r] = f[r].g[0];
