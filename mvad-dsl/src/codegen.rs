@@ -783,6 +783,7 @@ impl Gen<'_> {
         };
 
         let sens_methods = quote! {
+            #[inline]
             fn rhs_sens(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, f: &mut #xv, ds: &mut #mnp) {
         let #pr::Point { mode, sw, t, x, p } = pt; #sens }
         };
@@ -794,6 +795,7 @@ impl Gen<'_> {
             fn initial_state_jac(&self, p: &#pv, dx0: &mut #mnp) { #x0j }
             fn horizon(&self, p: &#pv) -> ::core::option::Option<f64> { #hz }
             fn horizon_grad(&self, p: &#pv, dt: &mut #pv) { #hzg }
+            #[inline]
             fn rhs(&self, pt: #pr::Point<'_, Self::N, Self::P>, f: &mut #xv) {
         let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
             fn rhs_jac_x(&self, pt: #pr::Point<'_, Self::N, Self::P>, fx: &mut #mnn) {

@@ -311,7 +311,7 @@ where
 
     // ---- flow -------------------------------------------------------------------------
 
-    /// f_m(t, x, θ) with the frozen branches `sw`.
+    /// f_m(t, x, θ) at `pt` = (m, sw, t, x, θ), with the frozen branches `pt.sw`.
     fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut OVector<f64, Self::N>);
     /// ∂f_m/∂x (n×n).
     fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, Self::N, Self::N>);
@@ -459,7 +459,7 @@ pub trait ModelSens: ModelCore
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
 {
-    /// f = f_m(t, x, θ) and Ṡ = f_x S + f_θ (n×p), with the frozen branches `sw`.
+    /// f = f_m(t, x, θ) and Ṡ = f_x S + f_θ (n×p) at `pt`, with the frozen branches `pt.sw`.
     #[allow(clippy::too_many_arguments)]
     fn rhs_sens(
         &self,
@@ -486,7 +486,7 @@ pub trait ModelAdjoint: ModelCore
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
 {
-    /// λᵀf_x into `vx` (n) and λᵀf_θ into `vp` (p), for f = f_m(t, x, θ) under `sw`:
+    /// λᵀf_x into `vx` (n) and λᵀf_θ into `vp` (p), for f = f_m(t, x, θ) at `pt`:
     /// vx_j = Σᵢ λᵢ ∂fᵢ/∂x_j, vp_k = Σᵢ λᵢ ∂fᵢ/∂θ_k. Both outputs are overwritten.
     #[allow(clippy::too_many_arguments)]
     fn rhs_vjp(
