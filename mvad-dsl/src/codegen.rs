@@ -4,7 +4,8 @@
 //! - `pub struct NAMEParams { pub θ₁: f64, .. }` with `Default` from the declared values,
 //!   `to_vector`/`from_vector` and `From<NAMEParams> for OVector<f64, Const<p>>`;
 //! - `pub struct NAME` with `new()`, `default_params()`, `NSTATES`, `NPARAMS`, and an
-//!   `impl ModelCore for NAME` with `type N = Const<n>; type P = Const<p>`, `impl ModelSens`
+//!   `impl ModelDims for NAME` with `type N = Const<n>; type P = Const<p>`, `impl HybridModel`
+//!   with the core methods, `impl ModelSens`
 //!   with the sparse sensitivity right-hand side, and the default adjoint and second-order
 //!   capabilities (so `NAME: HybridModel`).
 //!
@@ -115,9 +116,11 @@ pub fn generate(k: &ModelKernels) -> TokenStream {
         }
 
         #[allow(unused_variables, unused_parens, unused_braces, non_snake_case, clippy::all, clippy::pedantic, clippy::nursery)]
-        impl #pr::ModelCore for #name {
+        impl #pr::ModelDims for #name {
             type N = #pr::Const<#n_lit>;
             type P = #pr::Const<#p_lit>;
+        }
+        impl #pr::HybridModel for #name {
             #methods
         }
 
@@ -572,7 +575,7 @@ impl Gen<'_> {
         })
     }
 
-    /// The `ModelCore` methods and the `ModelSens` override.
+    /// The `HybridModel` methods and the `ModelSens` override.
     fn methods(&self, k: &ModelKernels) -> (TokenStream, TokenStream) {
         let pr = quote!(::mvad::__private);
         let n = k.nstates();

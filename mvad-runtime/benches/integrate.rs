@@ -5,7 +5,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::integrate::{AugState, Integrator};
 use mvad_runtime::solution::{Method, Options};
-use mvad_runtime::ModelCore;
+use mvad_runtime::HybridModel;
 use nalgebra::Const;
 use std::hint::black_box;
 

@@ -4,8 +4,8 @@
 //! h ≤ 0 with v⁺ = −e v⁻, C = ∫₀ᵀ h dt, T = 2. Parameters θ = (e, g, h0, v0).
 
 use crate::model::{
-    Direction, EventInfo, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Point,
-    Switches,
+    Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
+    ModelSens, Point, Switches,
 };
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -74,9 +74,12 @@ impl ModelSens for Ball {}
 impl ModelAdjoint for Ball {}
 impl ModelSecondOrder for Ball {}
 
-impl ModelCore for Ball {
+impl ModelDims for Ball {
     type N = N;
     type P = P;
+}
+
+impl HybridModel for Ball {
     fn info(&self) -> &ModelInfo {
         &self.info
     }

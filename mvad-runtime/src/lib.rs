@@ -12,7 +12,7 @@ pub mod fixtures;
 pub mod model;
 
 pub use model::{
-    Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelCore, ModelInfo,
+    Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
     ModelSecondOrder, ModelSens, Point, Switches,
 };
 

@@ -119,7 +119,7 @@ impl Switches {
 
 /// One evaluation point of the flow: mode m, frozen branches, t, x and θ.
 ///
-/// The flow-side methods ([`ModelCore::rhs`] and its derivatives, and the capability
+/// The flow-side methods ([`HybridModel::rhs`] and its derivatives, and the capability
 /// products) take one `Point` instead of five arguments, so every source of flow
 /// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
 /// words, passed by value.
@@ -264,29 +264,35 @@ impl ModelInfo {
     }
 }
 
-/// The core of a hybrid model: sizes, structure, and the values and first derivatives of
-/// x₀, T, f, g, R, σ, h, ℓ, φ and Φ that the forward method needs.
-///
-/// `N` is the state dimension, `P` the parameter dimension: `Const<_>` for models
-/// compiled by `hybrid!`, `Dyn` for models loaded at run time. Callers bound on
-/// [`HybridModel`], which bundles this trait with the capability traits.
-///
-/// ## Gradient convention
-/// Every `*_grad(.., gx, gp) -> f64` method of a scalar function u(t, x, θ) *overwrites*
-/// `gx` with ∇ₓu and `gp` with ∂u/∂θ and **returns ∂u/∂t**. The one method that returns
-/// the value instead is named for it: [`ModelCore::running_cost_value_grad`] returns ℓ
-/// (the quadrature needs ℓ with its gradient, never ∂ℓ/∂t). Vector functions have `*_jac`
-/// methods that fill every block they name (∂R/∂t included). Functions of θ alone (x₀, T)
-/// have no x or t part.
-pub trait ModelCore
-where
-    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
-{
+/// The dimensions of a model: `N` the state dimension, `P` the parameter dimension
+/// (`Const<_>` for models compiled by `hybrid!`, `Dyn` for models loaded at run time).
+/// Its own trait so that the capability traits can name them without depending on
+/// [`HybridModel`].
+pub trait ModelDims {
     /// State dimension n.
     type N: Dim;
     /// Parameter dimension p.
     type P: Dim;
+}
 
+/// A hybrid model: its core — sizes, structure, and the values and first derivatives of
+/// x₀, T, f, g, R, σ, h, ℓ, φ and Φ that the forward method needs — on top of the
+/// capability traits ([`ModelSens`], [`ModelAdjoint`], [`ModelSecondOrder`]), whose
+/// defaults are built from these methods. A model that has no better form of a capability
+/// opts into its default with an empty `impl`. Integrators, the event code and the
+/// reductions bound on this trait, and importing it brings every core method into scope.
+///
+/// ## Gradient convention
+/// Every `*_grad(.., gx, gp) -> f64` method of a scalar function u(t, x, θ) *overwrites*
+/// `gx` with ∇ₓu and `gp` with ∂u/∂θ and **returns ∂u/∂t**. The one method that returns
+/// the value instead is named for it: [`HybridModel::running_cost_value_grad`] returns ℓ
+/// (the quadrature needs ℓ with its gradient, never ∂ℓ/∂t). Vector functions have `*_jac`
+/// methods that fill every block they name (∂R/∂t included). Functions of θ alone (x₀, T)
+/// have no x or t part.
+pub trait HybridModel: ModelDims + ModelSens + ModelAdjoint + ModelSecondOrder
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
     /// Names, defaults and structure.
     fn info(&self) -> &ModelInfo;
     /// n as a dimension value (`Const::<n>` or `Dyn(n)`).
@@ -452,10 +458,10 @@ where
 
 /// Capability: the forward-sensitivity right-hand side.
 ///
-/// The default goes through the dense Jacobians of [`ModelCore`] and allocates an n×n
+/// The default goes through the dense Jacobians of [`HybridModel`] and allocates an n×n
 /// scratch matrix (on the heap for dynamic sizes); generated models override it with
 /// sparse straight-line code that allocates nothing.
-pub trait ModelSens: ModelCore
+pub trait ModelSens: ModelDims
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
 {
@@ -467,7 +473,9 @@ where
         s: &OMatrix<f64, Self::N, Self::P>,
         f: &mut OVector<f64, Self::N>,
         ds: &mut OMatrix<f64, Self::N, Self::P>,
-    ) {
+    ) where
+        Self: HybridModel,
+    {
         let Point { mode, sw, t, x, p } = pt;
         let n = self.nstates();
         let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
@@ -482,7 +490,7 @@ where
 ///
 /// The default forms the dense Jacobians f_x, f_θ and multiplies (it allocates both for
 /// dynamic sizes); a model with a cheaper reverse-mode form overrides it.
-pub trait ModelAdjoint: ModelCore
+pub trait ModelAdjoint: ModelDims
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
 {
@@ -495,7 +503,9 @@ where
         lambda: &OVector<f64, Self::N>,
         vx: &mut OVector<f64, Self::N>,
         vp: &mut OVector<f64, Self::P>,
-    ) {
+    ) where
+        Self: HybridModel,
+    {
         let Point { mode, sw, t, x, p } = pt;
         let (n, np) = (self.nstates(), self.nparams());
         let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
@@ -527,7 +537,9 @@ where
         s: &OMatrix<f64, Self::N, Self::P>,
         v: &OVector<f64, Self::N>,
         out: &mut OMatrix<f64, Self::N, Self::P>,
-    ) {
+    ) where
+        Self: HybridModel,
+    {
         let Point { mode, sw, t, x, p } = pt;
         let vmax = v.amax();
         if vmax == 0.0 || !vmax.is_finite() {
@@ -546,21 +558,4 @@ where
         *out -= &minus;
         *out /= 2.0 * h;
     }
-}
-
-/// A hybrid model with every capability: what the integrators, the event code and the
-/// reductions bound on. Implemented for every type that implements [`ModelCore`] and the
-/// capability traits ([`ModelSens`], [`ModelAdjoint`], [`ModelSecondOrder`]); a model that
-/// has no better form of a capability opts into its default with an empty `impl`.
-pub trait HybridModel: ModelCore + ModelSens + ModelAdjoint + ModelSecondOrder
-where
-    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
-{
-}
-
-impl<T> HybridModel for T
-where
-    T: ModelCore + ModelSens + ModelAdjoint + ModelSecondOrder,
-    DefaultAllocator: ModelAlloc<T::N, T::P>,
-{
 }

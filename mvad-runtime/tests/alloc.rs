@@ -7,7 +7,7 @@ use mvad_runtime::fixtures::Ball;
 use mvad_runtime::integrate::{AugState, Integrator};
 use mvad_runtime::solution::{Method, Options};
 use mvad_runtime::solve::solve;
-use mvad_runtime::ModelCore;
+use mvad_runtime::HybridModel;
 use nalgebra::Const;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

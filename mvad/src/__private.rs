@@ -4,7 +4,7 @@
 
 pub use mvad_dsl::ir::sign;
 pub use mvad_runtime::{
-    Direction, EventInfo, HybridModel, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder,
+    Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
     ModelSens, Point, Switches,
 };
 pub use nalgebra::{Const, OMatrix, OVector};

@@ -15,7 +15,8 @@ use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Point};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
 use mvad_runtime::{
-    EventInfo, ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+    EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
+    Switches,
 };
 use nalgebra::{DMatrix, DVector, Dyn};
 
@@ -280,10 +281,12 @@ fn pt_theta(p: &X) -> At<'_> {
     }
 }
 
-impl ModelCore for InterpretedModel {
+impl ModelDims for InterpretedModel {
     type N = Dyn;
     type P = Dyn;
+}
 
+impl HybridModel for InterpretedModel {
     fn info(&self) -> &ModelInfo {
         &self.info
     }

@@ -191,7 +191,7 @@ fn model_error(name: &str, src: &str, diagnostics: Vec<Diagnostic>) -> LoadError
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ModelCore;
+    use crate::HybridModel;
     use proptest::prelude::*;
 
     const BALL: &str = include_str!("../../models/bouncing_ball.hyb");

@@ -8,7 +8,7 @@
 //! Both doors are checked: the interpreted model and the `hybrid!`-compiled one.
 
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc, ModelCore};
+use mvad::{HybridModel, ModelAlloc};
 use mvad_tests::{model_files, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 

@@ -8,7 +8,7 @@
 
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc, ModelCore};
+use mvad::{HybridModel, ModelAlloc};
 use mvad_tests::{model_source, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 

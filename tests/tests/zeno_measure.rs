@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use mvad::load::load;
-use mvad::{measure, solve, DiagnosticKind, ModelCore, Options};
+use mvad::{measure, solve, DiagnosticKind, HybridModel, Options};
 
 #[test]
 fn zeno_velocity_measure_pairs_to_the_height_change() {

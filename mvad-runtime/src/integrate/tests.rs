@@ -4,7 +4,7 @@
 use super::{AugState, Integrator, StepError};
 use crate::fixtures::Ball;
 use crate::model::{
-    ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Point, Switches,
+    HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Point, Switches,
 };
 use crate::solution::{Method, Options};
 use nalgebra::{Const, OMatrix, OVector};
@@ -47,9 +47,12 @@ impl ModelSens for Decay {}
 impl ModelAdjoint for Decay {}
 impl ModelSecondOrder for Decay {}
 
-impl ModelCore for Decay {
+impl ModelDims for Decay {
     type N = N;
     type P = P;
+}
+
+impl HybridModel for Decay {
     fn info(&self) -> &ModelInfo {
         &self.info
     }

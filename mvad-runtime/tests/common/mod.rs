@@ -10,7 +10,7 @@ pub mod check;
 pub mod models;
 
 use mvad_runtime::model::{
-    ModelAdjoint, ModelCore, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+    HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Switches,
 };
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -303,9 +303,12 @@ impl<T: Spec> ModelSens for AdModel<T> {}
 impl<T: Spec> ModelAdjoint for AdModel<T> {}
 impl<T: Spec> ModelSecondOrder for AdModel<T> {}
 
-impl<T: Spec> ModelCore for AdModel<T> {
+impl<T: Spec> ModelDims for AdModel<T> {
     type N = Dyn;
     type P = Dyn;
+}
+
+impl<T: Spec> HybridModel for AdModel<T> {
     fn info(&self) -> &ModelInfo {
         &self.info
     }

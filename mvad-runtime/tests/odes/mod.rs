@@ -6,7 +6,7 @@ use crate::common::{info, AdModel, Sc, Spec};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::integrate::{AugState, Forward, Integrator};
 use mvad_runtime::solution::{Method, Options};
-use mvad_runtime::{HybridModel, ModelCore, ModelInfo};
+use mvad_runtime::{HybridModel, ModelInfo};
 use nalgebra::{Const, DVector, Dyn, OVector};
 
 /// The smooth test problems of the integrator tests (no events; modes `a` and `b`), as generic
