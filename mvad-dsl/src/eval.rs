@@ -96,6 +96,12 @@ impl Tape {
     /// Runs the tape, filling `regs[..nregs]`. Returns false (and does nothing) when
     /// `regs` is too short.
     pub fn run(&self, at: &Point<'_>, regs: &mut [f64]) -> bool {
+        self.run_with(at, &[], regs)
+    }
+
+    /// [`Tape::run`] with switch bits beyond the first 64: `at.sw` holds bits 0..64 and
+    /// `hi` the rest (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent).
+    pub fn run_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> bool {
         if regs.len() < self.ops.len() {
             return false;
         }
@@ -121,7 +127,13 @@ impl Tape {
                     }
                 }
                 Op::Switch(j, a, b) => {
-                    if j < 64 && at.sw & (1u64 << j) != 0 {
+                    let on = if j < 64 {
+                        at.sw >> j & 1 != 0
+                    } else {
+                        let k = (j - 64) as usize;
+                        hi.get(k / 64).is_some_and(|w| w >> (k % 64) & 1 != 0)
+                    };
+                    if on {
                         r(a)
                     } else {
                         r(b)
@@ -136,7 +148,12 @@ impl Tape {
     /// Runs the tape and writes the dense output (zeros included) into `out`; entries
     /// beyond `out.len()` are dropped. Outputs are NaN if `regs` is too short.
     pub fn eval(&self, at: &Point<'_>, regs: &mut [f64], out: &mut [f64]) {
-        if !self.run(at, regs) {
+        self.eval_with(at, &[], regs, out);
+    }
+
+    /// [`Tape::eval`] with switch bits beyond the first 64 in `hi` (see [`Tape::run_with`]).
+    pub fn eval_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64], out: &mut [f64]) {
+        if !self.run_with(at, hi, regs) {
             out.iter_mut().take(self.len).for_each(|o| *o = f64::NAN);
             return;
         }
@@ -150,8 +167,13 @@ impl Tape {
 
     /// Runs the tape and returns slot 0 (a scalar kernel); NaN if `regs` is too short.
     pub fn eval_scalar(&self, at: &Point<'_>, regs: &mut [f64]) -> f64 {
+        self.eval_scalar_with(at, &[], regs)
+    }
+
+    /// [`Tape::eval_scalar`] with switch bits beyond the first 64 in `hi`.
+    pub fn eval_scalar_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> f64 {
         let mut out = [0.0];
-        self.eval(at, regs, &mut out);
+        self.eval_with(at, hi, regs, &mut out);
         out[0]
     }
 }

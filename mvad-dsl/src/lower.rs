@@ -31,8 +31,9 @@ use crate::span::Span;
 /// Deepest nesting of expressions, observables included, that lowering accepts.
 const MAX_LOWER_DEPTH: usize = 1024;
 
-/// The most switching functions a model may have (bits of the switch word).
-pub const MAX_SWITCHES: usize = 64;
+/// The most switching functions a model may have (their ids are `u32`; the runtime's
+/// switch bits hold any number).
+pub const MAX_SWITCHES: usize = u32::MAX as usize;
 
 /// Lowers a checked model to a [`Program`].
 ///
@@ -708,8 +709,9 @@ mod tests {
             many.push_str(&format!(" + abs(x - {i})"));
         }
         many.push_str("; } }");
+        // More than 64 kinks are fine: the switch bits are not limited to one word.
         let e = errors(&many);
-        assert!(e.iter().any(|m| m.contains("kinks")), "{e:?}");
+        assert!(e.is_empty(), "{e:?}");
     }
 
     /// Models the checker rejects, lowered without it: every broken invariant comes back

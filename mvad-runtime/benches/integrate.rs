@@ -22,7 +22,7 @@ fn flight(ball: &Ball, sensitivities: bool, method: Method) -> f64 {
     ball.initial_state(&p, &mut y0.x);
     ball.initial_state_jac(&p, &mut y0.s);
     let mut it = Integrator::new(ball, &p, &opts);
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     while it.t() < 0.6 {
         it.step(0.6).expect("ball flight");
     }

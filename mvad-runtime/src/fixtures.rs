@@ -3,7 +3,10 @@
 //! [`Ball`] is the seed paper's E1 bouncing ball: ḣ = v, v̇ = −g, event `impact` when
 //! h ≤ 0 with v⁺ = −e v⁻, C = ∫₀ᵀ h dt, T = 2. Parameters θ = (e, g, h0, v0).
 
-use crate::model::{Direction, EventInfo, HybridModel, ModelInfo, Switches};
+use crate::model::{
+    Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
+    ModelSens, Point, Switches,
+};
 use nalgebra::{Const, OMatrix, OVector};
 
 type N = Const<2>;
@@ -67,9 +70,16 @@ impl Ball {
     }
 }
 
-impl HybridModel for Ball {
+impl ModelSens for Ball {}
+impl ModelAdjoint for Ball {}
+impl ModelSecondOrder for Ball {}
+
+impl ModelDims for Ball {
     type N = N;
     type P = P;
+}
+
+impl HybridModel for Ball {
     fn info(&self) -> &ModelInfo {
         &self.info
     }
@@ -94,35 +104,47 @@ impl HybridModel for Ball {
     fn horizon_grad(&self, _p: &Th, dt: &mut Th) {
         dt.fill(0.0);
     }
-    fn rhs(&self, _m: usize, _sw: Switches, _t: f64, x: &X, p: &Th, f: &mut X) {
+    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x,
+            p,
+        } = pt;
         f[0] = x[1];
         f[1] = -p[1];
     }
-    fn rhs_jac_x(
-        &self,
-        _m: usize,
-        _sw: Switches,
-        _t: f64,
-        _x: &X,
-        _p: &Th,
-        fx: &mut OMatrix<f64, N, N>,
-    ) {
+    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         fx.fill(0.0);
         fx[(0, 1)] = 1.0;
     }
-    fn rhs_jac_p(
-        &self,
-        _m: usize,
-        _sw: Switches,
-        _t: f64,
-        _x: &X,
-        _p: &Th,
-        fp: &mut OMatrix<f64, N, P>,
-    ) {
+    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         fp.fill(0.0);
         fp[(1, 1)] = -1.0;
     }
-    fn rhs_dt(&self, _m: usize, _sw: Switches, _t: f64, _x: &X, _p: &Th, ft: &mut X) {
+    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
@@ -174,12 +196,12 @@ impl HybridModel for Ball {
         yx[3] = 1.0; // ∂velocity/∂v
         yp.fill(0.0);
     }
-    fn running_cost(&self, _sw: Switches, _t: f64, x: &X, _p: &Th) -> f64 {
+    fn running_cost(&self, _sw: &Switches, _t: f64, x: &X, _p: &Th) -> f64 {
         x[0]
     }
-    fn running_cost_grad(
+    fn running_cost_value_grad(
         &self,
-        _sw: Switches,
+        _sw: &Switches,
         _t: f64,
         x: &X,
         _p: &Th,

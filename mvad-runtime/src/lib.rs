@@ -11,7 +11,10 @@
 pub mod fixtures;
 pub mod model;
 
-pub use model::{Direction, EventInfo, HybridModel, ModelAlloc, ModelInfo, Switches, MAX_SWITCHES};
+pub use model::{
+    Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
+    ModelSecondOrder, ModelSens, Point, Switches,
+};
 
 pub mod error;
 pub mod event;

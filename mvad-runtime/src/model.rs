@@ -41,10 +41,131 @@ impl<N: Dim, P: Dim, A> ModelAlloc<N, P> for A where
 }
 
 /// Frozen branches of the switching functions: bit j set iff σ_j's positive branch is active.
-pub type Switches = u64;
+///
+/// Any number of switching functions: bits 0..64 live in an inline word (so a model with at
+/// most 64 kinks never touches the heap, and generated code reads its bits from
+/// [`Switches::low_word`] with a constant mask); bits 64.. live in words allocated once, by
+/// [`Switches::new`], for the run. Copy one into another with `clone_from`, which reuses the
+/// destination's words, so no step or event allocates.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Switches {
+    lo: u64,
+    hi: Vec<u64>,
+}
 
-/// The most switching functions a model may have (bits of [`Switches`]).
-pub const MAX_SWITCHES: usize = 64;
+impl Switches {
+    /// All branches negative, with room for `n` switching functions.
+    pub fn new(n: usize) -> Self {
+        Switches {
+            lo: 0,
+            hi: vec![0; n.saturating_sub(64).div_ceil(64)],
+        }
+    }
+    /// Bits 0..64 from a word (for at most 64 switching functions).
+    pub fn from_bits(bits: u64) -> Self {
+        Switches {
+            lo: bits,
+            hi: Vec::new(),
+        }
+    }
+    /// Bits 0..64 (bit j of the word is bit j of the set).
+    #[inline(always)]
+    pub fn low_word(&self) -> u64 {
+        self.lo
+    }
+    /// Bit j: whether σ_j's positive branch is active (false beyond the allocated words).
+    #[inline(always)]
+    pub fn get(&self, j: usize) -> bool {
+        if j < 64 {
+            self.lo >> j & 1 != 0
+        } else {
+            self.hi
+                .get((j - 64) / 64)
+                .is_some_and(|w| w >> ((j - 64) % 64) & 1 != 0)
+        }
+    }
+    /// Sets bit j to `on` (grows the words if j is beyond them: allocate with [`Switches::new`]).
+    pub fn set(&mut self, j: usize, on: bool) {
+        let (w, b) = if j < 64 {
+            (&mut self.lo, j)
+        } else {
+            let k = (j - 64) / 64;
+            if k >= self.hi.len() {
+                self.hi.resize(k + 1, 0);
+            }
+            (&mut self.hi[k], (j - 64) % 64)
+        };
+        if on {
+            *w |= 1 << b;
+        } else {
+            *w &= !(1 << b);
+        }
+    }
+    /// Flips bit j.
+    pub fn flip(&mut self, j: usize) {
+        let on = self.get(j);
+        self.set(j, !on);
+    }
+    /// Clears every bit (keeps the words).
+    pub fn clear(&mut self) {
+        self.lo = 0;
+        self.hi.fill(0);
+    }
+    /// Bits 64.. as words: bit j ≥ 64 is bit (j − 64) % 64 of word (j − 64) / 64.
+    pub fn high_words(&self) -> &[u64] {
+        &self.hi
+    }
+}
+
+/// One evaluation point of the flow: mode m, frozen branches, t, x and θ.
+///
+/// The flow-side methods ([`HybridModel::rhs`] and its derivatives, and the capability
+/// products) take one `Point` instead of five arguments, so every source of flow
+/// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
+/// words, passed by value.
+pub struct Point<'a, N: Dim, P: Dim>
+where
+    DefaultAllocator: Allocator<N> + Allocator<P>,
+{
+    /// The mode m.
+    pub mode: usize,
+    /// The frozen branches of the switching functions.
+    pub sw: &'a Switches,
+    /// Time t.
+    pub t: f64,
+    /// State x.
+    pub x: &'a OVector<f64, N>,
+    /// Parameters θ.
+    pub p: &'a OVector<f64, P>,
+}
+
+impl<'a, N: Dim, P: Dim> Point<'a, N, P>
+where
+    DefaultAllocator: Allocator<N> + Allocator<P>,
+{
+    /// The point (m, sw, t, x, θ).
+    #[inline(always)]
+    pub fn new(
+        mode: usize,
+        sw: &'a Switches,
+        t: f64,
+        x: &'a OVector<f64, N>,
+        p: &'a OVector<f64, P>,
+    ) -> Self {
+        Point { mode, sw, t, x, p }
+    }
+}
+
+impl<N: Dim, P: Dim> Clone for Point<'_, N, P>
+where
+    DefaultAllocator: Allocator<N> + Allocator<P>,
+{
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<N: Dim, P: Dim> Copy for Point<'_, N, P> where DefaultAllocator: Allocator<N> + Allocator<P> {}
 
 /// The direction in which a guard g = LHS − RHS fires.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -108,7 +229,7 @@ pub struct ModelInfo {
     pub events: Vec<EventInfo>,
     /// Observable names, in declaration order.
     pub observables: Vec<String>,
-    /// Number of switching functions σ_j (kinks of flows and ℓ), at most [`MAX_SWITCHES`].
+    /// Number of switching functions σ_j (kinks of flows and ℓ); any number (see [`Switches`]).
     pub switches: usize,
     /// Whether the cost has `integral(..)` terms (ℓ ≢ 0).
     pub has_running_cost: bool,
@@ -143,19 +264,35 @@ impl ModelInfo {
     }
 }
 
-/// A hybrid model with symbolic first derivatives, generic over its dimensions.
-///
-/// `N` is the state dimension, `P` the parameter dimension: `Const<_>` for models
-/// compiled by `hybrid!`, `Dyn` for models loaded at run time.
-pub trait HybridModel
-where
-    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
-{
+/// The dimensions of a model: `N` the state dimension, `P` the parameter dimension
+/// (`Const<_>` for models compiled by `hybrid!`, `Dyn` for models loaded at run time).
+/// Its own trait so that the capability traits can name them without depending on
+/// [`HybridModel`].
+pub trait ModelDims {
     /// State dimension n.
     type N: Dim;
     /// Parameter dimension p.
     type P: Dim;
+}
 
+/// A hybrid model: its core — sizes, structure, and the values and first derivatives of
+/// x₀, T, f, g, R, σ, h, ℓ, φ and Φ that the forward method needs — on top of the
+/// capability traits ([`ModelSens`], [`ModelAdjoint`], [`ModelSecondOrder`]), whose
+/// defaults are built from these methods. A model that has no better form of a capability
+/// opts into its default with an empty `impl`. Integrators, the event code and the
+/// reductions bound on this trait, and importing it brings every core method into scope.
+///
+/// ## Gradient convention
+/// Every `*_grad(.., gx, gp) -> f64` method of a scalar function u(t, x, θ) *overwrites*
+/// `gx` with ∇ₓu and `gp` with ∂u/∂θ and **returns ∂u/∂t**. The one method that returns
+/// the value instead is named for it: [`HybridModel::running_cost_value_grad`] returns ℓ
+/// (the quadrature needs ℓ with its gradient, never ∂ℓ/∂t). Vector functions have `*_jac`
+/// methods that fill every block they name (∂R/∂t included). Functions of θ alone (x₀, T)
+/// have no x or t part.
+pub trait HybridModel: ModelDims + ModelSens + ModelAdjoint + ModelSecondOrder
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
     /// Names, defaults and structure.
     fn info(&self) -> &ModelInfo;
     /// n as a dimension value (`Const::<n>` or `Dyn(n)`).
@@ -180,72 +317,16 @@ where
 
     // ---- flow -------------------------------------------------------------------------
 
-    /// f_m(t, x, θ) with the frozen branches `sw`.
-    fn rhs(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        f: &mut OVector<f64, Self::N>,
-    );
+    /// f_m(t, x, θ) at `pt` = (m, sw, t, x, θ), with the frozen branches `pt.sw`.
+    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut OVector<f64, Self::N>);
     /// ∂f_m/∂x (n×n).
-    fn rhs_jac_x(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        fx: &mut OMatrix<f64, Self::N, Self::N>,
-    );
+    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, Self::N, Self::N>);
     /// ∂f_m/∂θ (n×p).
-    fn rhs_jac_p(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        fp: &mut OMatrix<f64, Self::N, Self::P>,
-    );
+    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, Self::N, Self::P>);
     /// ∂f_m/∂t (zeros for an autonomous flow).
-    fn rhs_dt(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        ft: &mut OVector<f64, Self::N>,
-    );
+    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut OVector<f64, Self::N>);
     /// Whether f_m depends on t explicitly.
     fn rhs_depends_on_t(&self, mode: usize) -> bool;
-
-    /// The forward-sensitivity right-hand side: f and Ṡ = f_x S + f_θ.
-    ///
-    /// Generated models override this with sparse straight-line code; the default
-    /// goes through the dense Jacobians and allocates scratch (dynamic sizes only).
-    #[allow(clippy::too_many_arguments)]
-    fn rhs_sens(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        s: &OMatrix<f64, Self::N, Self::P>,
-        f: &mut OVector<f64, Self::N>,
-        ds: &mut OMatrix<f64, Self::N, Self::P>,
-    ) {
-        let n = self.nstates();
-        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
-        self.rhs(mode, sw, t, x, p, f);
-        self.rhs_jac_x(mode, sw, t, x, p, &mut fx);
-        self.rhs_jac_p(mode, sw, t, x, p, ds);
-        ds.gemm(1.0, &fx, s, 1.0);
-    }
 
     // ---- events -----------------------------------------------------------------------
 
@@ -329,15 +410,15 @@ where
     /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors).
     fn running_cost(
         &self,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
     ) -> f64;
-    /// ℓ_x into `lx`, ℓ_θ into `lp`; returns ℓ.
-    fn running_cost_grad(
+    /// ℓ_x into `lx`, ℓ_θ into `lp`; returns the value ℓ (not ∂ℓ/∂t, which no caller needs).
+    fn running_cost_value_grad(
         &self,
-        sw: Switches,
+        sw: &Switches,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -373,4 +454,108 @@ where
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
+}
+
+/// Capability: the forward-sensitivity right-hand side.
+///
+/// The default goes through the dense Jacobians of [`HybridModel`] and allocates an n×n
+/// scratch matrix (on the heap for dynamic sizes); generated models override it with
+/// sparse straight-line code that allocates nothing.
+pub trait ModelSens: ModelDims
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// f = f_m(t, x, θ) and Ṡ = f_x S + f_θ (n×p) at `pt`, with the frozen branches `pt.sw`.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_sens(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        f: &mut OVector<f64, Self::N>,
+        ds: &mut OMatrix<f64, Self::N, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let Point { mode, sw, t, x, p } = pt;
+        let n = self.nstates();
+        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
+        self.rhs(Point::new(mode, sw, t, x, p), f);
+        self.rhs_jac_x(Point::new(mode, sw, t, x, p), &mut fx);
+        self.rhs_jac_p(Point::new(mode, sw, t, x, p), ds);
+        ds.gemm(1.0, &fx, s, 1.0);
+    }
+}
+
+/// Capability: vector–Jacobian products of the flow, for an adjoint (backward) pass.
+///
+/// The default forms the dense Jacobians f_x, f_θ and multiplies (it allocates both for
+/// dynamic sizes); a model with a cheaper reverse-mode form overrides it.
+pub trait ModelAdjoint: ModelDims
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// λᵀf_x into `vx` (n) and λᵀf_θ into `vp` (p), for f = f_m(t, x, θ) at `pt`:
+    /// vx_j = Σᵢ λᵢ ∂fᵢ/∂x_j, vp_k = Σᵢ λᵢ ∂fᵢ/∂θ_k. Both outputs are overwritten.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_vjp(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        lambda: &OVector<f64, Self::N>,
+        vx: &mut OVector<f64, Self::N>,
+        vp: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let Point { mode, sw, t, x, p } = pt;
+        let (n, np) = (self.nstates(), self.nparams());
+        let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
+        let mut fp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
+        self.rhs_jac_x(Point::new(mode, sw, t, x, p), &mut fx);
+        self.rhs_jac_p(Point::new(mode, sw, t, x, p), &mut fp);
+        fx.tr_mul_to(lambda, vx);
+        fp.tr_mul_to(lambda, vp);
+    }
+}
+
+/// Capability: second-derivative directional products, for the implicit method's
+/// Jacobian of the sensitivity equations.
+///
+/// The default differentiates [`ModelSens::rhs_sens`] by central differences along v with
+/// the step h = ε^{1/3} (1 + ‖x‖∞) / ‖v‖∞ (ε the machine epsilon; truncation and rounding
+/// errors balance at O(ε^{2/3})); it allocates scratch. A model with symbolic second
+/// derivatives overrides it with the exact product.
+pub trait ModelSecondOrder: ModelSens
+where
+    DefaultAllocator: ModelAlloc<Self::N, Self::P>,
+{
+    /// (∂/∂x (f_x S + f_θ)) · v into `out` (n×p): out = Σᵢ vᵢ ∂(f_x S + f_θ)/∂xᵢ, the
+    /// derivative of the sensitivity right-hand side along the state direction v.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_sens_dir_x(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        v: &OVector<f64, Self::N>,
+        out: &mut OMatrix<f64, Self::N, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let Point { mode, sw, t, x, p } = pt;
+        let vmax = v.amax();
+        if vmax == 0.0 || !vmax.is_finite() {
+            out.fill(if vmax == 0.0 { 0.0 } else { f64::NAN });
+            return;
+        }
+        let h = f64::EPSILON.cbrt() * (1.0 + x.amax()) / vmax;
+        let mut f = x.clone_owned();
+        let mut xs = x.clone_owned();
+        let mut minus = out.clone_owned();
+        xs.axpy(h, v, 1.0);
+        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, out);
+        xs.copy_from(x);
+        xs.axpy(-h, v, 1.0);
+        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, &mut minus);
+        *out -= &minus;
+        *out /= 2.0 * h;
+    }
 }

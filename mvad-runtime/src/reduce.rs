@@ -190,7 +190,7 @@ where
 pub fn final_terms<M: HybridModel>(
     model: &M,
     p: &OVector<f64, M::P>,
-    sw: Switches,
+    sw: &Switches,
     t: f64,
     x: &OVector<f64, M::N>,
     s: &OMatrix<f64, M::N, M::P>,

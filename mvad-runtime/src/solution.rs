@@ -234,7 +234,7 @@ pub struct Segment {
     /// The mode on the segment.
     pub mode: usize,
     /// The frozen switch bits on the segment.
-    pub switches: u64,
+    pub switches: crate::model::Switches,
     /// Range of step indices `first_step..end_step` covering the segment.
     pub first_step: usize,
     /// One past the last step index.

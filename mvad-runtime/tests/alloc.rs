@@ -103,7 +103,7 @@ fn stepping_allocates_nothing_for_static_sizes() {
         let mut xo = y0.x;
         let before = allocations();
         for _ in 0..3 {
-            it.restart(0.0, &y0, 0, 0);
+            it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
             while it.t() < 0.6 {
                 it.step(0.6).unwrap();
                 let tm = 0.5 * (it.t_prev() + it.t());

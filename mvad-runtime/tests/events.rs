@@ -10,7 +10,7 @@ use common::check::{assert_grad, close, fd_opts, recorded, tight};
 use common::{ev, info, AdModel, Sc, Spec, D};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::measure::measure;
-use mvad_runtime::model::{Direction, ModelInfo, Switches};
+use mvad_runtime::model::{Direction, ModelInfo};
 use mvad_runtime::solution::{DiagnosticKind, Options, Solution};
 use mvad_runtime::solve::solve;
 use nalgebra::DVector;
@@ -195,7 +195,7 @@ impl Spec for Sick {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         (self.kind != 4).then(|| S::cst(2.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, sw: Switches, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, sw: u64, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
         if self.kind == 3 {
             // ẋ = −sign(x): slides on x = 0 (chattering).
             f[0] = S::cst(if sw & 1 != 0 { -1.0 } else { 1.0 });
@@ -227,7 +227,7 @@ impl Spec for Sick {
     fn switch<S: Sc>(&self, _j: usize, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
 }

@@ -63,7 +63,7 @@ fn dense_output_order_at_interior_points() {
         let mut errs = vec![];
         for h in hs {
             let mut it = Integrator::new(&m, &p, &o);
-            it.restart(0.0, &y0, 0, 0);
+            it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
             it.step_fixed(h).unwrap();
             let tq = 0.37 * h;
             let mut x = DVector::zeros(2);
@@ -118,7 +118,7 @@ fn adaptive_decay_matches_closed_form_for_x_s_q_and_gradient() {
             let mut o = opts(method, rtol, atol);
             o.sens_error_control = sens_ec;
             let mut it = Integrator::new(&m, &p, &o);
-            it.restart(0.0, &y0, 0, 0);
+            it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
             let mut guard = 0;
             while it.t() < t_end {
                 it.step(t_end).unwrap();
@@ -154,7 +154,7 @@ fn adaptive_decay_matches_closed_form_for_x_s_q_and_gradient() {
                     let mut o5 = o.clone();
                     o5.method = Method::Tsit5;
                     let mut it5 = Integrator::new(&m, &p, &o5);
-                    it5.restart(0.0, &y0, 0, 0);
+                    it5.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
                     integrate_to(&mut it5, t_end);
                     assert!(it5.stats().steps > 3 * st.steps);
                 }
@@ -171,7 +171,7 @@ fn primal_only_leaves_sensitivities_alone() {
     let mut o = opts(Method::Tsit5, 1e-9, 1e-12);
     o.sensitivities = false;
     let mut it = Integrator::new(&m, &p, &o);
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     integrate_to(&mut it, t_end);
     let ex = decay_exact(a, x0, t_end);
     assert_relative_eq!(it.y().x[0], ex[0], max_relative = 1e-8);
@@ -190,7 +190,7 @@ fn ball_flight_is_exact_for_tsit5() {
     let o = opts(Method::Tsit5, 1e-10, 1e-10);
     let mut it = Integrator::new(&ball, &p, &o);
     let y0 = ball_start(&ball, &p);
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     let t_end = 0.6;
     integrate_to(&mut it, t_end);
     let (g, h0) = (p[1], p[2]);
@@ -221,13 +221,13 @@ fn restart_discards_the_fsal_stage() {
         let o = opts(method, 1e-8, 1e-10);
         let mut it = Integrator::new(&m, &p, &o);
         let y0 = AugState::zeros(Dyn(1), Dyn(1));
-        it.restart(0.0, &y0, 0, 0);
+        it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
         it.step(1.0).unwrap();
         let (t1, x1) = (it.t(), it.y().x[0]);
         assert_relative_eq!(x1, t1, epsilon = 1e-14);
         // Same state, other mode: the next step must see ẋ = −1 from its first stage.
         let y1 = it.y().clone();
-        it.restart(t1, &y1, 1, 0);
+        it.restart(t1, &y1, 1, &mvad_runtime::Switches::default());
         assert_eq!(it.mode(), 1);
         it.step(10.0).unwrap();
         let (t2, x2) = (it.t(), it.y().x[0]);
@@ -245,7 +245,7 @@ fn truncate_cuts_the_step_and_the_next_step_restarts_from_the_cut() {
     let (p, y0) = decay_start(a, x0);
     let o = opts(Method::Tsit5, 1e-10, 1e-12);
     let mut it = Integrator::new(&m, &p, &o);
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     it.step(1.0).unwrap();
     it.step(1.0).unwrap();
     let (t0, t1) = (it.t_prev(), it.t());
@@ -278,7 +278,7 @@ fn blow_up_is_reported_not_hung() {
     let mut it = Integrator::new(&m, &p, &o);
     let mut y0 = AugState::zeros(Dyn(1), Dyn(1));
     y0.x[0] = 1.0;
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     let mut n = 0;
     let res = loop {
         match it.step(2.0) {
@@ -320,7 +320,7 @@ fn print_ball_stats() {
             o.sensitivities = sens;
             let mut it = Integrator::new(&ball, &p, &o);
             let y0 = ball_start(&ball, &p);
-            it.restart(0.0, &y0, 0, 0);
+            it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
             let mut hs = vec![];
             while it.t() < 0.6 {
                 it.step(0.6).unwrap();
@@ -342,7 +342,7 @@ fn print_ball_stats() {
         let mut o = opts(method, 1e-8, 1e-10);
         o.sens_error_control = sec;
         let mut it = Integrator::new(&m, &p, &o);
-        it.restart(0.0, &y0, 0, 0);
+        it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
         let mut switched = None;
         while it.t() < 3.0 {
             it.step(3.0).unwrap();
@@ -385,7 +385,7 @@ fn nonlinear_sensitivities_all_methods() {
         let mut o = opts(method, 1e-11, 1e-13);
         o.sens_error_control = true;
         let mut it = Integrator::new(&m, &p, &o);
-        it.restart(0.0, &y0, 0, 0);
+        it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
         integrate_to(&mut it, t_end);
         let y = it.y();
         let got = [y.x[0], y.s[(0, 0)], y.s[(0, 1)]];
@@ -415,7 +415,7 @@ fn zero_atol(method: Method) {
     let mut y0 = AugState::zeros(Dyn(2), Dyn(1));
     y0.x[0] = 1.0;
     let mut it = Integrator::new(&m, &p, &opts(method, 1e-9, 0.0));
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     while it.t() < 1.0 {
         it.step(1.0)
             .map_err(|e| format!("{e:?} at t = {}", it.t()))
@@ -434,7 +434,7 @@ fn seeded_step_size_is_used_and_still_controlled() {
     let o = opts(Method::Tsit5, 1e-10, 1e-10);
     // The flight is a polynomial Tsit5 integrates exactly: a seed of 0.25 is accepted as is.
     let mut it = Integrator::new(&ball, &p, &o);
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     it.set_step_size(0.25);
     it.step(0.6).unwrap();
     assert_eq!(it.t(), 0.25);
@@ -443,7 +443,7 @@ fn seeded_step_size_is_used_and_still_controlled() {
     let m = decay();
     let (pd, yd) = decay_start(1.3, 2.0);
     let mut it = Integrator::new(&m, &pd, &opts(Method::Tsit5, 1e-10, 1e-12));
-    it.restart(0.0, &yd, 0, 0);
+    it.restart(0.0, &yd, 0, &mvad_runtime::Switches::default());
     it.set_step_size(2.0);
     it.step(3.0).unwrap();
     assert!(it.stats().rejected_steps >= 1 && it.t() < 2.0);
@@ -454,7 +454,7 @@ fn seeded_step_size_is_used_and_still_controlled() {
         max_relative = 1e-8
     );
     // Garbage restores the heuristic.
-    it.restart(0.0, &yd, 0, 0);
+    it.restart(0.0, &yd, 0, &mvad_runtime::Switches::default());
     it.set_step_size(f64::NAN);
     assert_eq!(it.next_step_size(), 0.0);
 }
@@ -472,8 +472,8 @@ fn verner_lazy_interpolation_stages() {
     let mut eager = Integrator::new(&m, &p, &o);
     let mut lazy = Integrator::new(&m, &p, &o);
     lazy.set_lazy_dense(true);
-    eager.restart(0.0, &y0, 0, 0);
-    lazy.restart(0.0, &y0, 0, 0);
+    eager.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
+    lazy.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     let t_end = 5.0;
     let mut steps = 0;
     let (mut a, mut b) = (
@@ -511,7 +511,7 @@ fn verner_lazy_interpolation_stages() {
     // Without ensure_dense the lazy integrator saves 9 evaluations per accepted step.
     let mut lazy2 = Integrator::new(&m, &p, &o);
     lazy2.set_lazy_dense(true);
-    lazy2.restart(0.0, &y0, 0, 0);
+    lazy2.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     integrate_to(&mut lazy2, t_end);
     assert_eq!(lazy2.y(), eager.y());
     assert_eq!(se - lazy2.stats().rhs_evals, 9 * steps);

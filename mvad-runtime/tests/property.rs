@@ -6,7 +6,7 @@ mod common;
 
 use common::{ev, info, AdModel, Sc, Spec};
 use mvad_runtime::fd::fd_full_gradient;
-use mvad_runtime::model::{Direction, ModelInfo, Switches};
+use mvad_runtime::model::{Direction, ModelInfo};
 use mvad_runtime::solution::{DiagnosticKind, Options};
 use mvad_runtime::solve::solve;
 use nalgebra::DVector;
@@ -47,7 +47,7 @@ impl Spec for Wall {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(self.t_end))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = x[1];
         f[1] = -(p[0] * x[0]) - p[1] * x[1] + p[2] * (t * self.omega).sin();
     }
@@ -68,7 +68,7 @@ impl Spec for Wall {
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[0];
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0] * x[0] + x[1] * self.q
     }
     fn event_cost<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {

@@ -5,7 +5,7 @@ mod common;
 
 use common::{info, AdModel, Sc, Spec};
 use mvad_runtime::error::SolveError;
-use mvad_runtime::model::{ModelInfo, Switches};
+use mvad_runtime::model::ModelInfo;
 use mvad_runtime::solution::{DiagnosticKind, Method, Options};
 use mvad_runtime::solve::solve;
 use std::time::Instant;
@@ -33,11 +33,11 @@ impl Spec for Lag {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(1.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = (x[1] - x[0]) / p[0];
         f[1] = -x[1];
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
 }
@@ -117,7 +117,7 @@ impl Spec for Undefined {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(1.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, t: S, _x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, t: S, _x: &[S], p: &[S], f: &mut [S]) {
         let d = p[0] - t;
         f[0] = match self.kind {
             0 => d.sqrt(),
@@ -125,7 +125,7 @@ impl Spec for Undefined {
             _ => S::cst(1.0) / d,
         };
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
 }
@@ -192,10 +192,10 @@ impl Spec for Decay {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(1.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = -p[0] * x[0];
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
 }

@@ -25,7 +25,7 @@ fn prothero_robinson_stiff_with_rosenbrock_and_auto() {
         y0.s[(0, 1)] = 1.0;
         let o = opts(method, 1e-8, 1e-10);
         let mut it = Integrator::new(&m, &p, &o);
-        it.restart(0.0, &y0, 0, 0);
+        it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
         let t_end = 10.0;
         while it.t() < t_end {
             it.step(t_end).unwrap();
@@ -56,7 +56,7 @@ fn stiff_lag_auto(sens_error_control: bool, max_steps: usize) -> (AugState<Dyn, 
     let mut o = opts(Method::Auto, 1e-8, 1e-10);
     o.sens_error_control = sens_error_control;
     let mut it = Integrator::new(&m, &p, &o);
-    it.restart(0.0, &y0, 0, 0);
+    it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     while it.t() < 3.0 {
         it.step(3.0).unwrap();
         let st = it.stats();
@@ -82,7 +82,7 @@ fn auto_switches_to_rosenbrock_on_the_stiff_lag() {
     let mut y0 = AugState::zeros(Dyn(2), Dyn(2));
     y0.x[1] = 1.0;
     let mut it5 = Integrator::new(&m, &p, &opts(Method::Tsit5, 1e-8, 1e-10));
-    it5.restart(0.0, &y0, 0, 0);
+    it5.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
     integrate_to(&mut it5, 1e-5);
     let n5 = it5.stats().steps + it5.stats().rejected_steps;
     assert!(n5 as f64 > 0.5 * 1e-5 / (3.6 * tau), "{:?}", it5.stats());

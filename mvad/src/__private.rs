@@ -3,7 +3,10 @@
 //! runtime crate.
 
 pub use mvad_dsl::ir::sign;
-pub use mvad_runtime::{Direction, EventInfo, HybridModel, ModelInfo, Switches};
+pub use mvad_runtime::{
+    Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
+    ModelSens, Point, Switches,
+};
 pub use nalgebra::{Const, OMatrix, OVector};
 
 /// Owned names from string literals (builds `ModelInfo` lists).

@@ -14,7 +14,10 @@ use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Point};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
-use mvad_runtime::{EventInfo, HybridModel, ModelInfo, Switches};
+use mvad_runtime::{
+    EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
+    Switches,
+};
 use nalgebra::{DMatrix, DVector, Dyn};
 
 /// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
@@ -168,19 +171,19 @@ impl InterpretedModel {
     fn with<R>(
         &self,
         tape: &Tape,
-        at: &Point<'_>,
+        at: &At<'_>,
         f: impl FnOnce(bool, &[f64], &mut [f64]) -> R,
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        let ok = tape.run(at, regs);
+        let ok = tape.run_with(&at.pt, at.hi, regs);
         f(ok, regs, out)
     }
 
     /// Writes a vector kernel into `v` (dense, zeros included).
-    fn vec_out(&self, tape: &Tape, at: &Point<'_>, v: &mut X) {
+    fn vec_out(&self, tape: &Tape, at: &At<'_>, v: &mut X) {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval(at, &mut sc.regs, v.as_mut_slice());
+        tape.eval_with(&at.pt, at.hi, &mut sc.regs, v.as_mut_slice());
     }
 
     /// Writes a row-major matrix block of a kernel (slots `off..off + rows·cols`) into `m`.
@@ -201,23 +204,23 @@ impl InterpretedModel {
         }
     }
 
-    fn mat(&self, tape: &Tape, at: &Point<'_>, m: &mut M, cols: usize) {
+    fn mat(&self, tape: &Tape, at: &At<'_>, m: &mut M, cols: usize) {
         self.with(tape, at, |ok, regs, _| {
             Self::mat_out(tape, ok, regs, m, cols, 0)
         });
     }
 
-    fn scalar(&self, tape: &Tape, at: &Point<'_>) -> f64 {
+    fn scalar(&self, tape: &Tape, at: &At<'_>) -> f64 {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_scalar(at, &mut sc.regs)
+        tape.eval_scalar_with(&at.pt, at.hi, &mut sc.regs)
     }
 
     /// Gradient kernel into `gx`, `gp`; returns the last slot.
-    fn grad(&self, g: &GradTapes, at: &Point<'_>, gx: &mut X, gp: &mut X) -> f64 {
+    fn grad(&self, g: &GradTapes, at: &At<'_>, gx: &mut X, gp: &mut X) -> f64 {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        g.grad.eval(at, regs, out);
+        g.grad.eval_with(&at.pt, at.hi, regs, out);
         copy_into(gx.as_mut_slice(), &out[..n]);
         copy_into(gp.as_mut_slice(), &out[n..n + p]);
         out[n + p]
@@ -233,19 +236,57 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
     dst[..k].copy_from_slice(&src[..k]);
 }
 
-fn pt<'a>(t: f64, x: &'a X, p: &'a X, sw: Switches) -> Point<'a> {
-    Point {
-        t,
-        x: x.as_slice(),
-        p: p.as_slice(),
-        sw,
+/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest.
+struct At<'a> {
+    pt: Point<'a>,
+    hi: &'a [u64],
+}
+
+/// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
+fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
+    At {
+        pt: Point {
+            t,
+            x: x.as_slice(),
+            p: p.as_slice(),
+            sw: sw.low_word(),
+        },
+        hi: sw.high_words(),
     }
 }
 
-impl HybridModel for InterpretedModel {
+/// The point (t, x, θ) for pointwise functions (no frozen branches).
+fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
+    At {
+        pt: Point {
+            t,
+            x: x.as_slice(),
+            p: p.as_slice(),
+            sw: 0,
+        },
+        hi: &[],
+    }
+}
+
+/// The point for functions of θ alone (x₀, T).
+fn pt_theta(p: &X) -> At<'_> {
+    At {
+        pt: Point {
+            t: 0.0,
+            x: &[],
+            p: p.as_slice(),
+            sw: 0,
+        },
+        hi: &[],
+    }
+}
+
+impl ModelDims for InterpretedModel {
     type N = Dyn;
     type P = Dyn;
+}
 
+impl HybridModel for InterpretedModel {
     fn info(&self) -> &ModelInfo {
         &self.info
     }
@@ -257,66 +298,50 @@ impl HybridModel for InterpretedModel {
     }
 
     fn initial_state(&self, p: &X, x0: &mut X) {
-        let at = Point {
-            t: 0.0,
-            x: &[],
-            p: p.as_slice(),
-            sw: 0,
-        };
+        let at = pt_theta(p);
         self.vec_out(&self.x0, &at, x0);
     }
     fn initial_state_jac(&self, p: &X, dx0: &mut M) {
-        let at = Point {
-            t: 0.0,
-            x: &[],
-            p: p.as_slice(),
-            sw: 0,
-        };
+        let at = pt_theta(p);
         self.mat(&self.x0_jac, &at, dx0, self.p);
     }
     fn horizon(&self, p: &X) -> Option<f64> {
-        let at = Point {
-            t: 0.0,
-            x: &[],
-            p: p.as_slice(),
-            sw: 0,
-        };
+        let at = pt_theta(p);
         self.horizon.as_ref().map(|(h, _)| self.scalar(h, &at))
     }
     fn horizon_grad(&self, p: &X, dt: &mut X) {
-        let at = Point {
-            t: 0.0,
-            x: &[],
-            p: p.as_slice(),
-            sw: 0,
-        };
+        let at = pt_theta(p);
         match &self.horizon {
             Some((_, g)) => self.vec_out(g, &at, dt),
             None => dt.fill(0.0),
         }
     }
 
-    fn rhs(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, f: &mut X) {
+    fn rhs(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, f: &mut X) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) => self.vec_out(&m.rhs, &pt(t, x, p, sw), f),
+            Some(m) => self.vec_out(&m.rhs, &at_sw(t, x, p, sw), f),
             None => f.fill(f64::NAN),
         }
     }
-    fn rhs_jac_x(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, fx: &mut M) {
+    fn rhs_jac_x(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fx: &mut M) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) => self.mat(&m.jac_x, &pt(t, x, p, sw), fx, self.n),
+            Some(m) => self.mat(&m.jac_x, &at_sw(t, x, p, sw), fx, self.n),
             None => fx.fill(f64::NAN),
         }
     }
-    fn rhs_jac_p(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, fp: &mut M) {
+    fn rhs_jac_p(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fp: &mut M) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) => self.mat(&m.jac_p, &pt(t, x, p, sw), fp, self.p),
+            Some(m) => self.mat(&m.jac_p, &at_sw(t, x, p, sw), fp, self.p),
             None => fp.fill(f64::NAN),
         }
     }
-    fn rhs_dt(&self, mode: usize, sw: Switches, t: f64, x: &X, p: &X, ft: &mut X) {
+    fn rhs_dt(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, ft: &mut X) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
         match self.mode(mode) {
-            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &pt(t, x, p, sw), ft),
+            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &at_sw(t, x, p, sw), ft),
             Some(_) => ft.fill(0.0),
             None => ft.fill(f64::NAN),
         }
@@ -325,56 +350,15 @@ impl HybridModel for InterpretedModel {
         self.mode(mode).is_some_and(|m| m.depends_on_t)
     }
 
-    fn rhs_sens(
-        &self,
-        mode: usize,
-        sw: Switches,
-        t: f64,
-        x: &X,
-        p: &X,
-        s: &M,
-        f: &mut X,
-        ds: &mut M,
-    ) {
-        let Some(m) = self.mode(mode) else {
-            f.fill(f64::NAN);
-            ds.fill(f64::NAN);
-            return;
-        };
-        let (n, np) = (self.n, self.p);
-        let nnz = m.sparsity.len();
-        if s.nrows() != n || s.ncols() != np || ds.nrows() != n || ds.ncols() != np {
-            f.fill(f64::NAN);
-            ds.fill(f64::NAN);
-            return;
-        }
-        let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
-        m.sens.eval(&pt(t, x, p, sw), regs, out);
-        copy_into(f.as_mut_slice(), &out[..n]);
-        let fp = &out[n + nnz..n + nnz + n * np];
-        for r in 0..n {
-            for c in 0..np {
-                ds[(r, c)] = fp[r * np + c];
-            }
-        }
-        for (e, &(r, k)) in m.sparsity.iter().enumerate() {
-            let a = out[n + e];
-            for c in 0..np {
-                ds[(r, c)] += a * s[(k, c)];
-            }
-        }
-    }
-
     fn guard(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
         match self.events.get(event) {
-            Some(e) => self.scalar(&e.guard.value, &pt(t, x, p, 0)),
+            Some(e) => self.scalar(&e.guard.value, &pt0(t, x, p)),
             None => f64::NAN,
         }
     }
     fn guard_grad(&self, event: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
         match self.events.get(event) {
-            Some(e) => self.grad(&e.guard, &pt(t, x, p, 0), gx, gp),
+            Some(e) => self.grad(&e.guard, &pt0(t, x, p), gx, gp),
             None => {
                 gx.fill(f64::NAN);
                 gp.fill(f64::NAN);
@@ -384,7 +368,7 @@ impl HybridModel for InterpretedModel {
     }
     fn reset(&self, event: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
         match self.events.get(event) {
-            Some(e) => self.vec_out(&e.reset, &pt(t, x, p, 0), xplus),
+            Some(e) => self.vec_out(&e.reset, &pt0(t, x, p), xplus),
             None => xplus.fill(f64::NAN),
         }
     }
@@ -397,7 +381,7 @@ impl HybridModel for InterpretedModel {
         };
         let (n, np) = (self.n, self.p);
         let tape = &e.reset_jac;
-        self.with(tape, &pt(t, x, p, 0), |ok, regs, out| {
+        self.with(tape, &pt0(t, x, p), |ok, regs, out| {
             Self::mat_out(tape, ok, regs, rx, n, 0);
             Self::mat_out(tape, ok, regs, rp, np, n * n);
             out[..n].fill(if ok { 0.0 } else { f64::NAN });
@@ -414,13 +398,13 @@ impl HybridModel for InterpretedModel {
 
     fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
         match self.switches.get(j) {
-            Some(s) => self.scalar(&s.value, &pt(t, x, p, 0)),
+            Some(s) => self.scalar(&s.value, &pt0(t, x, p)),
             None => f64::NAN,
         }
     }
     fn switch_grad(&self, j: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
         match self.switches.get(j) {
-            Some(s) => self.grad(s, &pt(t, x, p, 0), gx, gp),
+            Some(s) => self.grad(s, &pt0(t, x, p), gx, gp),
             None => {
                 gx.fill(f64::NAN);
                 gp.fill(f64::NAN);
@@ -434,7 +418,8 @@ impl HybridModel for InterpretedModel {
             return;
         }
         let mut sc = self.scratch.borrow_mut();
-        self.observe.eval(&pt(t, x, p, 0), &mut sc.regs, y);
+        let at = pt0(t, x, p);
+        self.observe.eval_with(&at.pt, at.hi, &mut sc.regs, y);
     }
     fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
         let nobs = self.info.observables.len();
@@ -443,7 +428,7 @@ impl HybridModel for InterpretedModel {
             return;
         }
         let tape = &self.observe_jac;
-        self.with(tape, &pt(t, x, p, 0), |ok, regs, _| {
+        self.with(tape, &pt0(t, x, p), |ok, regs, _| {
             let fill = if ok { 0.0 } else { f64::NAN };
             yx.iter_mut().take(nobs * n).for_each(|v| *v = fill);
             yp.iter_mut().take(nobs * np).for_each(|v| *v = fill);
@@ -463,15 +448,23 @@ impl HybridModel for InterpretedModel {
         });
     }
 
-    fn running_cost(&self, sw: Switches, t: f64, x: &X, p: &X) -> f64 {
+    fn running_cost(&self, sw: &Switches, t: f64, x: &X, p: &X) -> f64 {
         match &self.running_cost {
-            Some(c) => self.scalar(&c.value, &pt(t, x, p, sw)),
+            Some(c) => self.scalar(&c.value, &at_sw(t, x, p, sw)),
             None => 0.0,
         }
     }
-    fn running_cost_grad(&self, sw: Switches, t: f64, x: &X, p: &X, lx: &mut X, lp: &mut X) -> f64 {
+    fn running_cost_value_grad(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &X,
+        p: &X,
+        lx: &mut X,
+        lp: &mut X,
+    ) -> f64 {
         match &self.running_cost {
-            Some(c) => self.grad(c, &pt(t, x, p, sw), lx, lp),
+            Some(c) => self.grad(c, &at_sw(t, x, p, sw), lx, lp),
             None => {
                 lx.fill(0.0);
                 lp.fill(0.0);
@@ -481,13 +474,13 @@ impl HybridModel for InterpretedModel {
     }
     fn event_cost(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.scalar(&c.value, &pt(t, x, p, 0)),
+            Some(c) => self.scalar(&c.value, &pt0(t, x, p)),
             None => 0.0,
         }
     }
     fn event_cost_grad(&self, event: usize, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.grad(c, &pt(t, x, p, 0), cx, cp),
+            Some(c) => self.grad(c, &pt0(t, x, p), cx, cp),
             None => {
                 cx.fill(0.0);
                 cp.fill(0.0);
@@ -497,13 +490,13 @@ impl HybridModel for InterpretedModel {
     }
     fn final_cost(&self, t: f64, x: &X, p: &X) -> f64 {
         match &self.final_cost {
-            Some(c) => self.scalar(&c.value, &pt(t, x, p, 0)),
+            Some(c) => self.scalar(&c.value, &pt0(t, x, p)),
             None => 0.0,
         }
     }
     fn final_cost_grad(&self, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
         match &self.final_cost {
-            Some(c) => self.grad(c, &pt(t, x, p, 0), cx, cp),
+            Some(c) => self.grad(c, &pt0(t, x, p), cx, cp),
             None => {
                 cx.fill(0.0);
                 cp.fill(0.0);
@@ -512,3 +505,47 @@ impl HybridModel for InterpretedModel {
         }
     }
 }
+
+impl ModelSens for InterpretedModel {
+    fn rhs_sens(
+        &self,
+        pt: mvad_runtime::Point<'_, Self::N, Self::P>,
+        s: &M,
+        f: &mut X,
+        ds: &mut M,
+    ) {
+        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
+        let Some(m) = self.mode(mode) else {
+            f.fill(f64::NAN);
+            ds.fill(f64::NAN);
+            return;
+        };
+        let (n, np) = (self.n, self.p);
+        let nnz = m.sparsity.len();
+        if s.nrows() != n || s.ncols() != np || ds.nrows() != n || ds.ncols() != np {
+            f.fill(f64::NAN);
+            ds.fill(f64::NAN);
+            return;
+        }
+        let mut sc = self.scratch.borrow_mut();
+        let Scratch { regs, out } = &mut *sc;
+        let at = at_sw(t, x, p, sw);
+        m.sens.eval_with(&at.pt, at.hi, regs, out);
+        copy_into(f.as_mut_slice(), &out[..n]);
+        let fp = &out[n + nnz..n + nnz + n * np];
+        for r in 0..n {
+            for c in 0..np {
+                ds[(r, c)] = fp[r * np + c];
+            }
+        }
+        for (e, &(r, k)) in m.sparsity.iter().enumerate() {
+            let a = out[n + e];
+            for c in 0..np {
+                ds[(r, c)] += a * s[(k, c)];
+            }
+        }
+    }
+}
+
+impl ModelAdjoint for InterpretedModel {}
+impl ModelSecondOrder for InterpretedModel {}

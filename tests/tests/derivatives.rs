@@ -137,6 +137,7 @@ pub fn check_model<M: HybridModel>(m: &M, pt: &Pt, sw: u64, rng: &mut Rng)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let sw = &mvad::Switches::from_bits(sw);
     let info = m.info().clone();
     let n = pt.x.len();
     let p = pt.p.len();
@@ -151,15 +152,18 @@ where
     for mode in 0..info.modes.len() {
         let f = |q: &Pt| {
             let mut f = zn();
-            m.rhs(mode, sw, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut f);
+            m.rhs(
+                mvad::Point::new(mode, sw, q.t, &vn(m, &q.x), &vp(m, &q.p)),
+                &mut f,
+            );
             f.as_slice().to_vec()
         };
         let mut fx = znn();
-        m.rhs_jac_x(mode, sw, t, &x, &pv, &mut fx);
+        m.rhs_jac_x(mvad::Point::new(mode, sw, t, &x, &pv), &mut fx);
         let mut fp = znp();
-        m.rhs_jac_p(mode, sw, t, &x, &pv, &mut fp);
+        m.rhs_jac_p(mvad::Point::new(mode, sw, t, &x, &pv), &mut fp);
         let mut ft = zn();
-        m.rhs_dt(mode, sw, t, &x, &pv, &mut ft);
+        m.rhs_dt(mvad::Point::new(mode, sw, t, &x, &pv), &mut ft);
         let what = format!("{} mode {mode} f", info.name);
         fd_check(&what, pt, Wrt::X, &rows(&fx), &f);
         fd_check(&what, pt, Wrt::P, &rows(&fp), &f);
@@ -186,7 +190,7 @@ where
         let mut s = znp();
         s.iter_mut().for_each(|v| *v = rng.range(-1.0, 1.0));
         let (mut f1, mut ds) = (zn(), znp());
-        m.rhs_sens(mode, sw, t, &x, &pv, &s, &mut f1, &mut ds);
+        m.rhs_sens(mvad::Point::new(mode, sw, t, &x, &pv), &s, &mut f1, &mut ds);
         let want = &fx * &s + &fp;
         assert_eq!(f1.as_slice(), f(pt).as_slice(), "{what}: rhs_sens f");
         for (a, b) in ds.iter().zip(want.iter()) {
@@ -252,8 +256,8 @@ where
     // Costs.
     let l = |q: &Pt| vec![m.running_cost(sw, q.t, &vn(m, &q.x), &vp(m, &q.p))];
     let (mut lx, mut lp) = (zn(), zp());
-    let lv = m.running_cost_grad(sw, t, &x, &pv, &mut lx, &mut lp);
-    assert_eq!(lv, l(pt)[0], "running_cost_grad returns ℓ");
+    let lv = m.running_cost_value_grad(sw, t, &x, &pv, &mut lx, &mut lp);
+    assert_eq!(lv, l(pt)[0], "running_cost_value_grad returns ℓ");
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
     let phi = |q: &Pt| vec![m.final_cost(q.t, &vn(m, &q.x), &vp(m, &q.p))];

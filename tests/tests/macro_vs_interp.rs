@@ -30,6 +30,7 @@ fn snapshot<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let sw = &mvad::Switches::from_bits(sw);
     let info = m.info().clone();
     let (nd, pd) = (m.nstates(), m.nparams());
     let zn = || OVector::<f64, M::N>::zeros_generic(nd, Const::<1>);
@@ -58,23 +59,28 @@ where
 
     for mode in 0..info.modes.len() {
         let mut f = zn();
-        m.rhs(mode, sw, t, &xv, &pv, &mut f);
+        m.rhs(mvad::Point::new(mode, sw, t, &xv, &pv), &mut f);
         put(format!("f{mode}"), f.as_slice());
         let mut fx = znn();
-        m.rhs_jac_x(mode, sw, t, &xv, &pv, &mut fx);
+        m.rhs_jac_x(mvad::Point::new(mode, sw, t, &xv, &pv), &mut fx);
         put(format!("fx{mode}"), fx.as_slice());
         let mut fp = znp();
-        m.rhs_jac_p(mode, sw, t, &xv, &pv, &mut fp);
+        m.rhs_jac_p(mvad::Point::new(mode, sw, t, &xv, &pv), &mut fp);
         put(format!("fp{mode}"), fp.as_slice());
         let mut ft = zn();
-        m.rhs_dt(mode, sw, t, &xv, &pv, &mut ft);
+        m.rhs_dt(mvad::Point::new(mode, sw, t, &xv, &pv), &mut ft);
         put(format!("ft{mode}"), ft.as_slice());
         put(
             format!("dep_t{mode}"),
             &[f64::from(u8::from(m.rhs_depends_on_t(mode)))],
         );
         let (mut f2, mut ds) = (zn(), znp());
-        m.rhs_sens(mode, sw, t, &xv, &pv, &sv, &mut f2, &mut ds);
+        m.rhs_sens(
+            mvad::Point::new(mode, sw, t, &xv, &pv),
+            &sv,
+            &mut f2,
+            &mut ds,
+        );
         put(format!("sens_f{mode}"), f2.as_slice());
         put(format!("sens_ds{mode}"), ds.as_slice());
     }
@@ -118,7 +124,7 @@ where
     put("yp".into(), &yp);
     put("l".into(), &[m.running_cost(sw, t, &xv, &pv)]);
     let (mut lx, mut lp) = (zn(), zp());
-    let l2 = m.running_cost_grad(sw, t, &xv, &pv, &mut lx, &mut lp);
+    let l2 = m.running_cost_value_grad(sw, t, &xv, &pv, &mut lx, &mut lp);
     put("lx".into(), lx.as_slice());
     put("lp".into(), lp.as_slice());
     put("l2".into(), &[l2]);

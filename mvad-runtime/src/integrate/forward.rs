@@ -9,7 +9,7 @@
 //!
 //! f and f_x S + f_θ come from [`HybridModel::rhs_sens`] (or f alone from
 //! [`HybridModel::rhs`] without sensitivities), ℓ, ℓ_x, ℓ_θ from
-//! [`HybridModel::running_cost_grad`] (only when the model has a running cost; otherwise q ≡ 0).
+//! [`HybridModel::running_cost_value_grad`] (only when the model has a running cost; otherwise q ≡ 0).
 //!
 //! ## The augmented Jacobian, factorised once (for Rodas5P)
 //! J = ∂F/∂Y is block lower triangular:
@@ -28,7 +28,7 @@
 //! K_q = hγ (R_q + ℓ_x K_x), K_{q_θ} = hγ (R_{q_θ} + D K_x + K_Sᵀ ℓ_x).
 //! f_x is the model's symbolic Jacobian; the second-derivative actions B K_x and D K_x (the
 //! model has no second derivatives) are central directional differences of `rhs_sens` /
-//! `running_cost_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
+//! `running_cost_value_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
 //! Central differences are exact when f_x S + f_θ is at most quadratic in x, and perturb J by
 //! O(1e-8) relative for cubic terms; the step is far larger than the usual ε^(1/3) because
 //! models with cancellation inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the
@@ -42,7 +42,7 @@ use super::aug::{axpy_slice, weighted_rms, AugState};
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem};
 use super::Integrator;
-use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -131,7 +131,7 @@ where
                 model,
                 p,
                 mode: model.info().initial_mode,
-                sw: 0,
+                sw: Switches::new(model.info().switches),
                 sens: opts.sensitivities,
                 has_rc: model.info().has_running_cost,
                 lx: OVector::zeros_generic(n, Const::<1>),
@@ -171,11 +171,14 @@ where
         self.evals += 1;
         if self.sens {
             self.model.rhs_sens(
-                self.mode, self.sw, t, &y.x, self.p, &y.s, &mut out.x, &mut out.s,
+                Point::new(self.mode, &self.sw, t, &y.x, self.p),
+                &y.s,
+                &mut out.x,
+                &mut out.s,
             );
         } else {
             self.model
-                .rhs(self.mode, self.sw, t, &y.x, self.p, &mut out.x);
+                .rhs(Point::new(self.mode, &self.sw, t, &y.x, self.p), &mut out.x);
         }
         if !self.has_rc {
             out.q = 0.0;
@@ -183,13 +186,18 @@ where
                 out.qp.fill(0.0);
             }
         } else if self.sens {
-            out.q =
-                self.model
-                    .running_cost_grad(self.sw, t, &y.x, self.p, &mut self.lx, &mut self.lp);
+            out.q = self.model.running_cost_value_grad(
+                &self.sw,
+                t,
+                &y.x,
+                self.p,
+                &mut self.lx,
+                &mut self.lp,
+            );
             out.qp.copy_from(&self.lp);
             out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
         } else {
-            out.q = self.model.running_cost(self.sw, t, &y.x, self.p);
+            out.q = self.model.running_cost(&self.sw, t, &y.x, self.p);
         }
     }
 }
@@ -279,11 +287,11 @@ where
     /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0).
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
         let Forward { rhs, imp: w, .. } = self;
-        let (model, p, mode, sw) = (rhs.model, rhs.p, rhs.mode, rhs.sw);
-        model.rhs_jac_x(mode, sw, t0, &y0.x, p, &mut w.w.jac);
+        let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
+        model.rhs_jac_x(Point::new(mode, &rhs.sw, t0, &y0.x, p), &mut w.w.jac);
         w.w.power_iteration();
         if rhs.has_rc {
-            model.running_cost_grad(sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
+            model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
         } else {
             w.lx0.fill(0.0);
         }
@@ -315,7 +323,7 @@ where
             w.dt.q = 0.0;
             w.dt.qp.fill(0.0);
         }
-        model.rhs_dt(mode, sw, t0, &y0.x, p, &mut w.dt.x);
+        model.rhs_dt(Point::new(mode, &rhs.sw, t0, &y0.x, p), &mut w.dt.x);
         if rhs.sens {
             w.ypert.s.copy_from(&y0.s);
         }
@@ -396,8 +404,10 @@ where
 
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
-        rhs.model
-            .rhs_jac_x(rhs.mode, rhs.sw, t, &y.x, rhs.p, &mut self.imp.w.jac);
+        rhs.model.rhs_jac_x(
+            Point::new(rhs.mode, &rhs.sw, t, &y.x, rhs.p),
+            &mut self.imp.w.jac,
+        );
         self.imp.w.power_iteration()
     }
 
@@ -422,9 +432,9 @@ where
     /// Must be called at the start and after every event, mode switch or switch flip. Under
     /// `auto` the method in use (explicit or implicit) is kept: stiffness is a property of the
     /// model that usually survives an event, and the switch-back test runs on every step.
-    pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: Switches) {
+    pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: &Switches) {
         self.sys.rhs.mode = mode;
-        self.sys.rhs.sw = sw;
+        self.sys.rhs.sw.clone_from(sw);
         self.restart_at(t, y);
     }
 
@@ -433,7 +443,7 @@ where
         self.sys.rhs.mode
     }
     /// Current frozen switch bits.
-    pub fn switches(&self) -> Switches {
-        self.sys.rhs.sw
+    pub fn switches(&self) -> &Switches {
+        &self.sys.rhs.sw
     }
 }

@@ -3,7 +3,9 @@
 
 use super::{AugState, Integrator, StepError};
 use crate::fixtures::Ball;
-use crate::model::{HybridModel, ModelInfo, Switches};
+use crate::model::{
+    HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Point, Switches,
+};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -41,9 +43,16 @@ fn parts(y: &AugState<N, P>) -> [f64; 4] {
     [y.x[0], y.s[(0, 0)], y.q, y.qp[0]]
 }
 
-impl HybridModel for Decay {
+impl ModelSens for Decay {}
+impl ModelAdjoint for Decay {}
+impl ModelSecondOrder for Decay {}
+
+impl ModelDims for Decay {
     type N = N;
     type P = P;
+}
+
+impl HybridModel for Decay {
     fn info(&self) -> &ModelInfo {
         &self.info
     }
@@ -65,32 +74,44 @@ impl HybridModel for Decay {
     fn horizon_grad(&self, _p: &Th, dt: &mut Th) {
         dt.fill(0.0);
     }
-    fn rhs(&self, _m: usize, _sw: Switches, _t: f64, x: &X, p: &Th, f: &mut X) {
+    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x,
+            p,
+        } = pt;
         f[0] = -p[0] * x[0];
     }
-    fn rhs_jac_x(
-        &self,
-        _m: usize,
-        _sw: Switches,
-        _t: f64,
-        _x: &X,
-        p: &Th,
-        fx: &mut OMatrix<f64, N, N>,
-    ) {
+    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p,
+        } = pt;
         fx[(0, 0)] = -p[0];
     }
-    fn rhs_jac_p(
-        &self,
-        _m: usize,
-        _sw: Switches,
-        _t: f64,
-        x: &X,
-        _p: &Th,
-        fp: &mut OMatrix<f64, N, P>,
-    ) {
+    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x,
+            p: _p,
+        } = pt;
         fp[(0, 0)] = -x[0];
     }
-    fn rhs_dt(&self, _m: usize, _sw: Switches, _t: f64, _x: &X, _p: &Th, ft: &mut X) {
+    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
+        let Point {
+            mode: _m,
+            sw: _sw,
+            t: _t,
+            x: _x,
+            p: _p,
+        } = pt;
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
@@ -131,12 +152,12 @@ impl HybridModel for Decay {
     }
     fn observe(&self, _t: f64, _x: &X, _p: &Th, _y: &mut [f64]) {}
     fn observe_jac(&self, _t: f64, _x: &X, _p: &Th, _yx: &mut [f64], _yp: &mut [f64]) {}
-    fn running_cost(&self, _sw: Switches, _t: f64, x: &X, _p: &Th) -> f64 {
+    fn running_cost(&self, _sw: &Switches, _t: f64, x: &X, _p: &Th) -> f64 {
         x[0]
     }
-    fn running_cost_grad(
+    fn running_cost_value_grad(
         &self,
-        _sw: Switches,
+        _sw: &Switches,
         _t: f64,
         x: &X,
         _p: &Th,
@@ -211,13 +232,13 @@ fn backward_steps_match_the_closed_form_and_the_forward_run() {
         };
         // Forward 0 → T, then backward T → 0 from the exact end state.
         let mut fwd = Integrator::new(&m, &p, &opts);
-        fwd.restart(0.0, &state(exact(a, 0.0)), 0, 0);
+        fwd.restart(0.0, &state(exact(a, 0.0)), 0, &Switches::default());
         while fwd.t() < t_end {
             fwd.step(t_end).unwrap();
         }
         assert_close(parts(fwd.y()), exact(a, t_end), tol, "forward end");
         let mut bwd = Integrator::new(&m, &p, &opts);
-        bwd.restart(t_end, &state(exact(a, t_end)), 0, 0);
+        bwd.restart(t_end, &state(exact(a, t_end)), 0, &Switches::default());
         let mut mid = AugState::zeros(Const::<1>, Const::<1>);
         let mut seen_mid = false;
         while bwd.t() > 0.0 {
@@ -248,7 +269,7 @@ fn backward_steps_match_the_closed_form_and_the_forward_run() {
             "{method:?}: {sf} vs {sb} steps"
         );
         // Truncating a backward step lands on the dense output.
-        bwd.restart(t_end, &state(exact(a, t_end)), 0, 0);
+        bwd.restart(t_end, &state(exact(a, t_end)), 0, &Switches::default());
         bwd.step(0.0).unwrap();
         let cut = 0.5 * (bwd.t() + bwd.t_prev());
         bwd.dense(cut, &mut mid);
@@ -256,7 +277,7 @@ fn backward_steps_match_the_closed_form_and_the_forward_run() {
         assert_eq!(bwd.t(), cut);
         assert_eq!(parts(bwd.y()), parts(&mid));
         // Fixed steps: h = −T/n from T reaches 0 and the same end.
-        bwd.restart(t_end, &state(exact(a, t_end)), 0, 0);
+        bwd.restart(t_end, &state(exact(a, t_end)), 0, &Switches::default());
         for _ in 0..400 {
             bwd.step_fixed(-t_end / 400.0).unwrap();
         }
@@ -282,7 +303,7 @@ fn nonfinite_start_is_an_error() {
     let mut it = Integrator::new(&ball, &p, &opts);
     let mut y = AugState::zeros(Const::<2>, Const::<4>);
     y.x[0] = 2.0;
-    it.restart(0.0, &y, 0, 0);
+    it.restart(0.0, &y, 0, &Switches::default());
     match it.step(1.0) {
         Err(StepError::NonFinite { what, .. }) => {
             assert!(what.contains("flow of mode"), "{what}")

@@ -4,7 +4,7 @@
 use super::zeno::ZENO_RATIOS;
 use super::Driver;
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{final_terms, FinalWork};
 use crate::solution::{Diagnostic, DiagnosticKind, Solution, Stats};
 use nalgebra::{Const, DefaultAllocator, OVector};
@@ -35,25 +35,25 @@ where
             cost = acc.cost;
             self.report_accumulation(acc.t_star, ratio);
             if let Some(rec) = &mut self.rec {
-                rec.hold(t_end, &x_final, &s_final, self.mode, self.sw);
+                rec.hold(t_end, &x_final, &s_final, self.mode, &self.sw);
             }
             // The state is at rest at T.
             f_end = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
         } else {
             if let Some(rec) = &mut self.rec {
-                rec.close_segment(t_end, self.mode, self.sw);
+                rec.close_segment(t_end, self.mode, &self.sw);
             }
             let y = self.integ.y();
             cost = y.q + self.c_ev;
             grad.copy_from(&y.qp);
             grad += &self.g_ev;
-            model.rhs(self.mode, self.sw, t_end, &y.x, p, &mut fw.f);
+            model.rhs(Point::new(self.mode, &self.sw, t_end, &y.x, p), &mut fw.f);
             f_end = fw.f.clone();
         }
         cost += final_terms(
             model,
             p,
-            self.sw,
+            &self.sw,
             t_end,
             &x_final,
             &s_final,

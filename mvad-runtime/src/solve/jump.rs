@@ -4,7 +4,7 @@
 
 use super::Driver;
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::sens;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind};
@@ -35,9 +35,9 @@ where
         sink: &mut impl EventSink,
     ) -> Result<bool, SolveError> {
         let approach = self.event_approach(k, t)?;
-        let (mode_before, sw_before) = (self.mode, self.sw);
-        let sw_after = self.event_reset(k, t)?;
-        let l_plus = self.event_costs(k, t, sw_before, sw_after)?;
+        let mode_before = self.mode;
+        self.event_reset(k, t)?;
+        let l_plus = self.event_costs(k, t)?;
         let zeno_stop = self.zeno_verdict(t, l_plus, approach.grazing, approach.slope);
         self.emit_event(k, t, mode_before, approach, sink);
         let graze_scale = self.opts.grazing_tol * self.gx.norm() * self.f_minus.norm();
@@ -45,7 +45,7 @@ where
         let stuck = zeno_stop.is_none()
             && self.model.info().events[k].armed_in(mode_after)
             && t < self.t_end
-            && self.stuck_after_reset(k, t, mode_after, sw_after, approach.slope + approach.gt);
+            && self.stuck_after_reset(k, t, mode_after, approach.slope + approach.gt);
         if approach.grazing && zeno_stop.is_none() && !stuck {
             self.report_grazing(k, t, approach.slope, graze_scale);
         }
@@ -54,7 +54,7 @@ where
         if self.sens {
             self.y.s.copy_from(&self.s_plus);
         }
-        self.sw = sw_after;
+        std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.fired[k] = true;
         if zeno_stop.is_some() {
             self.zeno_stop = zeno_stop;
@@ -72,7 +72,10 @@ where
         let info = model.info();
         let name = &info.events[k].name;
         self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
-        model.rhs(self.mode, self.sw, t, &self.y.x, p, &mut self.f_minus);
+        model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, p),
+            &mut self.f_minus,
+        );
         self.nonfinite_x(t, &self.f_minus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
@@ -118,20 +121,22 @@ where
         )
     }
 
-    /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (returned, bits
-    /// with σ_j = 0 keep their old value), f⁺ and, with sensitivities, S⁺ by the saltation
+    /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
+    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ and, with sensitivities, S⁺ by the saltation
     /// jump (see [`sens::jump`]) into `self.s_plus`.
-    fn event_reset(&mut self, k: usize, t: f64) -> Result<Switches, SolveError> {
+    fn event_reset(&mut self, k: usize, t: f64) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
         let ev = &info.events[k];
         model.reset(k, t, &self.y.x, p, &mut self.x_plus);
         self.nonfinite_x(t, &self.x_plus, || format!("reset of event `{}`", ev.name))?;
-        let sw_before = self.sw;
         let mode_after = ev.target.unwrap_or(self.mode);
         self.mode = mode_after;
-        let sw_after = self.switch_bits(t, true, Some(sw_before));
-        model.rhs(mode_after, sw_after, t, &self.x_plus, p, &mut self.f_plus);
+        self.switch_bits(t, true, true);
+        model.rhs(
+            Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
+            &mut self.f_plus,
+        );
         self.nonfinite_x(t, &self.f_plus, || {
             format!("flow of mode `{}`", info.modes[mode_after])
         })?;
@@ -155,25 +160,19 @@ where
                 });
             }
         }
-        Ok(sw_after)
+        Ok(())
     }
 
     /// The cost terms event k moves: the running-cost jump (ℓ⁻ − ℓ⁺)·t' into q_θ, the total
     /// derivative S⁺ + f⁺t' of the post-event state into `self.dtot`, and the event cost φ_k
     /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ. Returns ℓ⁺ (0 without a running cost).
-    fn event_costs(
-        &mut self,
-        k: usize,
-        t: f64,
-        sw_before: Switches,
-        sw_after: Switches,
-    ) -> Result<f64, SolveError> {
+    fn event_costs(&mut self, k: usize, t: f64) -> Result<f64, SolveError> {
         let (model, p, sens) = (self.model, self.p, self.sens);
         let info = model.info();
         let mut l_plus = 0.0;
         if info.has_running_cost {
-            let l_minus = model.running_cost(sw_before, t, &self.y.x, p);
-            l_plus = model.running_cost(sw_after, t, &self.x_plus, p);
+            let l_minus = model.running_cost(&self.sw, t, &self.y.x, p);
+            l_plus = model.running_cost(&self.sw_next, t, &self.x_plus, p);
             if !(l_minus.is_finite() && l_plus.is_finite()) {
                 return Err(SolveError::NonFinite {
                     t,
@@ -257,10 +256,16 @@ where
     pub(super) fn apply_switch(&mut self, j: usize, t: f64) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
-        let sw_before = self.sw;
-        let sw_after = sw_before ^ (1 << j);
-        model.rhs(self.mode, sw_before, t, &self.y.x, p, &mut self.f_minus);
-        model.rhs(self.mode, sw_after, t, &self.y.x, p, &mut self.f_plus);
+        self.sw_next.clone_from(&self.sw);
+        self.sw_next.flip(j);
+        model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, p),
+            &mut self.f_minus,
+        );
+        model.rhs(
+            Point::new(self.mode, &self.sw_next, t, &self.y.x, p),
+            &mut self.f_plus,
+        );
         self.nonfinite_x(t, &self.f_plus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
@@ -290,12 +295,12 @@ where
                 &mut self.work,
             );
             if info.has_running_cost {
-                let l_minus = model.running_cost(sw_before, t, &self.y.x, p);
-                let l_plus = model.running_cost(sw_after, t, &self.y.x, p);
+                let l_minus = model.running_cost(&self.sw, t, &self.y.x, p);
+                let l_plus = model.running_cost(&self.sw_next, t, &self.y.x, p);
                 self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
             }
         }
-        self.sw = sw_after;
+        std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.switch_crossings += 1;
         Ok(())
     }

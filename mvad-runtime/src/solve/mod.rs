@@ -32,7 +32,7 @@ mod zeno;
 use crate::error::SolveError;
 use crate::event::{Scanner, Watch};
 use crate::integrate::{AugState, Forward, Integrator};
-use crate::model::{HybridModel, ModelAlloc, Switches, MAX_SWITCHES};
+use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, Options, Solution};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
@@ -131,12 +131,6 @@ where
             info.initial_mode, nmodes
         ));
     }
-    if info.switches > MAX_SWITCHES {
-        return bad_model(format!(
-            "{} switching functions (at most {MAX_SWITCHES})",
-            info.switches
-        ));
-    }
     if info.states.len() != model.nstates().value() {
         return bad_model("state names and state dimension disagree".into());
     }
@@ -166,7 +160,12 @@ where
     y: AugState<M::N, M::P>,
     aug_tmp: AugState<M::N, M::P>,
     mode: usize,
+    /// The frozen switch bits in force.
     sw: Switches,
+    /// The bits after a pending event or flip (swapped into `sw` when it is applied).
+    sw_next: Switches,
+    /// Scratch: switching functions at exactly zero when the bits are first decided.
+    sw_undecided: Switches,
     scanner: Scanner,
     xs: OVector<f64, M::N>,
     xe: OVector<f64, M::N>,
@@ -232,7 +231,9 @@ where
             y: AugState::zeros(n, np),
             aug_tmp: AugState::zeros(n, np),
             mode: info.initial_mode,
-            sw: 0,
+            sw: Switches::new(info.switches),
+            sw_next: Switches::new(info.switches),
+            sw_undecided: Switches::new(info.switches),
             scanner: Scanner::new(nev, info.switches),
             xs: vn(),
             xe: vn(),
@@ -284,44 +285,49 @@ where
         }
     }
 
-    /// Switch bits at (t, x) in `mode`: bit j set iff σ_j > 0; for σ_j = 0 exactly, the bit of
-    /// `hint` is kept, or at the start (hint = None) the sign of σ̇_j under the other bits.
-    fn switch_bits(&mut self, t: f64, x_is_plus: bool, hint: Option<Switches>) -> Switches {
+    /// Switch bits at (t, x) in `mode` into `self.sw_next`: bit j set iff σ_j > 0; for σ_j = 0
+    /// exactly, the bit of `self.sw` is kept (`keep`), or at the start (`keep` false) the sign
+    /// of σ̇_j under the other bits decides.
+    fn switch_bits(&mut self, t: f64, x_is_plus: bool, keep: bool) {
         let nsw = self.model.info().switches;
-        let mut bits: Switches = 0;
-        let mut undecided: Switches = 0;
+        self.sw_next.clear();
+        self.sw_undecided.clear();
+        let mut undecided = false;
         for j in 0..nsw {
             let x = if x_is_plus { &self.x_plus } else { &self.y.x };
             let s = self.model.switch_value(j, t, x, self.p);
             if s > 0.0 {
-                bits |= 1 << j;
+                self.sw_next.set(j, true);
             } else if s == 0.0 {
-                match hint {
-                    Some(h) => bits |= h & (1 << j),
-                    None => undecided |= 1 << j,
+                if keep {
+                    self.sw_next.set(j, self.sw.get(j));
+                } else {
+                    self.sw_undecided.set(j, true);
+                    undecided = true;
                 }
             }
         }
-        if undecided != 0 {
+        if undecided {
             let x = if x_is_plus {
                 self.x_plus.clone()
             } else {
                 self.y.x.clone()
             };
-            self.model
-                .rhs(self.mode, bits, t, &x, self.p, &mut self.work);
+            self.model.rhs(
+                Point::new(self.mode, &self.sw_next, t, &x, self.p),
+                &mut self.work,
+            );
             for j in 0..nsw {
-                if undecided & (1 << j) != 0 {
+                if self.sw_undecided.get(j) {
                     let st = self
                         .model
                         .switch_grad(j, t, &x, self.p, &mut self.gx, &mut self.gp);
                     if self.gx.dot(&self.work) + st > 0.0 {
-                        bits |= 1 << j;
+                        self.sw_next.set(j, true);
                     }
                 }
             }
         }
-        bits
     }
 
     /// Signed watched value of function w at (t, x) under bits `sw` (see [`crate::event`]).
@@ -329,7 +335,7 @@ where
         model: &M,
         p: &OVector<f64, M::P>,
         nev: usize,
-        sw: Switches,
+        sw: &Switches,
         w: usize,
         t: f64,
         x: &OVector<f64, M::N>,
@@ -339,7 +345,7 @@ where
         } else {
             let j = w - nev;
             let s = model.switch_value(j, t, x, p);
-            if sw & (1 << j) != 0 {
+            if sw.get(j) {
                 -s
             } else {
                 s
@@ -354,7 +360,7 @@ where
         for w in 0..self.scanner.len() {
             let active = w >= nev || info.events[w].armed_in(self.mode);
             let v = if active {
-                Self::signed(self.model, self.p, nev, self.sw, w, t, &self.y.x)
+                Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
             } else {
                 0.0
             };
@@ -365,7 +371,7 @@ where
             self.scanner.restart_one(w, active, v, fired);
         }
         self.fired.fill(false);
-        self.integ.restart(t, &self.y, self.mode, self.sw);
+        self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
         }
@@ -391,7 +397,8 @@ where
         if self.sens {
             model.initial_state_jac(p, &mut self.y.s);
         }
-        self.sw = self.switch_bits(0.0, false, None);
+        self.switch_bits(0.0, false, false);
+        std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.restart(0.0)?;
         let nev = info.events.len();
         while self.integ.t() < self.t_end {
@@ -404,7 +411,7 @@ where
                 self.integ.ensure_dense();
             }
             let (t0, t1) = (self.integ.t_prev(), self.integ.t());
-            let sw = self.sw;
+            let sw = &self.sw;
             {
                 let integ = &self.integ;
                 let xs = &mut self.xs;
@@ -444,7 +451,7 @@ where
             self.integ.truncate(te);
             self.y.copy_from(self.integ.y());
             if let Some(rec) = &mut self.rec {
-                rec.close_segment(te, self.mode, self.sw);
+                rec.close_segment(te, self.mode, &self.sw);
             }
             let nfound = self.scanner.found.len();
             let mut user = 0;

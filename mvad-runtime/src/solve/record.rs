@@ -60,14 +60,14 @@ impl Recorder {
 
     /// Closes the open segment at t, in `mode` with switch bits `sw` (empty segments, as
     /// between simultaneous events, are dropped).
-    pub(super) fn close_segment(&mut self, t: f64, mode: usize, sw: Switches) {
+    pub(super) fn close_segment(&mut self, t: f64, mode: usize, sw: &Switches) {
         let end_step = self.traj.len();
         if end_step > self.segment_first_step {
             self.traj.segments.push(Segment {
                 t_start: self.segment_start,
                 t_end: t,
                 mode,
-                switches: sw,
+                switches: sw.clone(),
                 first_step: self.segment_first_step,
                 end_step,
             });
@@ -82,7 +82,7 @@ impl Recorder {
         x: &OVector<f64, N>,
         s: &OMatrix<f64, N, P>,
         mode: usize,
-        sw: Switches,
+        sw: &Switches,
     ) where
         DefaultAllocator: ModelAlloc<N, P>,
     {
@@ -104,7 +104,7 @@ impl Recorder {
             t_start: t0,
             t_end,
             mode,
-            switches: sw,
+            switches: sw.clone(),
             first_step: first,
             end_step: first + 1,
         });

@@ -13,7 +13,7 @@
 //! −ℓ(t*, x*) dt*/dθ + ∫ (ℓ_x dx*/dθ + ℓ_θ) dt.
 
 use super::Driver;
-use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{aitken_iterated, FinalWork, GL8};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -193,7 +193,6 @@ where
         k: usize,
         t: f64,
         mode: usize,
-        sw: Switches,
         rate_minus: f64,
     ) -> bool {
         let (model, p) = (self.model, self.p);
@@ -211,7 +210,10 @@ where
         let v_plus = d * model.guard(k, t, &self.x_plus, p);
         self.xs.copy_from(&self.x_plus);
         self.xs.axpy(delta, &self.f_plus, 1.0);
-        model.rhs(mode, sw, t + delta, &self.xs, p, &mut self.work);
+        model.rhs(
+            Point::new(mode, &self.sw_next, t + delta, &self.xs, p),
+            &mut self.work,
+        );
         self.xe.copy_from(&self.x_plus);
         self.xe.axpy(0.5 * delta, &self.f_plus, 1.0);
         self.xe.axpy(0.5 * delta, &self.work, 1.0);
@@ -256,14 +258,15 @@ where
         }
         // Rest on [t*, T]: ∫ ℓ(t, x*) dt by 8-point Gauss–Legendre, and its derivative.
         if model.info().has_running_cost && t_end > t_star {
-            let l_star = model.running_cost(self.sw, t_star, x_final, p);
+            let l_star = model.running_cost(&self.sw, t_star, x_final, p);
             if sens {
                 grad.axpy(-l_star, &dt_star, 1.0);
             }
             let (c0, r0) = (0.5 * (t_star + t_end), 0.5 * (t_end - t_star));
             for &(xi, wi) in &GL8 {
                 let t = c0 + r0 * xi;
-                let l = model.running_cost_grad(self.sw, t, x_final, p, &mut fw.cx, &mut fw.cp);
+                let l =
+                    model.running_cost_value_grad(&self.sw, t, x_final, p, &mut fw.cx, &mut fw.cp);
                 cost += wi * r0 * l;
                 if sens {
                     grad.gemv_tr(wi * r0, s_final, &fw.cx, 1.0);

@@ -4,7 +4,7 @@
 //! ceiling; with a parameter horizon θ3 is T instead of v0 (and v0 = 0).
 
 use super::{ev, info, Sc, Spec};
-use mvad_runtime::model::{Direction, ModelInfo, Switches};
+use mvad_runtime::model::{Direction, ModelInfo};
 
 /// The cost of a [`BallSpec`] run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -131,7 +131,7 @@ impl Spec for BallSpec {
     fn horizon<S: Sc>(&self, p: &[S]) -> Option<S> {
         Some(self.t_end.map_or(p[3], S::cst))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = x[1];
         f[1] = -p[1];
     }
@@ -149,7 +149,7 @@ impl Spec for BallSpec {
         y[0] = x[0];
         y[1] = x[1];
     }
-    fn running<S: Sc>(&self, _sw: Switches, t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, t: S, x: &[S], _p: &[S]) -> S {
         match self.cost {
             BallCost::IntH => x[0],
             BallCost::IntV => x[1],

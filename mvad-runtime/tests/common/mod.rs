@@ -9,7 +9,9 @@ pub mod cases;
 pub mod check;
 pub mod models;
 
-use mvad_runtime::model::{HybridModel, ModelInfo, Switches};
+use mvad_runtime::model::{
+    HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+};
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -206,7 +208,7 @@ pub trait Spec {
     fn info(&self) -> ModelInfo;
     fn x0<S: Sc>(&self, p: &[S], x: &mut [S]);
     fn horizon<S: Sc>(&self, p: &[S]) -> Option<S>;
-    fn rhs<S: Sc>(&self, mode: usize, sw: Switches, t: S, x: &[S], p: &[S], f: &mut [S]);
+    fn rhs<S: Sc>(&self, mode: usize, sw: u64, t: S, x: &[S], p: &[S], f: &mut [S]);
     fn guard<S: Sc>(&self, _k: usize, _t: S, _x: &[S], _p: &[S]) -> S {
         S::cst(1.0)
     }
@@ -217,7 +219,7 @@ pub trait Spec {
         S::cst(0.0)
     }
     fn observe<S: Sc>(&self, _t: S, _x: &[S], _p: &[S], _y: &mut [S]) {}
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, _x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, _x: &[S], _p: &[S]) -> S {
         S::cst(0.0)
     }
     fn event_cost<S: Sc>(&self, _k: usize, _t: S, _x: &[S], _p: &[S]) -> S {
@@ -280,7 +282,7 @@ impl<T: Spec> AdModel<T> {
         (d.v, self.split(&d, gx.as_mut_slice(), gp.as_mut_slice()))
     }
     /// The flow in dual numbers seeded at (t, x, p).
-    fn flow(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V) -> Vec<D> {
+    fn flow(&self, m: usize, sw: u64, t: f64, x: &V, p: &V) -> Vec<D> {
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
         let mut f = vec![D::c(0.0); self.n()];
         self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
@@ -297,9 +299,16 @@ impl<T: Spec> AdModel<T> {
 type V = OVector<f64, Dyn>;
 type Mx = OMatrix<f64, Dyn, Dyn>;
 
-impl<T: Spec> HybridModel for AdModel<T> {
+impl<T: Spec> ModelSens for AdModel<T> {}
+impl<T: Spec> ModelAdjoint for AdModel<T> {}
+impl<T: Spec> ModelSecondOrder for AdModel<T> {}
+
+impl<T: Spec> ModelDims for AdModel<T> {
     type N = Dyn;
     type P = Dyn;
+}
+
+impl<T: Spec> HybridModel for AdModel<T> {
     fn info(&self) -> &ModelInfo {
         &self.info
     }
@@ -334,28 +343,62 @@ impl<T: Spec> HybridModel for AdModel<T> {
             }
         }
     }
-    fn rhs(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, f: &mut V) {
-        self.spec
-            .rhs(m, sw, t, x.as_slice(), p.as_slice(), f.as_mut_slice());
+    fn rhs(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, f: &mut V) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
+        self.spec.rhs(
+            m,
+            sw.low_word(),
+            t,
+            x.as_slice(),
+            p.as_slice(),
+            f.as_mut_slice(),
+        );
     }
-    fn rhs_jac_x(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fx: &mut Mx) {
-        let f = self.flow(m, sw, t, x, p);
+    fn rhs_jac_x(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fx: &mut Mx) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
+        let f = self.flow(m, sw.low_word(), t, x, p);
         for r in 0..self.n() {
             for c in 0..self.n() {
                 fx[(r, c)] = f[r].g[1 + c];
             }
         }
     }
-    fn rhs_jac_p(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, fp: &mut Mx) {
-        let f = self.flow(m, sw, t, x, p);
+    fn rhs_jac_p(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fp: &mut Mx) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
+        let f = self.flow(m, sw.low_word(), t, x, p);
         for r in 0..self.n() {
             for c in 0..self.np() {
                 fp[(r, c)] = f[r].g[1 + self.n() + c];
             }
         }
     }
-    fn rhs_dt(&self, m: usize, sw: Switches, t: f64, x: &V, p: &V, ft: &mut V) {
-        let f = self.flow(m, sw, t, x, p);
+    fn rhs_dt(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, ft: &mut V) {
+        let mvad_runtime::Point {
+            mode: m,
+            sw,
+            t,
+            x,
+            p,
+        } = pt;
+        let f = self.flow(m, sw.low_word(), t, x, p);
         for r in 0..self.n() {
             ft[r] = f[r].g[0];
         }
@@ -410,12 +453,23 @@ impl<T: Spec> HybridModel for AdModel<T> {
             yp[i * np..(i + 1) * np].copy_from_slice(&y[i].g[1 + n..1 + n + np]);
         }
     }
-    fn running_cost(&self, sw: Switches, t: f64, x: &V, p: &V) -> f64 {
-        self.spec.running(sw, t, x.as_slice(), p.as_slice())
+    fn running_cost(&self, sw: &Switches, t: f64, x: &V, p: &V) -> f64 {
+        self.spec
+            .running(sw.low_word(), t, x.as_slice(), p.as_slice())
     }
-    fn running_cost_grad(&self, sw: Switches, t: f64, x: &V, p: &V, lx: &mut V, lp: &mut V) -> f64 {
-        self.scalar_grad(t, x, p, lx, lp, |t, x, p| self.spec.running(sw, t, x, p))
-            .0
+    fn running_cost_value_grad(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &V,
+        p: &V,
+        lx: &mut V,
+        lp: &mut V,
+    ) -> f64 {
+        self.scalar_grad(t, x, p, lx, lp, |t, x, p| {
+            self.spec.running(sw.low_word(), t, x, p)
+        })
+        .0
     }
     fn event_cost(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
         self.spec.event_cost(k, t, x.as_slice(), p.as_slice())

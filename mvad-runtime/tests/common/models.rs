@@ -3,7 +3,7 @@
 //! on one guard and a decay without parameters.
 
 use super::{ev, info, Sc, Spec};
-use mvad_runtime::model::{Direction, ModelInfo, Switches};
+use mvad_runtime::model::{Direction, ModelInfo};
 
 /// Two-mode thermostat with thresholds lo, hi as parameters (θ = k, lo, hi, p), ambient 10,
 /// temp(0) = 19, horizon 10.
@@ -34,7 +34,7 @@ impl Spec for Thermostat {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(10.0))
     }
-    fn rhs<S: Sc>(&self, m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = -(p[0] * (x[0] - 10.0));
         if m == 0 {
             f[0] = f[0] + p[3];
@@ -50,7 +50,7 @@ impl Spec for Thermostat {
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[0];
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         if self.squared {
             (x[0] - 20.0) * (x[0] - 20.0)
         } else {
@@ -116,7 +116,7 @@ impl Spec for Relay {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(3.0))
     }
-    fn rhs<S: Sc>(&self, m: usize, _sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         let w = if m == 0 { p[0] } else { -p[0] };
         f[0] = (w - x[0]) / TAU;
         f[1] = x[0];
@@ -131,7 +131,7 @@ impl Spec for Relay {
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[1];
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[1]
     }
 }
@@ -190,7 +190,7 @@ impl Spec for Kink {
     fn switch<S: Sc>(&self, _j: usize, _t: S, x: &[S], p: &[S]) -> S {
         x[0] - p[1]
     }
-    fn rhs<S: Sc>(&self, _m: usize, sw: Switches, _t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         let y = x[0] - p[1];
         let abs = if sw & 1 != 0 { y } else { -y };
         f[0] = -abs - 1.0;
@@ -198,7 +198,7 @@ impl Spec for Kink {
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[0];
     }
-    fn running<S: Sc>(&self, sw: Switches, _t: S, x: &[S], p: &[S]) -> S {
+    fn running<S: Sc>(&self, sw: u64, _t: S, x: &[S], p: &[S]) -> S {
         let y = x[0] - p[1];
         let abs = if sw & 1 != 0 { y } else { -y };
         x[0] + abs
@@ -231,13 +231,13 @@ impl Spec for Dip {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(1.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = S::cst(1.0);
     }
     fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
         (x[0] - p[0]) * (x[0] - p[0]) - p[1] * p[1]
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
 }
@@ -268,7 +268,7 @@ impl Spec for Twin {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(1.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = S::cst(1.0);
         f[1] = S::cst(0.0);
     }
@@ -279,7 +279,7 @@ impl Spec for Twin {
         xp[0] = x[0];
         xp[1] = if k == 0 { x[1] + 1.0 } else { x[1] * 2.0 };
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[1]
     }
 }
@@ -306,7 +306,7 @@ impl Spec for Decay {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(2.0))
     }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: Switches, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = -x[0];
     }
     fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S]) -> S {
@@ -315,7 +315,7 @@ impl Spec for Decay {
     fn reset<S: Sc>(&self, _k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
         xp[0] = x[0] * 0.5;
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[0]
     }
 }

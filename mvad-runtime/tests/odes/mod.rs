@@ -6,7 +6,7 @@ use crate::common::{info, AdModel, Sc, Spec};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::integrate::{AugState, Forward, Integrator};
 use mvad_runtime::solution::{Method, Options};
-use mvad_runtime::{HybridModel, ModelInfo, Switches};
+use mvad_runtime::{HybridModel, ModelInfo};
 use nalgebra::{Const, DVector, Dyn, OVector};
 
 /// The smooth test problems of the integrator tests (no events; modes `a` and `b`), as generic
@@ -56,7 +56,7 @@ impl Spec for Ode {
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         None
     }
-    fn rhs<S: Sc>(&self, m: usize, _sw: Switches, t: S, x: &[S], p: &[S], f: &mut [S]) {
+    fn rhs<S: Sc>(&self, m: usize, _sw: u64, t: S, x: &[S], p: &[S], f: &mut [S]) {
         match self {
             Ode::Decay => f[0] = -(p[0] * x[0]),
             Ode::Oscillator => {
@@ -77,7 +77,7 @@ impl Spec for Ode {
             }
         }
     }
-    fn running<S: Sc>(&self, _sw: Switches, _t: S, x: &[S], _p: &[S]) -> S {
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         match self {
             Ode::Decay => x[0] * x[0],
             Ode::Oscillator => x[0],
@@ -176,7 +176,7 @@ pub fn fixed_steps<M: HybridModel<N = Dyn, P = Dyn>>(
 ) -> AugState<Dyn, Dyn> {
     let o = opts(method, 1e-6, 1e-6);
     let mut it = Integrator::new(model, p, &o);
-    it.restart(0.0, y0, 0, 0);
+    it.restart(0.0, y0, 0, &mvad_runtime::Switches::default());
     let h = t_end / n as f64;
     for _ in 0..n {
         it.step_fixed(h).unwrap();
