@@ -449,7 +449,8 @@ pub struct Program {
     pub final_cost: Option<ExprId>,
     /// T(θ), if declared.
     pub horizon: Option<ExprId>,
-    /// Switching functions σ_j (pointwise expressions), at most 64.
+    /// Switching functions σ_j (pointwise expressions), any number: the tape reads the bits
+    /// past 64 through `eval_with`; the arena's own evaluator ([`Point::sw`]) sees bits 0..64.
     pub switches: Vec<ExprId>,
 }
 
