@@ -24,6 +24,24 @@ impl<N: Dim, P: Dim> AugState<N, P>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
+    /// self += h Σ_j c_j k_j over x and q, and S and q_θ too when `all` (zero coefficients
+    /// skipped): the sum both [`StageVector::combine`] and [`StageVector::lincomb`] end with.
+    #[inline(always)]
+    fn accumulate(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+        for (c, k) in coefs.iter().zip(ks) {
+            if *c == 0.0 {
+                continue;
+            }
+            let a = h * c;
+            axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
+            self.q += a * k.q;
+            if all {
+                axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
+                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+            }
+        }
+    }
+
     /// All parts zero (x ∈ Rⁿ, S ∈ Rⁿˣᵖ, q, q_θ ∈ Rᵖ).
     pub fn zeros(n: N, p: P) -> Self {
         AugState {
@@ -125,18 +143,7 @@ where
             self.s.copy_from(&base.s);
             self.qp.copy_from(&base.qp);
         }
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c == 0.0 {
-                continue;
-            }
-            let a = h * c;
-            axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
-            self.q += a * k.q;
-            if all {
-                axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
-                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
-            }
-        }
+        self.accumulate(h, coefs, ks, all);
     }
 
     #[inline]
@@ -147,18 +154,7 @@ where
             self.s.fill(0.0);
             self.qp.fill(0.0);
         }
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c == 0.0 {
-                continue;
-            }
-            let a = h * c;
-            axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
-            self.q += a * k.q;
-            if all {
-                axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
-                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
-            }
-        }
+        self.accumulate(h, coefs, ks, all);
     }
 
     #[inline]
