@@ -515,6 +515,50 @@ where
         fx.tr_mul_to(lambda, vx);
         fp.tr_mul_to(lambda, vp);
     }
+
+    /// μᵀR_x into `vx` (n) and μᵀR_θ into `vp` (p) for event k's reset x⁺ = R_k(t, x, θ);
+    /// returns μᵀ∂R_k/∂t: vx_j = Σᵢ μᵢ ∂Rᵢ/∂x_j, vp_k = Σᵢ μᵢ ∂Rᵢ/∂θ_k. Both outputs are
+    /// overwritten. The transpose of the reset's linearisation, for the adjoint's jump at an
+    /// event. The default forms ∂R/∂x, ∂R/∂θ and ∂R/∂t densely (it allocates them).
+    #[allow(clippy::too_many_arguments)]
+    fn reset_vjp(
+        &self,
+        event: usize,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        mu: &OVector<f64, Self::N>,
+        vx: &mut OVector<f64, Self::N>,
+        vp: &mut OVector<f64, Self::P>,
+    ) -> f64
+    where
+        Self: HybridModel,
+    {
+        let (n, np) = (self.nstates(), self.nparams());
+        let mut rx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
+        let mut rp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
+        let mut rt = OVector::<f64, Self::N>::zeros_generic(n, nalgebra::Const::<1>);
+        self.reset_jac(event, t, x, p, &mut rx, &mut rp, &mut rt);
+        rx.tr_mul_to(mu, vx);
+        rp.tr_mul_to(mu, vp);
+        mu.dot(&rt)
+    }
+
+    /// μᵀ∂x₀/∂θ into `vp` (p), overwritten: the initial state's share of an adjoint
+    /// gradient. The default forms ∂x₀/∂θ densely (it allocates it).
+    fn initial_state_vjp(
+        &self,
+        p: &OVector<f64, Self::P>,
+        mu: &OVector<f64, Self::N>,
+        vp: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let (n, np) = (self.nstates(), self.nparams());
+        let mut dx0 = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
+        self.initial_state_jac(p, &mut dx0);
+        dx0.tr_mul_to(mu, vp);
+    }
 }
 
 /// Capability: second-derivative directional products, for the implicit method's

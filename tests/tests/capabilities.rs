@@ -64,3 +64,38 @@ fn second_order_default_is_the_directional_derivative_of_the_sensitivity_rhs() {
         );
     }
 }
+
+mvad::hybrid! {
+    model Kick {
+        param a = 0.7;
+        param b = 1.3;
+        state x = a * b;
+        state y = b;
+        flow { der(x) = 1; der(y) = 0; }
+        event kick when x >= 2 { x = a * x * y + t; y = b * t; }
+    }
+}
+
+#[test]
+fn reset_and_initial_state_vjps_are_mu_times_the_jacobians() {
+    let m = Kick::new();
+    let (a, b, t) = (0.7, 1.3, 0.25);
+    let (xv, pv) = (Vector2::new(2.0, -0.5), Vector2::new(a, b));
+    let mu = Vector2::new(1.5, -2.0);
+    let (mut vx, mut vp) = (Vector2::zeros(), Vector2::zeros());
+    let vt = m.reset_vjp(0, t, &xv, &pv, &mu, &mut vx, &mut vp);
+    // R = (a x y + t, b t): R_x = [[a y, a x], [0, 0]], R_θ = [[x y, 0], [0, t]], R_t = (1, b).
+    let (x, y) = (xv[0], xv[1]);
+    let want_x = [mu[0] * a * y, mu[0] * a * x];
+    let want_p = [mu[0] * x * y, mu[1] * t];
+    let want_t = mu[0] + mu[1] * b;
+    for i in 0..2 {
+        assert!((vx[i] - want_x[i]).abs() < 1e-15, "{vx:?}");
+        assert!((vp[i] - want_p[i]).abs() < 1e-15, "{vp:?}");
+    }
+    assert!((vt - want_t).abs() < 1e-15, "{vt}");
+    // x₀ = (a b, b): ∂x₀/∂θ = [[b, a], [0, 1]].
+    let mut v0 = Vector2::zeros();
+    m.initial_state_vjp(&pv, &mu, &mut v0);
+    assert!((v0[0] - mu[0] * b).abs() < 1e-15 && (v0[1] - (mu[0] * a + mu[1])).abs() < 1e-15);
+}
