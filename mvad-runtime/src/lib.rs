@@ -16,6 +16,7 @@ pub use model::{
     ModelSecondOrder, ModelSens, Point, Switches,
 };
 
+pub mod adjoint;
 pub mod error;
 pub mod event;
 pub mod fd;
@@ -27,11 +28,13 @@ pub mod sink;
 pub mod solution;
 pub mod solve;
 
+pub use adjoint::{vjp, Cotangents, Vjp};
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
 pub use sink::{EventCounts, EventSink, EventView, Stream};
 pub use solution::{
-    Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,
+    Diagnostic, DiagnosticKind, EventRecord, GradientMode, Method, Options, Segment, Solution,
+    Stats, Trajectory,
 };
 pub use solve::{solve, solve_with};

@@ -56,6 +56,24 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         dense_into(self.dense_scheme, k, y0, y1, self.dense_h, theta, all, out);
     }
 
+    /// The degree in θ of the dense output [`Integrator::dense_x`] gives now: 4 for Tsit5 and
+    /// Rodas5P, 9 for Verner (3 while its interpolation stages are pending), 0 right after a
+    /// restart. A polynomial of this degree is reproduced exactly by its values at degree + 1
+    /// points, which is how the adjoint's forward record stores a step.
+    pub fn dense_degree(&self) -> usize {
+        if self.dense_h == 0.0 {
+            0
+        } else if self.dense_pending {
+            3
+        } else {
+            match self.dense_scheme {
+                Scheme::Tsit5 => TSIT5.degree(),
+                Scheme::Verner9 => VERNER9.degree(),
+                Scheme::Rodas5P => rosenbrock::DENSE_DEGREE,
+            }
+        }
+    }
+
     /// The state at the end of the last accepted step (before any truncation).
     fn end_state(&self) -> &Sys::Vector {
         if self.truncated {

@@ -52,6 +52,11 @@ impl<const S: usize, const K: usize, const D: usize> Tableau<S, K, D> {
         }
     }
 
+    /// The degree D of the continuous extension in θ.
+    pub const fn degree(&self) -> usize {
+        D
+    }
+
     /// The weights b_i(θ) of the continuous extension (Horner's scheme).
     #[inline]
     pub fn weights(&self, theta: f64) -> [f64; K] {

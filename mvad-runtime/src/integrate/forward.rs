@@ -49,7 +49,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 /// Relative size of the perturbation of x in the directional differences (see module doc).
 const FD_REL: f64 = 1e-4;
 /// Relative step of the central differences in t (ε^(1/3)).
-const FD_REL_T: f64 = 6.055_454_452_393_343e-6;
+pub(super) const FD_REL_T: f64 = 6.055_454_452_393_343e-6;
 
 /// The forward augmented system (x, S, q, q_θ) of `model` at parameters θ in one mode with
 /// frozen switch bits (see the module doc).
@@ -60,6 +60,9 @@ where
     rhs: Rhs<'a, M>,
     /// S and q_θ are under error control.
     sens_err: bool,
+    /// Columns of S and length of q_θ: p, or 0 in a primal run of a model whose parameter
+    /// dimension is dynamic (so no stage operation or copy touches n·p unused entries).
+    sp: M::P,
     imp: ImplicitWork<M::N, M::P>,
 }
 
@@ -112,8 +115,20 @@ where
     /// The forward system of `model` at `p` in its initial mode; allocates its buffers once
     /// (the Rodas5P ones only when `opts.method` may use it).
     pub fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
+        Self::sized(model, p, opts, false)
+    }
+
+    /// [`Forward::new`]; with `narrow`, a primal run (`opts.sensitivities == false`) of a
+    /// model with a dynamic parameter dimension gets S of width 0 and q_θ of length 0, so
+    /// its vectors (see [`OdeSystem::zeros`]) carry nothing of size n·p.
+    fn sized(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options, narrow: bool) -> Self {
         let n = model.nstates();
         let np = model.nparams();
+        let sp = if !narrow || opts.sensitivities || M::P::try_to_usize().is_some() {
+            np
+        } else {
+            M::P::from_usize(0)
+        };
         let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
         // Unused Rodas5P buffers: empty for Dyn sizes (no allocation).
         let rn = if used || M::N::try_to_usize().is_some() {
@@ -126,6 +141,7 @@ where
         } else {
             M::P::from_usize(0)
         };
+        let rsp = if used { sp } else { rp };
         Forward {
             rhs: Rhs {
                 model,
@@ -139,14 +155,15 @@ where
                 evals: 0,
             },
             sens_err: opts.sens_error_control && opts.sensitivities,
+            sp,
             imp: ImplicitWork {
                 w: WMatrix::new(n, used),
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 lp0: OVector::zeros_generic(rp, Const::<1>),
-                dt: AugState::zeros(rn, rp),
-                ypert: AugState::zeros(rn, rp),
-                fplus: AugState::zeros(rn, rp),
-                fminus: AugState::zeros(rn, rp),
+                dt: AugState::zeros(rn, rsp),
+                ypert: AugState::zeros(rn, rsp),
+                fplus: AugState::zeros(rn, rsp),
+                fminus: AugState::zeros(rn, rsp),
                 base_valid: false,
             },
         }
@@ -208,8 +225,9 @@ where
 {
     type Vector = AugState<M::N, M::P>;
 
+    /// (x, S, q, q_θ) with S n×p, or n×0 in a primal run of a `Dyn`-parameter model.
     fn zeros(&self) -> Self::Vector {
-        AugState::zeros(self.rhs.model.nstates(), self.rhs.model.nparams())
+        AugState::zeros(self.rhs.model.nstates(), self.sp)
     }
 
     #[inline]
@@ -424,6 +442,13 @@ where
     /// every buffer once. Call [`Integrator::restart`] before the first [`Integrator::step`].
     pub fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
         Integrator::with_system(Forward::new(model, p, opts), opts)
+    }
+
+    /// [`Integrator::new`] for the event loop: in a primal run of a model with a dynamic
+    /// parameter dimension S and q_θ have zero width (the states it restarts from must come
+    /// from `system().zeros()`), so a primal run's cost does not grow with p.
+    pub(crate) fn new_narrow(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
+        Integrator::with_system(Forward::sized(model, p, opts, true), opts)
     }
 
     /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at

@@ -245,6 +245,9 @@ where
     }
 }
 
+/// Degree in θ of the dense output: θ³(1 − θ) D₃ is its highest term.
+pub(super) const DENSE_DEGREE: usize = 4;
+
 /// Weights of (Y₀, Y₁, D₁, D₂, D₃) in the dense output at θ.
 #[inline]
 fn weights(theta: f64) -> [f64; 5] {

@@ -1,0 +1,207 @@
+//! Adjoint mode: dC/dθ (and vector–Jacobian products of observables) from one primal run and
+//! one backward sweep, at a cost that does not grow with the number of parameters beyond the
+//! model's own products λᵀf_θ.
+//!
+//! Forward mode carries S = ∂x/∂θ (n × p) along the run: O(n·p) work per step. The adjoint
+//! instead
+//!
+//! 1. runs the event loop without sensitivities (x and q only, O(n) per step) and keeps the
+//!    forward record ([`record::Tape`]: every step's dense output, every jump with its states,
+//!    modes and switch bits; the memory is stated there);
+//! 2. sweeps backwards from T to 0 ([`sweep`]): λ̇ = −f_xᵀλ − ℓ_xᵀ on each segment with
+//!    ∫ (λᵀf_θ + ℓ_θ) dt accumulated, the transpose of every jump ([`transpose`]), and at the
+//!    ends the final and initial terms.
+//!
+//! Both converge to the same exact dC/dθ; they differ by the integrators' errors (the primal
+//! run takes steps chosen for x alone, the sweep for λ and its quadrature).
+//!
+//! ## What the adjoint leaves out, and when it hands over to forward mode
+//! Its events carry t, the modes, the guard slope, transversality and the jumps, but no t'
+//! (so no atoms); it returns no S(T), and a trajectory it records has x only. A run that
+//! forward mode ends specially — at a Zeno accumulation, whose tail it extrapolates, or with
+//! a state stuck on its guard — is not swept: it is solved again in forward mode, which says
+//! so in its `zeno` diagnostic and in `Stats::mode`. Errors (a tangential crossing, too many
+//! events) are those of forward mode.
+//!
+//! [`vjp`] is the entry point for reverse-mode callers (a JAX `custom_vjp`, a torch
+//! `autograd.Function`): cotangents of C and of observables at sample times in, dθ out.
+
+pub mod record;
+mod sweep;
+mod transpose;
+mod vjp;
+
+pub use vjp::{vjp, Cotangents, Vjp};
+
+use crate::error::SolveError;
+use crate::model::{HybridModel, ModelAlloc};
+use crate::sink::{EventSink, EventView};
+use crate::solution::{Diagnostic, DiagnosticKind, GradientMode, Options, Solution, Stats};
+use crate::solve::run_loop;
+use nalgebra::{Const, DefaultAllocator, OVector};
+use record::{Item, JumpKind, Tape};
+use std::time::Instant;
+use transpose::JumpWork;
+
+/// [`crate::solve::solve_with`] in adjoint mode: the primal run with the tape, its events
+/// handed to `sink` (without t'), then the sweep; or forward mode where the adjoint does not
+/// apply (see the module doc).
+pub(crate) fn solve_with<M: HybridModel, K: EventSink>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sink: &mut K,
+) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let start = Instant::now();
+    let Some((mut sol, tape)) = primal(model, params, opts)? else {
+        return forward_instead(model, params, opts, sink, start);
+    };
+    replay_events(model, params, &tape, opts, sink);
+    let dt_end = horizon_grad(model, params, opts);
+    let out = sweep::sweep(model, params, &tape, opts, &dt_end, 1.0, &[])?;
+    sol.gradient = out.gradient;
+    add_sweep_stats(&mut sol.stats, &out.stats, start);
+    Ok(sol)
+}
+
+/// The primal run with the tape; `None` when it did not reach T normally (an accumulation
+/// or a stuck state ended it), so forward mode has to take over.
+fn primal<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+) -> Result<Option<(Solution, Tape)>, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let primal = Options {
+        sensitivities: false,
+        ..opts.clone()
+    };
+    let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;
+    Ok(tape
+        .filter(|t| t.final_state().is_some())
+        .map(|tape| (sol, tape)))
+}
+
+/// dT/dθ: the horizon's gradient, or zero when `Options::t_end` overrides it.
+fn horizon_grad<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+) -> OVector<f64, M::P>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut dt = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
+    if opts.t_end.is_none() {
+        model.horizon_grad(params, &mut dt);
+    }
+    dt
+}
+
+/// The primal run's counters plus the sweep's, the mode, and the wall time since `start`.
+fn add_sweep_stats(stats: &mut Stats, sweep: &Stats, start: Instant) {
+    stats.steps += sweep.steps;
+    stats.rejected_steps += sweep.rejected_steps;
+    stats.rhs_evals += sweep.rhs_evals;
+    stats.jac_evals += sweep.jac_evals;
+    stats.factorizations += sweep.factorizations;
+    stats.mode = GradientMode::Adjoint;
+    stats.wall_seconds = start.elapsed().as_secs_f64();
+}
+
+/// The message forward mode's `zeno` diagnostic gains when it stands in for the adjoint.
+const FALLBACK_NOTE: &str = "adjoint mode does not sweep back through an accumulation: \
+    the gradient was computed in forward mode";
+
+/// Solves in forward mode instead (the adjoint's primal run ended at an accumulation or a
+/// stuck state) and says so: `Stats::mode` is forward and the `zeno` diagnostic carries
+/// [`FALLBACK_NOTE`].
+fn forward_instead<M: HybridModel, K: EventSink>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sink: &mut K,
+    start: Instant,
+) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let fwd = Options {
+        gradient_mode: GradientMode::Forward,
+        ..opts.clone()
+    };
+    let (mut sol, _) = run_loop(model, params, &fwd, sink, false)?;
+    note_fallback(&mut sol);
+    sol.stats.wall_seconds = start.elapsed().as_secs_f64();
+    Ok(sol)
+}
+
+/// Marks a forward solution that stands in for an adjoint one (see [`forward_instead`]).
+fn note_fallback(sol: &mut Solution) {
+    sol.stats.mode = GradientMode::Forward;
+    match sol
+        .diagnostics
+        .iter_mut()
+        .rfind(|d| d.kind == DiagnosticKind::Zeno)
+    {
+        Some(d) => {
+            d.message.push_str("; ");
+            d.message.push_str(FALLBACK_NOTE);
+        }
+        None => sol.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::Zeno,
+            t: sol.t_end,
+            message: FALLBACK_NOTE.into(),
+        }),
+    }
+}
+
+/// Hands the primal run's user events to `sink`, in time order, as the event loop would
+/// have: the guard slope ∇g·f⁻, ∂g/∂t and transversality recomputed from the tape's x⁻ (the
+/// same inputs, so the same numbers), the observables on both sides, and no t'.
+fn replay_events<M: HybridModel, K: EventSink>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    tape: &Tape,
+    opts: &Options,
+    sink: &mut K,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let nobs = model.info().nobservables();
+    let (mut obs_minus, mut obs_plus) = (vec![0.0; nobs], vec![0.0; nobs]);
+    let mut work = JumpWork::new(model);
+    let mut index = 0;
+    for item in tape.items() {
+        let Item::Jump(j) = item else { continue };
+        let JumpKind::Event(k) = j.kind else { continue };
+        let (x_before, x_after) = tape.jump_states(j);
+        work.approach(model, p, j, x_before, x_after);
+        let gt = work.crossing_grad(model, p, j);
+        let (slope, grazing) = work.slope_and_grazing(gt, opts.grazing_tol);
+        let (xm, xp) = work.states();
+        model.observe(j.t, xm, p, &mut obs_minus);
+        model.observe(j.t, xp, p, &mut obs_plus);
+        sink.event(&EventView {
+            index,
+            event: k,
+            t: j.t,
+            mode_before: j.mode_before,
+            mode_after: j.mode_after,
+            guard_slope: slope,
+            guard_dt: gt,
+            transversal: !grazing,
+            dt: &[],
+            x_before,
+            x_after,
+            observables_before: &obs_minus,
+            observables_after: &obs_plus,
+        });
+        index += 1;
+    }
+}

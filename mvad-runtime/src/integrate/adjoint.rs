@@ -1,0 +1,534 @@
+//! The backward (adjoint) system of one segment, the second file in `integrate/` that calls
+//! the model.
+//!
+//! On a segment [a, b] with frozen mode m and switch bits, and the primal trajectory x(t)
+//! replayed from the forward record ([`Tape`]), Y = (λ, g) with λ ∈ Rⁿ, g ∈ Rᵖ and
+//!
+//! ```text
+//!   F(t, Y) = ( −f_xᵀ λ − w ℓ_xᵀ,   −(f_θᵀ λ + w ℓ_θᵀ) )      at (t, x(t), θ)
+//! ```
+//!
+//! (w the cotangent of the cost), integrated from b down to a with negative steps. Then
+//! d/dt(λᵀS) = λ̇ᵀS + λᵀ(f_x S + f_θ) = −w ℓ_x S + λᵀ f_θ, so
+//! λ(b)ᵀS(b) + w ∫_a^b (ℓ_x S + ℓ_θ) dt = λ(a)ᵀS(a) + [g(a) − g(b)]:
+//! the segment's share of dC/dθ moves into g without ever forming S. λᵀf_x and λᵀf_θ come
+//! from [`crate::model::ModelAdjoint::rhs_vjp`] (sparse when the model overrides it), ℓ_x and
+//! ℓ_θ from `running_cost_value_grad`, so a stage costs O(n + p) beyond the model's own work.
+//!
+//! ## For Rodas5P
+//! J = ∂F/∂Y = [[−f_xᵀ, 0], [−f_θᵀ, 0]] is block lower triangular with a zero block for g, so
+//! with W = I + hγ f_xᵀ (the `WMatrix` of J_λλ = −f_xᵀ, factorised once per attempt) a stage is
+//! solved exactly: K_λ = W⁻¹ hγ R_λ, K_g = hγ (R_g − f_θᵀ K_λ), the last a vector–Jacobian
+//! product at the step start. F depends on t through x(t) even for an autonomous flow, so F_t
+//! is the total derivative along the trajectory, a central difference
+//! [F(t₀ + δ, x₀ + δ f₀) − F(t₀ − δ, x₀ − δ f₀)]/(2δ) with δ = ε^(1/3)·max(|t₀|, |h|) taken off
+//! the model's flow (smooth, unlike the recorded steps' seams). The adjoint of a stiff flow is
+//! stiff backwards in time (the eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x
+//! stepped forwards), so `auto` switches to Rodas5P on it as on the forward run.
+
+use super::aug::{axpy_slice, hermite_slice, mix5_slice, sens_weight, WeightedRms};
+use super::forward::FD_REL_T;
+use super::rosenbrock::WMatrix;
+use super::system::{ImplicitSystem, OdeSystem, StageVector};
+use super::Integrator;
+use crate::adjoint::record::{SegmentRec, Tape};
+use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::solution::{Method, Options};
+use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+
+/// The adjoint state (λ, g) of the backward sweep: λ = ∂C/∂x(t) and g, dC/dθ accumulated
+/// from T down to t.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdjState<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// λ (n).
+    pub lam: OVector<f64, N>,
+    /// g (p).
+    pub g: OVector<f64, P>,
+}
+
+impl<N: Dim, P: Dim> AdjState<N, P>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// λ = 0 and g = 0.
+    pub fn zeros(n: N, p: P) -> Self {
+        AdjState {
+            lam: OVector::zeros_generic(n, Const::<1>),
+            g: OVector::zeros_generic(p, Const::<1>),
+        }
+    }
+
+    /// self += h Σ_j c_j k_j over λ, and g too when `all` (zero coefficients skipped).
+    #[inline(always)]
+    fn accumulate(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+        for (c, k) in coefs.iter().zip(ks) {
+            if *c == 0.0 {
+                continue;
+            }
+            axpy_slice(self.lam.as_mut_slice(), h * c, k.lam.as_slice());
+            if all {
+                axpy_slice(self.g.as_mut_slice(), h * c, k.g.as_slice());
+            }
+        }
+    }
+}
+
+impl<N: Dim, P: Dim> StageVector for AdjState<N, P>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    type Primary = OVector<f64, N>;
+
+    #[inline]
+    fn copy_from(&mut self, other: &Self) {
+        self.lam.copy_from(&other.lam);
+        self.g.copy_from(&other.g);
+    }
+
+    #[inline]
+    fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+        self.lam.copy_from(&base.lam);
+        if all {
+            self.g.copy_from(&base.g);
+        }
+        self.accumulate(h, coefs, ks, all);
+    }
+
+    #[inline]
+    fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+        self.lam.fill(0.0);
+        if all {
+            self.g.fill(0.0);
+        }
+        self.accumulate(h, coefs, ks, all);
+    }
+
+    #[inline]
+    fn axpy(&mut self, a: f64, other: &Self, all: bool) {
+        axpy_slice(self.lam.as_mut_slice(), a, other.lam.as_slice());
+        if all {
+            axpy_slice(self.g.as_mut_slice(), a, other.g.as_slice());
+        }
+    }
+
+    #[inline]
+    fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], all: bool) {
+        Self::mix5_primary(&mut self.lam, w, v);
+        if all {
+            mix5_slice(self.g.as_mut_slice(), w, v.map(|u| u.g.as_slice()));
+        }
+    }
+
+    #[inline]
+    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, all: bool) {
+        Self::hermite_primary(&mut self.lam, y0, y1, f0, f1, h, th);
+        if all {
+            let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.g.as_slice());
+            hermite_slice(self.g.as_mut_slice(), a, b, g0, g1, h, th);
+        }
+    }
+
+    #[inline]
+    fn is_finite(&self) -> bool {
+        self.lam.iter().chain(self.g.iter()).all(|v| v.is_finite())
+    }
+
+    #[inline]
+    fn primary_dist_sq(&self, other: &Self) -> f64 {
+        (&self.lam - &other.lam).norm_squared()
+    }
+
+    #[inline]
+    fn primary_into(&self, out: &mut OVector<f64, N>) {
+        out.copy_from(&self.lam);
+    }
+
+    #[inline]
+    fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
+        out.copy_from(&base.lam);
+        for (c, k) in coefs.iter().zip(ks) {
+            if *c != 0.0 {
+                axpy_slice(out.as_mut_slice(), h * c, k.lam.as_slice());
+            }
+        }
+    }
+
+    #[inline]
+    fn mix5_primary(out: &mut OVector<f64, N>, w: &[f64; 5], v: [&Self; 5]) {
+        mix5_slice(out.as_mut_slice(), w, v.map(|u| u.lam.as_slice()));
+    }
+
+    #[inline]
+    fn hermite_primary(
+        out: &mut OVector<f64, N>,
+        y0: &Self,
+        y1: &Self,
+        f0: &Self,
+        f1: &Self,
+        h: f64,
+        th: f64,
+    ) {
+        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.lam.as_slice());
+        hermite_slice(out.as_mut_slice(), a, b, g0, g1, h, th);
+    }
+}
+
+/// The backward system of one segment at parameters θ (see the module doc).
+pub struct Backward<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    rhs: AdjRhs<'a, M>,
+    hist: History<'a, M::N>,
+    /// g is under error control (column j weighted by |θ_j|, as S_j is forwards).
+    sens_err: bool,
+    imp: AdjImplicit<M::N, M::P>,
+}
+
+/// Everything F needs besides x(t).
+struct AdjRhs<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    model: &'a M,
+    p: &'a OVector<f64, M::P>,
+    mode: usize,
+    sw: Switches,
+    /// The cotangent w of the cost.
+    cw: f64,
+    has_rc: bool,
+    lx: OVector<f64, M::N>,
+    lp: OVector<f64, M::P>,
+    evals: usize,
+}
+
+/// x(t) from the record, on the segment being swept.
+struct History<'a, N: Dim>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<N>,
+{
+    tape: &'a Tape,
+    seg: Option<&'a SegmentRec>,
+    cursor: usize,
+    x: OVector<f64, N>,
+}
+
+/// The Rodas5P buffers (allocated once).
+struct AdjImplicit<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// J_λλ = −f_xᵀ and the factors of W = I − hγ J_λλ.
+    w: WMatrix<N>,
+    /// x and f at the step start, and x₀ ± δ f₀.
+    x0: OVector<f64, N>,
+    f0: OVector<f64, N>,
+    xpert: OVector<f64, N>,
+    /// F_t at the step start, and F at the two points of its difference quotient.
+    dt: AdjState<N, P>,
+    fplus: AdjState<N, P>,
+    fminus: AdjState<N, P>,
+    /// λᵀf_x scratch of the stage solve, and f_θᵀK_λ.
+    vx: OVector<f64, N>,
+    vp: OVector<f64, P>,
+    prepared: bool,
+}
+
+impl<M: HybridModel> AdjRhs<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// out = F(t, y) at the state x: (−f_xᵀλ − w ℓ_xᵀ, −f_θᵀλ − w ℓ_θᵀ).
+    #[inline]
+    fn eval_at(
+        &mut self,
+        t: f64,
+        x: &OVector<f64, M::N>,
+        y: &AdjState<M::N, M::P>,
+        out: &mut AdjState<M::N, M::P>,
+    ) {
+        self.evals += 1;
+        let pt = Point::new(self.mode, &self.sw, t, x, self.p);
+        self.model.rhs_vjp(pt, &y.lam, &mut out.lam, &mut out.g);
+        out.lam.neg_mut();
+        out.g.neg_mut();
+        if self.has_rc && self.cw != 0.0 {
+            let (lx, lp) = (&mut self.lx, &mut self.lp);
+            self.model
+                .running_cost_value_grad(&self.sw, t, x, self.p, lx, lp);
+            out.lam.axpy(-self.cw, lx, 1.0);
+            out.g.axpy(-self.cw, lp, 1.0);
+        }
+    }
+}
+
+impl<N: Dim> History<'_, N>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<N>,
+{
+    /// x(t) into `self.x` (NaN before a segment is set).
+    #[inline]
+    fn at(&mut self, t: f64) {
+        match self.seg {
+            Some(seg) => self
+                .tape
+                .state_at(seg, t, &mut self.cursor, self.x.as_mut_slice()),
+            None => self.x.fill(f64::NAN),
+        }
+    }
+}
+
+impl<'a, M: HybridModel> Backward<'a, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// The backward system of `model` at `p` over the record `tape`, with cost cotangent
+    /// `cw`; allocates its buffers once (the Rodas5P ones only when `opts.method` may use it).
+    pub fn new(
+        model: &'a M,
+        p: &'a OVector<f64, M::P>,
+        tape: &'a Tape,
+        opts: &Options,
+        cw: f64,
+    ) -> Self {
+        let (n, np) = (model.nstates(), model.nparams());
+        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
+        let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        Backward {
+            rhs: AdjRhs {
+                model,
+                p,
+                mode: model.info().initial_mode,
+                sw: Switches::new(model.info().switches),
+                cw,
+                has_rc: model.info().has_running_cost,
+                lx: vn(),
+                lp: OVector::zeros_generic(np, Const::<1>),
+                evals: 0,
+            },
+            hist: History {
+                tape,
+                seg: None,
+                cursor: 0,
+                x: vn(),
+            },
+            sens_err: opts.sens_error_control,
+            imp: AdjImplicit {
+                w: WMatrix::new(n, used),
+                x0: vn(),
+                f0: vn(),
+                xpert: vn(),
+                dt: AdjState::zeros(n, np),
+                fplus: AdjState::zeros(n, np),
+                fminus: AdjState::zeros(n, np),
+                vx: vn(),
+                vp: OVector::zeros_generic(np, Const::<1>),
+                prepared: false,
+            },
+        }
+    }
+
+    fn mode_name(&self) -> String {
+        match self.rhs.model.info().modes.get(self.rhs.mode) {
+            Some(name) => name.clone(),
+            None => self.rhs.mode.to_string(),
+        }
+    }
+}
+
+impl<M: HybridModel> OdeSystem for Backward<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    type Vector = AdjState<M::N, M::P>;
+
+    fn zeros(&self) -> Self::Vector {
+        AdjState::zeros(self.rhs.model.nstates(), self.rhs.model.nparams())
+    }
+
+    #[inline]
+    fn all_parts(&self) -> bool {
+        true
+    }
+
+    #[inline]
+    fn controls_all(&self) -> bool {
+        self.sens_err
+    }
+
+    /// out = F(t, y) with x(t) from the record.
+    #[inline]
+    fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector) {
+        self.hist.at(t);
+        self.rhs.eval_at(t, &self.hist.x, y, out);
+    }
+
+    #[inline]
+    fn evals(&self) -> usize {
+        self.rhs.evals
+    }
+
+    /// [`WeightedRms`] over λ (weight 1) and, under sensitivity error control, g with entry j
+    /// weighted by |θ_j| (the change θ_j·∂C/∂θ_j a relative change of θ_j makes).
+    #[inline]
+    fn error_norm(
+        &self,
+        e: &Self::Vector,
+        y0: &Self::Vector,
+        y1: &Self::Vector,
+        atol: f64,
+        rtol: f64,
+    ) -> f64 {
+        let mut rms = WeightedRms::new(atol, rtol);
+        rms.add(e.lam.as_slice(), y0.lam.as_slice(), y1.lam.as_slice(), 1.0);
+        if self.sens_err {
+            for (j, th) in self.rhs.p.iter().enumerate() {
+                rms.add(&[e.g[j]], &[y0.g[j]], &[y1.g[j]], sens_weight(*th));
+            }
+        }
+        rms.norm()
+    }
+
+    fn nonfinite_part(&self, y: &Self::Vector) -> Option<&'static str> {
+        if !y.lam.iter().all(|v| v.is_finite()) {
+            Some("adjoint state λ")
+        } else if !y.g.iter().all(|v| v.is_finite()) {
+            Some("adjoint gradient quadrature")
+        } else {
+            None
+        }
+    }
+
+    /// `adjoint of the flow of mode `m``.
+    fn flow_name(&self) -> String {
+        format!("adjoint of the flow of mode `{}`", self.mode_name())
+    }
+
+    fn stage_source(&self, k: &Self::Vector) -> String {
+        if !k.lam.iter().all(|v| v.is_finite()) {
+            self.flow_name()
+        } else {
+            format!(
+                "adjoint gradient quadrature of the flow of mode `{}`",
+                self.mode_name()
+            )
+        }
+    }
+}
+
+impl<M: HybridModel> ImplicitSystem for Backward<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// J_λλ = −f_xᵀ (and its spectral radius) and F_t at the step start.
+    fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
+        let Backward { rhs, hist, imp, .. } = self;
+        hist.at(t0);
+        imp.x0.copy_from(&hist.x);
+        let pt = Point::new(rhs.mode, &rhs.sw, t0, &imp.x0, rhs.p);
+        rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
+        imp.w.jac.transpose_mut();
+        imp.w.jac.neg_mut();
+        imp.w.power_iteration();
+        rhs.model.rhs(pt, &mut imp.f0);
+        let dt = FD_REL_T * t0.abs().max(h.abs()).max(f64::MIN_POSITIVE);
+        imp.xpert.copy_from(&imp.x0);
+        imp.xpert.axpy(dt, &imp.f0, 1.0);
+        rhs.eval_at(t0 + dt, &imp.xpert, y0, &mut imp.fplus);
+        imp.xpert.copy_from(&imp.x0);
+        imp.xpert.axpy(-dt, &imp.f0, 1.0);
+        rhs.eval_at(t0 - dt, &imp.xpert, y0, &mut imp.fminus);
+        let s = 0.5 / dt;
+        imp.dt.lincomb(s, &[1.0], std::slice::from_ref(&imp.fplus), true);
+        imp.dt.axpy(-s, &imp.fminus, true);
+        imp.prepared = true;
+    }
+
+    fn prepared(&self) -> bool {
+        self.imp.prepared
+    }
+
+    fn time_derivative(&self) -> &Self::Vector {
+        &self.imp.dt
+    }
+
+    fn factorise(&mut self, hg: f64) -> bool {
+        self.imp.w.factorise(hg)
+    }
+
+    fn factorised_for(&self) -> Option<f64> {
+        self.imp.w.factorised_for()
+    }
+
+    /// K_λ = W⁻¹ hγ R_λ, K_g = hγ (R_g − f_θᵀ K_λ) (see the module doc).
+    fn solve_stage(
+        &mut self,
+        t0: f64,
+        _y0: &Self::Vector,
+        hg: f64,
+        r: &Self::Vector,
+        k: &mut Self::Vector,
+    ) -> bool {
+        let Backward { rhs, imp, .. } = self;
+        if imp.w.factorised_for().is_none() {
+            return false;
+        }
+        k.lam.copy_from(&r.lam);
+        k.lam *= hg;
+        let ok = imp.w.solve_mut(&mut k.lam);
+        let pt = Point::new(rhs.mode, &rhs.sw, t0, &imp.x0, rhs.p);
+        rhs.model.rhs_vjp(pt, &k.lam, &mut imp.vx, &mut imp.vp);
+        k.g.copy_from(&r.g);
+        k.g -= &imp.vp;
+        k.g *= hg;
+        ok
+    }
+
+    fn invalidate(&mut self) {
+        self.imp.prepared = false;
+        self.imp.w.invalidate();
+    }
+
+    fn spectral_radius_at(&mut self, t: f64, _y: &Self::Vector) -> f64 {
+        let Backward { rhs, hist, imp, .. } = self;
+        hist.at(t);
+        let pt = Point::new(rhs.mode, &rhs.sw, t, &hist.x, rhs.p);
+        rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
+        imp.w.power_iteration()
+    }
+
+    fn jac_spectral_radius(&self) -> f64 {
+        self.imp.w.rho
+    }
+}
+
+impl<'a, M: HybridModel> Integrator<Backward<'a, M>>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// An integrator of the backward system over `tape` (see [`Backward::new`]); allocates
+    /// every buffer once. Call [`Integrator::restart_segment`] before each segment.
+    pub fn backward(
+        model: &'a M,
+        p: &'a OVector<f64, M::P>,
+        tape: &'a Tape,
+        opts: &Options,
+        cw: f64,
+    ) -> Self {
+        Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts)
+    }
+
+    /// Forget all history and restart at (t, y) on segment `seg` (its mode, switch bits and
+    /// recorded steps); then `step(t_stop)` with t_stop < t integrates backwards.
+    pub fn restart_segment(&mut self, seg: &'a SegmentRec, t: f64, y: &AdjState<M::N, M::P>) {
+        let sys = &mut self.sys;
+        sys.hist.seg = Some(seg);
+        sys.hist.cursor = seg.steps.end.saturating_sub(1);
+        sys.rhs.mode = seg.mode;
+        sys.rhs.sw.clone_from(&seg.sw);
+        self.restart_at(t, y);
+    }
+}
