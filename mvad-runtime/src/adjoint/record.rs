@@ -352,7 +352,8 @@ impl Tape {
         let Some(seg) = seg else {
             return false;
         };
-        let mut cursor = seg.steps.start + self.steps[seg.steps.clone()].partition_point(|s| s.t1 < t);
+        let mut cursor =
+            seg.steps.start + self.steps[seg.steps.clone()].partition_point(|s| s.t1 < t);
         self.state_at(seg, t, &mut cursor, out);
         true
     }
@@ -365,7 +366,12 @@ mod tests {
     /// A polynomial of the recorded degree is reproduced to rounding anywhere on its step.
     #[test]
     fn nodes_reproduce_polynomials_of_their_degree() {
-        let p = |t: f64| [1.0 + t - 3.0 * t.powi(4) + 0.5 * t.powi(9), (2.0 * t).powi(4)];
+        let p = |t: f64| {
+            [
+                1.0 + t - 3.0 * t.powi(4) + 0.5 * t.powi(9),
+                (2.0 * t).powi(4),
+            ]
+        };
         let mut tape = Tape::new(2);
         tape.open_segment(0.3);
         tape.record_step(0.3, 0.9, 9, |t, out| out.copy_from_slice(&p(t)));
@@ -381,7 +387,10 @@ mod tests {
             tape.state_at(seg, t, &mut cursor, &mut out);
             let want = p(t);
             for c in 0..2 {
-                assert!((out[c] - want[c]).abs() < 1e-14, "t {t}: {out:?} vs {want:?}");
+                assert!(
+                    (out[c] - want[c]).abs() < 1e-14,
+                    "t {t}: {out:?} vs {want:?}"
+                );
             }
         }
         // Right-continuous sampling, and x(T) at T.

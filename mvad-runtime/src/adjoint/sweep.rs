@@ -58,7 +58,13 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     /// λ += h_xᵀ w and g += h_θᵀ w at (t, `self.x`).
-    fn add(&mut self, model: &M, p: &OVector<f64, M::P>, s: &Sample<'_>, y: &mut AdjState<M::N, M::P>) {
+    fn add(
+        &mut self,
+        model: &M,
+        p: &OVector<f64, M::P>,
+        s: &Sample<'_>,
+        y: &mut AdjState<M::N, M::P>,
+    ) {
         if s.w.iter().all(|&w| w == 0.0) {
             return;
         }
@@ -165,7 +171,9 @@ where
                 0 => seg.t_start,
                 _ => samples[left - 1].t.max(seg.t_start),
             };
-            while integ.t() > stop {
+            // A stop within rounding of where the sweep stands (a sample a few ulps before a
+            // segment's end) is reached: no step is that short.
+            while integ.t() - stop > 16.0 * f64::EPSILON * stop.abs() {
                 integ.step(stop)?;
                 h_seed = integ.last_step_size().abs();
             }

@@ -21,7 +21,7 @@
 //! computed forwards, as [`crate::solve::solve`] does.
 
 use super::sweep::{sweep, Sample};
-use super::{add_sweep_stats, horizon_grad, note_fallback, primal};
+use super::{add_sweep_stats, horizon_grad, note_fallback, primal, replay_events};
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc};
 use crate::solution::{GradientMode, Options, Solution};
@@ -86,6 +86,7 @@ where
         return Ok(out);
     };
     check_times(cot.times, sol.t_end)?;
+    replay_events(model, params, &tape, opts, &mut sol.events);
     let samples = sorted_samples(cot, nobs);
     let mut observables = vec![0.0; cot.times.len() * nobs];
     let mut x = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
@@ -122,7 +123,9 @@ where
         gradient_mode: GradientMode::Forward,
         ..opts.clone()
     };
-    let (sol, _) = run_loop(model, params, &fwd, &mut (), false)?;
+    let mut events = Vec::new();
+    let (mut sol, _) = run_loop(model, params, &fwd, &mut events, false)?;
+    sol.events = events;
     check_times(cot.times, sol.t_end)?;
     let traj = sol.trajectory.as_ref().ok_or(SolveError::NotRecorded)?;
     let (n, np, nobs) = (traj.n, sol.gradient.len(), model.info().nobservables());

@@ -442,7 +442,8 @@ where
         imp.xpert.axpy(-dt, &imp.f0, 1.0);
         rhs.eval_at(t0 - dt, &imp.xpert, y0, &mut imp.fminus);
         let s = 0.5 / dt;
-        imp.dt.lincomb(s, &[1.0], std::slice::from_ref(&imp.fplus), true);
+        imp.dt
+            .lincomb(s, &[1.0], std::slice::from_ref(&imp.fplus), true);
         imp.dt.axpy(-s, &imp.fminus, true);
         imp.prepared = true;
     }

@@ -117,7 +117,15 @@ fn hermite_weights(theta: f64) -> (f64, f64, f64) {
 
 /// d = a + c (b − a) + h (w₀ f₀ + w₁ f₁), elementwise.
 #[inline]
-pub(super) fn hermite_slice(d: &mut [f64], a: &[f64], b: &[f64], f0: &[f64], f1: &[f64], h: f64, th: f64) {
+pub(super) fn hermite_slice(
+    d: &mut [f64],
+    a: &[f64],
+    b: &[f64],
+    f0: &[f64],
+    f1: &[f64],
+    h: f64,
+    th: f64,
+) {
     let (w0, w1, c) = hermite_weights(th);
     for ((((di, ai), bi), g0), g1) in d.iter_mut().zip(a).zip(b).zip(f0).zip(f1) {
         *di = ai + c * (bi - ai) + h * (w0 * g0 + w1 * g1);
