@@ -248,6 +248,9 @@ pub struct Stats {
     /// How the gradient was computed (an adjoint run that falls back says `Forward`). The
     /// counters of an adjoint run add the backward sweep's steps to the primal run's.
     pub mode: GradientMode,
+    /// Bytes of the forward record an adjoint run kept for its sweep (0 in forward mode);
+    /// see [`crate::adjoint::record`] for what a step and a jump cost.
+    pub record_bytes: usize,
 }
 
 /// The result of [`crate::solve::solve`]: cost, dC/dθ, the event table (with the measure's

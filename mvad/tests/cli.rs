@@ -197,9 +197,70 @@ fn grad_text_table() {
 }
 
 #[test]
-fn grad_adjoint_is_reported_unsupported() {
-    let o = run_status(&["grad", BALL, "--mode", "adjoint"], 2);
-    assert!(stderr(&o).contains("adjoint"), "{}", stderr(&o));
+fn grad_adjoint_gives_e1_and_leaves_out_forward_quantities() {
+    let v = json(&run_status(
+        &tight(&["grad", BALL, "--json", "--mode", "adjoint"]),
+        0,
+    ));
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
+    assert_eq!(v["stats"]["mode"], "adjoint");
+    assert_eq!(v["mode"], "adjoint");
+    assert!(
+        v["stats"]["record_bytes"].as_u64().is_some_and(|b| b > 0),
+        "{v}"
+    );
+    assert_relative_eq!(
+        v["cost"].as_f64().expect("cost"),
+        E1_COST,
+        max_relative = 1e-9
+    );
+    assert_relative_eq!(
+        v["gradient"]["e"].as_f64().expect("dC/de"),
+        E1_DCDE,
+        max_relative = 1e-9
+    );
+    let events = v["events"].as_array().expect("events");
+    assert_eq!(events.len(), 2);
+    for (ev, t) in events.iter().zip([E1_T1, E1_T2]) {
+        assert_eq!(ev["name"], "impact");
+        assert_relative_eq!(ev["t"].as_f64().expect("t"), t, max_relative = 1e-10);
+        assert!(ev["guard_slope"].is_number() && ev["transversal"] == true);
+        assert!(ev["jump"]["velocity"].is_number());
+        assert!(ev.get("dt").is_none() && ev.get("atoms").is_none(), "{ev}");
+    }
+    // The text form says which mode ran and has no t' columns.
+    let out = stdout(&run_status(&["grad", BALL, "--mode", "adjoint"], 0));
+    assert!(out.contains("gradient by adjoint mode"), "{out}");
+    assert!(!out.contains("dt/d"), "{out}");
+    // auto: 4 params take forward mode.
+    let v = json(&run_status(&["grad", BALL, "--json", "--mode", "auto"], 0));
+    assert_eq!(v["stats"]["mode"], "forward");
+    run_status(&["grad", BALL, "--mode", "backward"], 2);
+}
+
+#[test]
+fn grad_adjoint_of_an_accumulation_falls_back_to_forward() {
+    let o = run_status(
+        &[
+            "grad",
+            "models/zeno_ball.hyb",
+            "--json",
+            "--mode",
+            "adjoint",
+        ],
+        0,
+    );
+    let v = json(&o);
+    assert_eq!(v["stats"]["mode"], "forward");
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
+    let zeno = v["diagnostics"]
+        .as_array()
+        .expect("array")
+        .iter()
+        .find(|d| d["kind"] == "zeno")
+        .expect("zeno");
+    let message = zeno["message"].as_str().expect("message");
+    assert!(message.contains("forward mode"), "{message}");
 }
 
 #[test]
@@ -244,6 +305,22 @@ fn every_bundled_model_checks_and_runs_grad() {
             gradient.values().all(Value::is_number),
             "{name}: {gradient:?}"
         );
+        // Adjoint mode: the spec's keys and the same gradient (at the default tolerances).
+        let a = json(&run_status(
+            &["grad", &path, "--json", "--mode", "adjoint"],
+            0,
+        ));
+        assert_eq!(missing_spec_keys(&a), Vec::<String>::new(), "{name}");
+        for (k, g) in gradient {
+            let (f, b) = (
+                g.as_f64().expect("f"),
+                a["gradient"][k].as_f64().expect("a"),
+            );
+            assert!(
+                (f - b).abs() <= 1e-5 * f.abs().max(1e-3),
+                "{name} d/d{k}: forward {f} adjoint {b}"
+            );
+        }
     }
     let v = json(&run_status(
         &["check", "models/thermostat.hyb", "--json"],

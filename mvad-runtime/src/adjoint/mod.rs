@@ -63,7 +63,7 @@ where
     let dt_end = horizon_grad(model, params, opts);
     let out = sweep::sweep(model, params, &tape, opts, &dt_end, 1.0, &[])?;
     sol.gradient = out.gradient;
-    add_sweep_stats(&mut sol.stats, &out.stats, start);
+    add_sweep_stats(&mut sol.stats, &out.stats, &tape, start);
     Ok(sol)
 }
 
@@ -116,8 +116,10 @@ where
     dt
 }
 
-/// The primal run's counters plus the sweep's, the mode, and the wall time since `start`.
-fn add_sweep_stats(stats: &mut Stats, sweep: &Stats, start: Instant) {
+/// The primal run's counters plus the sweep's, the mode, the record's size and the wall time
+/// since `start`.
+fn add_sweep_stats(stats: &mut Stats, sweep: &Stats, tape: &Tape, start: Instant) {
+    stats.record_bytes = tape.bytes();
     stats.steps += sweep.steps;
     stats.rejected_steps += sweep.rejected_steps;
     stats.rhs_evals += sweep.rhs_evals;

@@ -97,7 +97,7 @@ where
     let dt_end = horizon_grad(model, params, opts);
     let out = sweep(model, params, &tape, opts, &dt_end, cot.cost, &samples)?;
     sol.gradient = out.gradient.clone();
-    add_sweep_stats(&mut sol.stats, &out.stats, start);
+    add_sweep_stats(&mut sol.stats, &out.stats, &tape, start);
     Ok(Vjp {
         cost: sol.cost,
         observables,

@@ -25,7 +25,8 @@ pub fn by_name(names: &[String], idx: &[usize], values: &[f64]) -> Value {
 
 /// One event as the spec's JSON object: index, name, t, modes, guard slope,
 /// transversality, t_k' per param, the jump per state and observable, and the atoms
-/// α_k = −J_k t_k' per observable and param (params restricted to `wrt`).
+/// α_k = −J_k t_k' per observable and param (params restricted to `wrt`). An event without
+/// t' (adjoint mode) leaves out `dt` and `atoms`, as the spec allows.
 pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
     let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
     let name = info
@@ -59,9 +60,14 @@ pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
     m.insert("mode_after".into(), Value::from(mode_name(ev.mode_after)));
     m.insert("guard_slope".into(), num(ev.guard_slope));
     m.insert("transversal".into(), Value::from(ev.transversal));
-    m.insert("dt".into(), by_name(&info.params, wrt, &ev.dt));
+    let forward = !ev.dt.is_empty() || info.params.is_empty();
+    if forward {
+        m.insert("dt".into(), by_name(&info.params, wrt, &ev.dt));
+    }
     m.insert("jump".into(), Value::Object(jump));
-    m.insert("atoms".into(), Value::Object(atoms));
+    if forward {
+        m.insert("atoms".into(), Value::Object(atoms));
+    }
     Value::Object(m)
 }
 
@@ -81,7 +87,8 @@ pub fn diagnostics_json(diags: &[Diagnostic]) -> Value {
     )
 }
 
-/// Stats as `{steps, rejected_steps, events, wall_seconds}` plus the other counters.
+/// Stats as `{steps, rejected_steps, events, wall_seconds}` plus the other counters, the
+/// gradient mode that ran and the bytes of an adjoint run's forward record.
 pub fn stats_json(s: &Stats) -> Value {
     let mut m = Map::new();
     m.insert("steps".into(), Value::from(s.steps));
@@ -92,6 +99,8 @@ pub fn stats_json(s: &Stats) -> Value {
     m.insert("rhs_evals".into(), Value::from(s.rhs_evals));
     m.insert("jac_evals".into(), Value::from(s.jac_evals));
     m.insert("factorizations".into(), Value::from(s.factorizations));
+    m.insert("mode".into(), Value::from(s.mode.name()));
+    m.insert("record_bytes".into(), Value::from(s.record_bytes));
     Value::Object(m)
 }
 

@@ -135,7 +135,7 @@ where
                     "event_time".into(),
                     first.map(|e| num(e.t)).unwrap_or(Value::Null),
                 );
-                m.insert("run".into(), grad_json(info, sol, &s.wrt, "forward"));
+                m.insert("run".into(), grad_json(info, sol, &s.wrt));
                 Value::Object(m)
             })
             .collect();
