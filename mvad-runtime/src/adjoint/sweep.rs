@@ -16,7 +16,8 @@
 //!
 //! Then g = w dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ: the sum of every term of DESIGN.md's dC/dθ,
 //! transposed. The integrator restarts at every segment start and every sample (λ jumps
-//! there), its first step seeded with the last step's size.
+//! there), its first step seeded with the last step's size. It runs in the segment's local
+//! time s = t − t_start (see [`super::record`]).
 
 use super::record::{FinalState, Item, Tape};
 use super::transpose::{transpose_jump, JumpWork};
@@ -165,22 +166,23 @@ where
         };
         let mut t = seg.t_end;
         loop {
-            integ.restart_segment(seg, t, &y);
+            integ.restart_segment(seg, seg.local(t), &y);
             integ.set_step_size(h_seed);
             let stop = match left {
                 0 => seg.t_start,
                 _ => samples[left - 1].t.max(seg.t_start),
             };
-            // A stop within rounding of where the sweep stands (a sample a few ulps before a
-            // segment's end) is reached: no step is that short.
-            while integ.t() - stop > 16.0 * f64::EPSILON * stop.abs() {
-                integ.step(stop)?;
+            // A stop within the time resolution of where the sweep stands (a sample a few ulps
+            // before a segment's end) is reached: no step is that short.
+            let s_stop = seg.local(stop);
+            while integ.t() - s_stop > 16.0 * f64::EPSILON * integ.t().abs() {
+                integ.step(s_stop)?;
                 h_seed = integ.last_step_size().abs();
             }
             y.copy_from(integ.y());
             let mut cursor = seg.steps.end - 1;
             while left > 0 && samples[left - 1].t >= stop {
-                tape.state_at(seg, stop, &mut cursor, sw.x.as_mut_slice());
+                tape.state_at(seg, s_stop, &mut cursor, sw.x.as_mut_slice());
                 sw.add(model, p, &samples[left - 1], &mut y);
                 left -= 1;
             }

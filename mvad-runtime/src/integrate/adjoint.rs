@@ -2,7 +2,8 @@
 //! the model.
 //!
 //! On a segment [a, b] with frozen mode m and switch bits, and the primal trajectory x(t)
-//! replayed from the forward record ([`Tape`]), Y = (λ, g) with λ ∈ Rⁿ, g ∈ Rᵖ and
+//! replayed from the forward record ([`Tape`]; the integrator runs in the segment's local
+//! time s = t − a, see there), Y = (λ, g) with λ ∈ Rⁿ, g ∈ Rᵖ and
 //!
 //! ```text
 //!   F(t, Y) = ( −f_xᵀ λ − w ℓ_xᵀ,   −(f_θᵀ λ + w ℓ_θᵀ) )      at (t, x(t), θ)
@@ -21,12 +22,15 @@
 //! solved exactly: K_λ = W⁻¹ hγ R_λ, K_g = hγ (R_g − f_θᵀ K_λ), the last a vector–Jacobian
 //! product at the step start. F depends on t through x(t) even for an autonomous flow, so F_t
 //! is the total derivative along the trajectory, a central difference
-//! [F(t₀ + δ, x₀ + δ f₀) − F(t₀ − δ, x₀ − δ f₀)]/(2δ) with δ = ε^(1/3)·max(|t₀|, |h|) taken off
-//! the model's flow (smooth, unlike the recorded steps' seams). The adjoint of a stiff flow is
+//! [F(t₀ + δ, x₀ + δ f₀) − F(t₀ − δ, x₀ − δ f₀)]/(2δ) taken off the model's flow (smooth,
+//! unlike the recorded steps' seams). The adjoint of a stiff flow is
 //! stiff backwards in time (the eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x
 //! stepped forwards), so `auto` switches to Rodas5P on it as on the forward run.
+//! F_t takes its step δ = ε^(1/3)·|h| from the step size, not from t: along a stiff
+//! transient x changes on the scale of h (with δ from t, 1e-5 at t ≈ 2.5, the stiff relay's
+//! transient of width τ = 1e-8 gave a meaningless F_t and steps of 1e-12).
 
-use super::aug::{axpy_slice, hermite_slice, mix5_slice, WeightedRms};
+use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
 use super::forward::FD_REL_T;
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem, StageVector};
@@ -149,11 +153,23 @@ where
     #[inline]
     fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
         out.copy_from(&base.lam);
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c != 0.0 {
-                axpy_slice(out.as_mut_slice(), h * c, k.lam.as_slice());
-            }
-        }
+        accumulate_slices(
+            out.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.lam.as_slice()),
+        );
+    }
+
+    #[inline]
+    fn lincomb_primary(out: &mut OVector<f64, N>, h: f64, coefs: &[f64], ks: &[Self]) {
+        out.fill(0.0);
+        accumulate_slices(
+            out.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.lam.as_slice()),
+        );
     }
 
     #[inline]
@@ -197,6 +213,8 @@ where
     p: &'a OVector<f64, M::P>,
     mode: usize,
     sw: Switches,
+    /// Absolute time of the segment's start: the integrator runs in local time s = t − t_start.
+    t_start: f64,
     /// The cotangent w of the cost.
     cw: f64,
     has_rc: bool,
@@ -241,16 +259,18 @@ impl<M: HybridModel> AdjRhs<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// out = F(t, y) at the state x: (−f_xᵀλ − w ℓ_xᵀ, −f_θᵀλ − w ℓ_θᵀ).
+    /// out = F at local time s and state x: (−f_xᵀλ − w ℓ_xᵀ, −f_θᵀλ − w ℓ_θᵀ), the model
+    /// evaluated at t = t_start + s.
     #[inline]
     fn eval_at(
         &mut self,
-        t: f64,
+        s: f64,
         x: &OVector<f64, M::N>,
         y: &AdjState<M::N, M::P>,
         out: &mut AdjState<M::N, M::P>,
     ) {
         self.evals += 1;
+        let t = self.t_start + s;
         let pt = Point::new(self.mode, &self.sw, t, x, self.p);
         self.model.rhs_vjp(pt, &y.lam, &mut out.lam, &mut out.g);
         out.lam.neg_mut();
@@ -303,6 +323,7 @@ where
                 p,
                 mode: model.info().initial_mode,
                 sw: Switches::new(model.info().switches),
+                t_start: 0.0,
                 cw,
                 has_rc: model.info().has_running_cost,
                 lx: vn(),
@@ -429,20 +450,24 @@ where
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t0);
         imp.x0.copy_from(&hist.x);
-        let pt = Point::new(rhs.mode, &rhs.sw, t0, &imp.x0, rhs.p);
+        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t0, &imp.x0, rhs.p);
         rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
         imp.w.jac.transpose_mut();
         imp.w.jac.neg_mut();
         imp.w.power_iteration();
         rhs.model.rhs(pt, &mut imp.f0);
-        let dt = FD_REL_T * t0.abs().max(h.abs()).max(f64::MIN_POSITIVE);
+        // The trajectory may change on the scale of the step (a stiff transient), so the
+        // difference step follows h, not t; the shifts of t actually represented are used
+        // for x too, so t and x move together.
+        let delta = (FD_REL_T * h.abs()).max(64.0 * f64::EPSILON * t0.abs());
+        let (tp, tm) = (t0 + delta, t0 - delta);
         imp.xpert.copy_from(&imp.x0);
-        imp.xpert.axpy(dt, &imp.f0, 1.0);
-        rhs.eval_at(t0 + dt, &imp.xpert, y0, &mut imp.fplus);
+        imp.xpert.axpy(tp - t0, &imp.f0, 1.0);
+        rhs.eval_at(tp, &imp.xpert, y0, &mut imp.fplus);
         imp.xpert.copy_from(&imp.x0);
-        imp.xpert.axpy(-dt, &imp.f0, 1.0);
-        rhs.eval_at(t0 - dt, &imp.xpert, y0, &mut imp.fminus);
-        let s = 0.5 / dt;
+        imp.xpert.axpy(tm - t0, &imp.f0, 1.0);
+        rhs.eval_at(tm, &imp.xpert, y0, &mut imp.fminus);
+        let s = 1.0 / (tp - tm);
         imp.dt
             .lincomb(s, &[1.0], std::slice::from_ref(&imp.fplus), true);
         imp.dt.axpy(-s, &imp.fminus, true);
@@ -481,7 +506,7 @@ where
         k.lam.copy_from(&r.lam);
         k.lam *= hg;
         let ok = imp.w.solve_mut(&mut k.lam);
-        let pt = Point::new(rhs.mode, &rhs.sw, t0, &imp.x0, rhs.p);
+        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t0, &imp.x0, rhs.p);
         rhs.model.rhs_vjp(pt, &k.lam, &mut imp.vx, &mut imp.vp);
         k.g.copy_from(&r.g);
         k.g -= &imp.vp;
@@ -497,7 +522,7 @@ where
     fn spectral_radius_at(&mut self, t: f64, _y: &Self::Vector) -> f64 {
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t);
-        let pt = Point::new(rhs.mode, &rhs.sw, t, &hist.x, rhs.p);
+        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t, &hist.x, rhs.p);
         rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
         imp.w.power_iteration()
     }
@@ -523,14 +548,16 @@ where
         Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts)
     }
 
-    /// Forget all history and restart at (t, y) on segment `seg` (its mode, switch bits and
-    /// recorded steps); then `step(t_stop)` with t_stop < t integrates backwards.
-    pub fn restart_segment(&mut self, seg: &'a SegmentRec, t: f64, y: &AdjState<M::N, M::P>) {
+    /// Forget all history and restart at (s, y) on segment `seg` (its mode, switch bits and
+    /// recorded steps), in the segment's local time s = t − t_start (see
+    /// [`crate::adjoint::record`]); then `step(s_stop)` with s_stop < s integrates backwards.
+    pub fn restart_segment(&mut self, seg: &'a SegmentRec, s: f64, y: &AdjState<M::N, M::P>) {
         let sys = &mut self.sys;
         sys.hist.seg = Some(seg);
         sys.hist.cursor = seg.steps.end.saturating_sub(1);
         sys.rhs.mode = seg.mode;
         sys.rhs.sw.clone_from(&seg.sw);
-        self.restart_at(t, y);
+        sys.rhs.t_start = seg.t_start;
+        self.restart_at(s, y);
     }
 }

@@ -98,6 +98,22 @@ pub(super) fn axpy_slice(y: &mut [f64], a: f64, x: &[f64]) {
     }
 }
 
+/// `out += h Σ_j c_j k_j` over slices, zero coefficients skipped (the primary parts of
+/// [`StageVector::combine_primary`] and [`StageVector::lincomb_primary`]).
+#[inline]
+pub(super) fn accumulate_slices<'a>(
+    out: &mut [f64],
+    h: f64,
+    coefs: &[f64],
+    ks: impl Iterator<Item = &'a [f64]>,
+) {
+    for (c, k) in coefs.iter().zip(ks) {
+        if *c != 0.0 {
+            axpy_slice(out, h * c, k);
+        }
+    }
+}
+
 /// `o = Σ_i w_i v_i` elementwise over five slices, summed left to right.
 #[inline]
 pub(super) fn mix5_slice(o: &mut [f64], w: &[f64; 5], v: [&[f64]; 5]) {
@@ -222,11 +238,23 @@ where
     #[inline]
     fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
         out.copy_from(&base.x);
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c != 0.0 {
-                axpy_slice(out.as_mut_slice(), h * c, k.x.as_slice());
-            }
-        }
+        accumulate_slices(
+            out.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.x.as_slice()),
+        );
+    }
+
+    #[inline]
+    fn lincomb_primary(out: &mut OVector<f64, N>, h: f64, coefs: &[f64], ks: &[Self]) {
+        out.fill(0.0);
+        accumulate_slices(
+            out.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.x.as_slice()),
+        );
     }
 
     #[inline]

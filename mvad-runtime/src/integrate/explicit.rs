@@ -85,6 +85,18 @@ impl<const S: usize, const K: usize, const D: usize> Tableau<S, K, D> {
         out.combine(y0, h, &self.weights(theta), &k[..K], all);
     }
 
+    /// The primary part of [`Tableau::dense`] as a polynomial in θ:
+    /// Y₀ + h Σ_i b_i(θ) k_i = Σ_{m=0..D} θᵐ c_m with c₀ = Y₀ and c_m = h Σ_i r_im k_i, into
+    /// `coefs[0..=D]`.
+    #[inline]
+    pub fn poly_primary<V: StageVector>(&self, k: &[V], y0: &V, h: f64, coefs: &mut [V::Primary]) {
+        y0.primary_into(&mut coefs[0]);
+        for (m, c) in coefs[1..=D].iter_mut().enumerate() {
+            let column: [f64; K] = std::array::from_fn(|i| self.dense[i][m]);
+            V::lincomb_primary(c, h, &column, &k[..K]);
+        }
+    }
+
     /// The primary part of [`Tableau::dense`].
     #[inline]
     pub fn dense_primary<V: StageVector>(

@@ -279,6 +279,23 @@ pub(super) fn dense_primary<V: StageVector>(
     V::mix5_primary(out, &weights(theta), [y0, y1, &dk[0], &dk[1], &dk[2]]);
 }
 
+/// [`dense_primary`] as a polynomial in θ, Σ_{m=0..4} θᵐ c_m, into `coefs[0..=4]`:
+/// c₀ = Y₀, c₁ = Y₁ − Y₀ + D₁, c₂ = D₂ − D₁, c₃ = D₃ − D₂, c₄ = −D₃.
+pub(super) fn poly_primary<V: StageVector>(k: &[V], y0: &V, y1: &V, coefs: &mut [V::Primary]) {
+    let dk = &k[1 + NSTAGES..STAGES];
+    let v = [y0, y1, &dk[0], &dk[1], &dk[2]];
+    y0.primary_into(&mut coefs[0]);
+    let rows: [[f64; 5]; DENSE_DEGREE] = [
+        [-1.0, 1.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, -1.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, -1.0, 1.0],
+        [0.0, 0.0, 0.0, 0.0, -1.0],
+    ];
+    for (c, w) in coefs[1..=DENSE_DEGREE].iter_mut().zip(&rows) {
+        V::mix5_primary(c, w, v);
+    }
+}
+
 impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// One Rodas5P attempt from (t, y) with k[0] = F(t, y): stages into k[1..=8], dense
     /// coefficients into k[9..=11], the candidate into `ynew`, K₈ into `yerr`; returns ‖K₈‖.

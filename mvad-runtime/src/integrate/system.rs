@@ -66,6 +66,10 @@ pub trait StageVector {
     fn combine_primary(out: &mut Self::Primary, base: &Self, h: f64, coefs: &[f64], ks: &[Self])
     where
         Self: Sized;
+    /// `out = h Σ_j c_j primary(k_j)`.
+    fn lincomb_primary(out: &mut Self::Primary, h: f64, coefs: &[f64], ks: &[Self])
+    where
+        Self: Sized;
     /// Primary part of [`StageVector::mix5`].
     fn mix5_primary(out: &mut Self::Primary, w: &[f64; 5], v: [&Self; 5]);
     /// Primary part of [`StageVector::hermite`].

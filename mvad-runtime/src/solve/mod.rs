@@ -29,7 +29,7 @@ mod jump;
 mod record;
 mod zeno;
 
-use crate::adjoint::record::Tape;
+use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
 use crate::event::{Scanner, Watch};
 use crate::integrate::{AugState, Forward, Integrator, OdeSystem};
@@ -225,6 +225,9 @@ where
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
     stuck: Option<usize>,
     rec: Option<Recorder>,
+    /// The coefficients of one step's dense polynomial, for the adjoint's tape (empty
+    /// without it).
+    poly: Vec<OVector<f64, M::N>>,
 }
 
 impl<'a, M: HybridModel> Driver<'a, M>
@@ -297,6 +300,11 @@ where
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),
+            poly: if tape {
+                (0..MAX_COEFS).map(|_| vn()).collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 
@@ -551,7 +559,7 @@ where
     /// Records [t0, t1] of the current step when recording.
     fn record_step(&mut self, t0: f64, t1: f64) {
         if let Some(rec) = &mut self.rec {
-            rec.record_step(&self.integ, &mut self.aug_tmp, t0, t1);
+            rec.record_step(&self.integ, &mut self.aug_tmp, &mut self.poly, t0, t1);
         }
     }
 }

@@ -47,11 +47,13 @@ impl Recorder {
     }
 
     /// Records [t0, t1] of the integrator's current step from its dense output (before the
-    /// step is truncated at an event). `tmp` is scratch space for one dense evaluation.
+    /// step is truncated at an event). `tmp` is scratch space for one dense evaluation,
+    /// `poly` for the coefficients of one dense polynomial (the tape's; `MAX_COEFS` vectors).
     pub(super) fn record_step<M: HybridModel>(
         &mut self,
         integ: &Integrator<Forward<'_, M>>,
         tmp: &mut AugState<M::N, M::P>,
+        poly: &mut [OVector<f64, M::N>],
         t0: f64,
         t1: f64,
     ) where
@@ -61,9 +63,11 @@ impl Recorder {
             return;
         }
         if let Some(tape) = &mut self.tape {
-            tape.record_step(t0, t1, integ.dense_degree(), |t, out| {
-                integ.dense_x(t, &mut tmp.x);
-                out.copy_from_slice(tmp.x.as_slice());
+            let deg = integ.dense_poly(poly);
+            let step = (integ.t_prev(), integ.last_step_size());
+            let cut = (t1 != integ.t()).then_some(t1);
+            tape.record_step(step, cut, deg, |m, out| {
+                out.copy_from_slice(poly[m].as_slice());
             });
         }
         let Some(traj) = &mut self.traj else {
