@@ -59,9 +59,12 @@ pub enum GradientMode {
 }
 
 impl GradientMode {
-    /// `auto` picks the adjoint from this many parameters on: the crossover of the
-    /// `adjoint` benchmark (`mvad-runtime/benches/adjoint.rs`, ARCHITECTURE.md).
-    pub const AUTO_ADJOINT_MIN_PARAMS: usize = 20;
+    /// `auto` picks the adjoint from this many parameters on: where the adjoint overtook
+    /// forward mode in the `adjoint` benchmark (`models/benches/adjoint.rs`) on the model
+    /// whose evaluation does not grow with p (between p = 20 and 50 at rtol 1e-8; on a model
+    /// whose flow sums p terms it did not overtake up to p = 1000 with today's dense
+    /// vector–Jacobian products).
+    pub const AUTO_ADJOINT_MIN_PARAMS: usize = 50;
 
     /// The name used on the command line and in `stats.mode`.
     pub fn name(self) -> &'static str {

@@ -192,6 +192,14 @@ where
     }
 }
 
+/// `o = −o + a·v` elementwise (one pass).
+#[inline]
+fn negate_plus(o: &mut [f64], a: f64, v: &[f64]) {
+    for (oi, vi) in o.iter_mut().zip(v) {
+        *oi = a * vi - *oi;
+    }
+}
+
 /// The backward system of one segment at parameters θ (see the module doc).
 pub struct Backward<'a, M: HybridModel>
 where
@@ -273,14 +281,15 @@ where
         let t = self.t_start + s;
         let pt = Point::new(self.mode, &self.sw, t, x, self.p);
         self.model.rhs_vjp(pt, &y.lam, &mut out.lam, &mut out.g);
-        out.lam.neg_mut();
-        out.g.neg_mut();
         if self.has_rc && self.cw != 0.0 {
             let (lx, lp) = (&mut self.lx, &mut self.lp);
             self.model
                 .running_cost_value_grad(&self.sw, t, x, self.p, lx, lp);
-            out.lam.axpy(-self.cw, lx, 1.0);
-            out.g.axpy(-self.cw, lp, 1.0);
+            negate_plus(out.lam.as_mut_slice(), -self.cw, lx.as_slice());
+            negate_plus(out.g.as_mut_slice(), -self.cw, lp.as_slice());
+        } else {
+            out.lam.neg_mut();
+            out.g.neg_mut();
         }
     }
 }
@@ -373,6 +382,12 @@ where
     #[inline]
     fn all_parts(&self) -> bool {
         true
+    }
+
+    /// F depends on λ alone: g is a quadrature, never read back.
+    #[inline]
+    fn reads_secondary(&self) -> bool {
+        false
     }
 
     #[inline]

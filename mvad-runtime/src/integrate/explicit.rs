@@ -122,14 +122,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         h: f64,
     ) -> f64 {
         let all = self.sys.all_parts();
+        let reads = self.sys.reads_secondary();
         let t = self.t;
         for i in 1..S {
-            let dst = if tab.last_stage_is_solution && i == S - 1 {
-                &mut self.ynew
+            // A stage argument needs only what F reads, unless it is the solution itself.
+            let (dst, parts) = if tab.last_stage_is_solution && i == S - 1 {
+                (&mut self.ynew, all)
             } else {
-                &mut self.tmp
+                (&mut self.tmp, reads)
             };
-            dst.combine(&self.y, h, tab.a[i], &self.k[..i], all);
+            dst.combine(&self.y, h, tab.a[i], &self.k[..i], parts);
             self.sys.eval(t + tab.c[i] * h, dst, &mut self.k[i]);
         }
         if !tab.last_stage_is_solution {
@@ -159,12 +161,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         stages: std::ops::Range<usize>,
         h: f64,
     ) {
-        let all = self.sys.all_parts();
+        let reads = self.sys.reads_secondary();
         let t0 = self.t_prev;
         for i in stages {
             let row = tab.a[i];
             self.tmp
-                .combine(&self.y_prev, h, row, &self.k[..row.len()], all);
+                .combine(&self.y_prev, h, row, &self.k[..row.len()], reads);
             self.sys.eval(t0 + tab.c[i] * h, &self.tmp, &mut self.k[i]);
         }
     }

@@ -235,6 +235,12 @@ where
         self.rhs.sens
     }
 
+    /// F reads S (f_x S + f_θ) whenever it is integrated.
+    #[inline]
+    fn reads_secondary(&self) -> bool {
+        self.rhs.sens
+    }
+
     #[inline]
     fn controls_all(&self) -> bool {
         self.sens_err

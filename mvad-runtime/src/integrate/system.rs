@@ -95,6 +95,11 @@ pub trait OdeSystem {
     fn zeros(&self) -> Self::Vector;
     /// Whether the secondary parts are integrated (the `all` flag of every operation).
     fn all_parts(&self) -> bool;
+    /// Whether F reads the secondary parts of its argument (S, for the forward system). When
+    /// it does not (the adjoint's gradient quadrature is never read back), the steppers form
+    /// only the primary part of a stage argument Y₀ + hΣa_ij k_j; the step's solution, error
+    /// estimate and dense output still carry every integrated part.
+    fn reads_secondary(&self) -> bool;
     /// Whether the secondary parts enter the error norm (never more than [`Self::all_parts`]).
     fn controls_all(&self) -> bool;
     /// `out = F(t, y)`.

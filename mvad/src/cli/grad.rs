@@ -28,7 +28,7 @@ pub struct GradArgs {
     pub common: Common,
     /// Sensitivity mode: `forward` (sensitivities carried along the run), `adjoint` (a primal
     /// run, then one backward sweep: cost flat in the number of params; events without t'
-    /// and atoms) or `auto` (adjoint from 20 params on).
+    /// and atoms) or `auto` (adjoint from 50 params on).
     #[arg(long, default_value = "forward", value_parser = ["forward", "adjoint", "auto"])]
     pub mode: String,
 }
