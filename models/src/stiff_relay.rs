@@ -21,6 +21,75 @@ pub fn switch_times(tau: f64, rate: f64, lo: f64, hi: f64, t_end: f64) -> Vec<f6
     out
 }
 
+/// C = ∫₀³ y² dt and dC/dθ for θ = (tau, rate, lo, hi), in closed form, for the horizon 3
+/// and parameters near the defaults (three switches before T, each segment ≫ τ).
+///
+/// On a segment that starts at y = A in direction σ = ±1 (up: +1), y(s) = B + σ·rate·s +
+/// 2σ·rate·τ e^{−s/τ} with B = A − 2σ·rate·τ, so over a length L ≫ τ
+/// ∫y² = ((B + σ·rate·L)³ − B³)/(3σ·rate) + 4σ·rate·B τ² + 6 rate² τ³ (terms in e^{−L/τ}
+/// dropped: below rounding for L ≫ τ). The first segment is y = rate·t up to hi/rate, full
+/// segments last (hi − lo)/rate + 2τ (see [`switch_times`]), the last one ends at T = 3.
+/// Summed and expanded (by sympy), with the gradient differentiated the same way.
+pub fn cost_closed(tau: f64, rate: f64, lo: f64, hi: f64) -> (f64, [f64; 4]) {
+    let (t, r, l, h) = (tau, rate, lo, hi);
+    let (r2, r3, t2, t3) = (r * r, r * r * r, t * t, t * t * t);
+    let c = -(20.0 * h * h * h - 32.0 * h * h * l + 92.0 * h * h * r * t - 48.0 * h * h * r
+        + 16.0 * h * l * l
+        - 96.0 * h * l * r * t
+        + 48.0 * h * l * r
+        + 144.0 * h * r2 * t2
+        - 144.0 * h * r2 * t
+        + 36.0 * h * r2
+        - 2.0 * l * l * l
+        + 22.0 * l * l * r * t
+        - 12.0 * l * l * r
+        - 72.0 * l * r2 * t2
+        + 72.0 * l * r2 * t
+        - 18.0 * l * r2
+        + 70.0 * r3 * t3
+        - 108.0 * r3 * t2
+        + 54.0 * r3 * t
+        - 9.0 * r3)
+        / r;
+    let d_tau = -2.0
+        * (46.0 * h * h - 48.0 * h * l + 144.0 * h * r * t - 72.0 * h * r + 11.0 * l * l
+            - 72.0 * l * r * t
+            + 36.0 * l * r
+            + 105.0 * r2 * t2
+            - 108.0 * r2 * t
+            + 27.0 * r2);
+    let d_rate = 2.0
+        * (10.0 * h * h * h - 16.0 * h * h * l + 8.0 * h * l * l - 72.0 * h * r2 * t2
+            + 72.0 * h * r2 * t
+            - 18.0 * h * r2
+            - l * l * l
+            + 36.0 * l * r2 * t2
+            - 36.0 * l * r2 * t
+            + 9.0 * l * r2
+            - 70.0 * r3 * t3
+            + 108.0 * r3 * t2
+            - 54.0 * r3 * t
+            + 9.0 * r3)
+        / r2;
+    let d_lo = 2.0
+        * (16.0 * h * h - 16.0 * h * l + 48.0 * h * r * t - 24.0 * h * r + 3.0 * l * l
+            - 22.0 * l * r * t
+            + 12.0 * l * r
+            + 36.0 * r2 * t2
+            - 36.0 * r2 * t
+            + 9.0 * r2)
+        / r;
+    let d_hi = -4.0
+        * (15.0 * h * h - 16.0 * h * l + 46.0 * h * r * t - 24.0 * h * r + 4.0 * l * l
+            - 24.0 * l * r * t
+            + 12.0 * l * r
+            + 36.0 * r2 * t2
+            - 36.0 * r2 * t
+            + 9.0 * r2)
+        / r;
+    (c, [d_tau, d_rate, d_lo, d_hi])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

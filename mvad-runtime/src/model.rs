@@ -561,13 +561,46 @@ where
     }
 }
 
-/// Capability: second-derivative directional products, for the implicit method's
-/// Jacobian of the sensitivity equations.
+/// Relative size of the perturbation of x in the directional differences of the
+/// [`ModelSecondOrder`] defaults: h = `DIR_STEP`·max(1, ‖x‖₂)/‖v‖₂.
 ///
-/// The default differentiates [`ModelSens::rhs_sens`] by central differences along v with
-/// the step h = ε^{1/3} (1 + ‖x‖∞) / ‖v‖∞ (ε the machine epsilon; truncation and rounding
-/// errors balance at O(ε^{2/3})); it allocates scratch. A model with symbolic second
-/// derivatives overrides it with the exact product.
+/// Far larger than the usual ε^{1/3}: models with cancellation inside f_θ (a lag
+/// (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the rounding of x ± h v by 1/h, and with
+/// ε^{1/3} the sensitivity of a τ = 1e-8 lag had a 2e-6 error floor, with 1e-4 it is 4e-8.
+/// Central differences are exact when the differenced function is at most quadratic in x,
+/// and perturb it by O(1e-8) relative for cubic terms.
+const DIR_STEP: f64 = 1e-4;
+
+/// The step of the directional differences along v at x (see [`DIR_STEP`]); `None` when
+/// v = 0 (the product is zero) and NaN when v is not finite.
+fn dir_step<N: Dim>(x: &OVector<f64, N>, v: &OVector<f64, N>) -> Option<f64>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    let nv = v.norm();
+    if nv == 0.0 {
+        return None;
+    }
+    Some(if nv.is_finite() {
+        DIR_STEP * x.norm().max(1.0) / nv
+    } else {
+        f64::NAN
+    })
+}
+
+/// The step of the central differences in t of the [`ModelSecondOrder`] defaults:
+/// ε^{1/3}·max(1, |t|) (truncation and rounding errors balance at O(ε^{2/3})).
+fn time_step(t: f64) -> f64 {
+    f64::EPSILON.cbrt() * t.abs().max(1.0)
+}
+
+/// Capability: second-derivative products, for the implicit method's Jacobian of the
+/// sensitivity equations and its time derivative (see `integrate::forward`).
+///
+/// The defaults are central differences of the first-derivative methods ([`ModelSens::rhs_sens`],
+/// [`HybridModel::running_cost_value_grad`]): along v with the step of [`DIR_STEP`], in t
+/// with ε^{1/3}·max(1, |t|); they allocate scratch. Both doors (`hybrid!` and loaded models)
+/// override every method with exact products from symbolic second derivatives.
 pub trait ModelSecondOrder: ModelSens
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
@@ -584,22 +617,100 @@ where
     ) where
         Self: HybridModel,
     {
-        let Point { mode, sw, t, x, p } = pt;
-        let vmax = v.amax();
-        if vmax == 0.0 || !vmax.is_finite() {
-            out.fill(if vmax == 0.0 { 0.0 } else { f64::NAN });
+        let Some(h) = dir_step(pt.x, v) else {
+            out.fill(0.0);
             return;
-        }
-        let h = f64::EPSILON.cbrt() * (1.0 + x.amax()) / vmax;
-        let mut f = x.clone_owned();
-        let mut xs = x.clone_owned();
+        };
+        let mut f = pt.x.clone_owned();
+        let mut xs = pt.x.clone_owned();
         let mut minus = out.clone_owned();
         xs.axpy(h, v, 1.0);
-        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, out);
-        xs.copy_from(x);
+        self.rhs_sens(Point { x: &xs, ..pt }, s, &mut f, out);
+        xs.copy_from(pt.x);
         xs.axpy(-h, v, 1.0);
-        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, &mut minus);
+        self.rhs_sens(Point { x: &xs, ..pt }, s, &mut f, &mut minus);
         *out -= &minus;
         *out /= 2.0 * h;
+    }
+
+    /// ∂ₜ(f_x S + f_θ) into `out` (n×p): the time derivative of the sensitivity right-hand
+    /// side at fixed x and S (zeros for an autonomous flow).
+    fn rhs_sens_dt(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        out: &mut OMatrix<f64, Self::N, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let h = time_step(pt.t);
+        let mut f = pt.x.clone_owned();
+        let mut minus = out.clone_owned();
+        self.rhs_sens(Point { t: pt.t + h, ..pt }, s, &mut f, out);
+        self.rhs_sens(Point { t: pt.t - h, ..pt }, s, &mut f, &mut minus);
+        *out -= &minus;
+        *out /= 2.0 * h;
+    }
+
+    /// (∂/∂x (ℓ_x S + ℓ_θ)) · v into `out` (p): out = Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ, the
+    /// derivative of the running cost's sensitivity integrand along v (with the frozen
+    /// branches `sw`; zeros without a running cost).
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dir_x(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        v: &OVector<f64, Self::N>,
+        out: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let Some(h) = dir_step(x, v) else {
+            out.fill(0.0);
+            return;
+        };
+        let mut xs = x.clone_owned();
+        xs.axpy(h, v, 1.0);
+        let mut lx = x.clone_owned();
+        let mut lx_minus = x.clone_owned();
+        let mut lp_minus = out.clone_owned();
+        self.running_cost_value_grad(sw, t, &xs, p, &mut lx, out);
+        xs.axpy(-2.0 * h, v, 1.0);
+        self.running_cost_value_grad(sw, t, &xs, p, &mut lx_minus, &mut lp_minus);
+        lx -= &lx_minus;
+        *out -= &lp_minus;
+        out.gemv_tr(1.0, s, &lx, 1.0);
+        *out /= 2.0 * h;
+    }
+
+    /// ∂ₜ(ℓ_x S + ℓ_θ) into `out` (p), at fixed x and S, with the frozen branches `sw`;
+    /// returns ∂ₜℓ (zeros and 0 without a running cost).
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dt(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        out: &mut OVector<f64, Self::P>,
+    ) -> f64
+    where
+        Self: HybridModel,
+    {
+        let h = time_step(t);
+        let mut lx = x.clone_owned();
+        let mut lx_minus = x.clone_owned();
+        let mut lp_minus = out.clone_owned();
+        let plus = self.running_cost_value_grad(sw, t + h, x, p, &mut lx, out);
+        let minus = self.running_cost_value_grad(sw, t - h, x, p, &mut lx_minus, &mut lp_minus);
+        lx -= &lx_minus;
+        *out -= &lp_minus;
+        out.gemv_tr(1.0, s, &lx, 1.0);
+        *out /= 2.0 * h;
+        (plus - minus) / (2.0 * h)
     }
 }
