@@ -150,17 +150,15 @@ both_doors! {
     }
 }
 
+/// x, θ and S (column-major) of a model at a point.
+type At<M> = (
+    OVector<f64, <M as mvad::ModelDims>::N>,
+    OVector<f64, <M as mvad::ModelDims>::P>,
+    OMatrix<f64, <M as mvad::ModelDims>::N, <M as mvad::ModelDims>::P>,
+);
+
 /// Vectors of a model's sizes from slices.
-fn vecs<M: HybridModel>(
-    m: &M,
-    x: &[f64],
-    p: &[f64],
-    s: &[f64],
-) -> (
-    OVector<f64, M::N>,
-    OVector<f64, M::P>,
-    OMatrix<f64, M::N, M::P>,
-)
+fn vecs<M: HybridModel>(m: &M, x: &[f64], p: &[f64], s: &[f64]) -> At<M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
