@@ -6,8 +6,9 @@
 //! - `pub struct NAME` with `new()`, `default_params()`, `NSTATES`, `NPARAMS`, and an
 //!   `impl ModelDims for NAME` with `type N = Const<n>; type P = Const<p>`, `impl HybridModel`
 //!   with the core methods, `impl ModelSens`
-//!   with the sparse sensitivity right-hand side, and the default adjoint and second-order
-//!   capabilities (so `NAME: HybridModel`).
+//!   with the sparse sensitivity right-hand side, `impl ModelAdjoint` with the sparse
+//!   vector–Jacobian products and `impl ModelSecondOrder` with the exact second-order products
+//!   (`products.rs`), so `NAME: HybridModel` with no default in use.
 //!
 //! Every method body is straight-line code cut from a [`crate::schedule::Kernel`]: nodes used more than
 //! once are bound once with `let`, nodes used once are inlined into their user (up to a
