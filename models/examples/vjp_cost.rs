@@ -1,7 +1,8 @@
 //! The cost of one vector–Jacobian product λᵀf_x, λᵀf_θ (`ModelAdjoint::rhs_vjp`) of a loaded
 //! model as the number of parameters grows, against the dense products the trait's default
 //! forms (f_x and f_θ, then f_xᵀλ and f_θᵀλ), beside the forward sensitivity right-hand side
-//! `rhs_sens` and the second-order product `rhs_sens_dir_x` for scale.
+//! `rhs_sens` and the second-order product `rhs_sens_dir_x` for scale, and the time to load
+//! the model (parse, differentiate, schedule, tapes).
 //!
 //! The models have n = 10 states and p parameters, each entering one equation through its own
 //! term: der(x_i) = −x_i + Σ_{j ≡ i mod n} k_j·u_j with u_j = tanh(x_{i+1} − j/p) (a
@@ -74,7 +75,7 @@ fn main() {
     let n = 10;
     println!("n = {n} states; times per call (median), loaded model\n");
     println!(
-        "{:>6} {:>5} {:>8} {:>8} | {:>12} {:>14} | {:>12} {:>16}",
+        "{:>6} {:>5} {:>8} {:>8} | {:>12} {:>14} | {:>12} {:>16} | {:>8}",
         "terms",
         "p",
         "nnz f_x",
@@ -82,13 +83,16 @@ fn main() {
         "rhs_vjp",
         "dense f_xᵀλ+f_θᵀλ",
         "rhs_sens",
-        "rhs_sens_dir_x"
+        "rhs_sens_dir_x",
+        "load"
     );
     for (tanh, p) in [false, true]
         .into_iter()
         .flat_map(|t| [10, 100, 1000].map(|p| (t, p)))
     {
+        let load = Instant::now();
         let m = InterpretedModel::from_source(&wide_model(n, p, tanh)).expect("model loads");
+        let load = load.elapsed().as_secs_f64();
         let th = m.default_params();
         let x = DVector::from_fn(n, |i, _| 0.3 + 0.05 * i as f64);
         let lam = DVector::from_fn(n, |i, _| 1.0 - 0.1 * i as f64);
@@ -123,7 +127,7 @@ fn main() {
         let nnz_x = m.info().jacobian_sparsity[0].len();
         let terms = if tanh { "tanh" } else { "linear" };
         println!(
-            "{terms:>6} {p:>5} {nnz_x:>8} {p:>8} | {:>9.0} ns {:>14.0} ns | {:>9.0} ns {:>13.0} ns",
+            "{terms:>6} {p:>5} {nnz_x:>8} {p:>8} | {:>9.0} ns {:>14.0} ns | {:>9.0} ns {:>13.0} ns | {load:>6.3} s",
             sparse, dense, sens, dir
         );
     }
