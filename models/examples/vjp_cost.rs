@@ -11,6 +11,7 @@
 //!
 //! `cargo run --release -p models --example vjp_cost`
 
+use models::median_us;
 use mvad::interp::InterpretedModel;
 use mvad::{HybridModel, ModelAdjoint, ModelSecondOrder, ModelSens, Point, Switches};
 use nalgebra::{DMatrix, DVector};
@@ -45,30 +46,9 @@ fn wide_model(n: usize, p: usize, tanh: bool) -> String {
     src
 }
 
-/// Median over 11 batches of the time per call of `f`, in ns.
-fn median_ns(mut f: impl FnMut()) -> f64 {
-    let mut batch = 10usize;
-    loop {
-        let t = Instant::now();
-        for _ in 0..batch {
-            f();
-        }
-        if t.elapsed().as_secs_f64() > 0.02 || batch > 10_000_000 {
-            break;
-        }
-        batch *= 2;
-    }
-    let mut v: Vec<f64> = (0..11)
-        .map(|_| {
-            let t = Instant::now();
-            for _ in 0..batch {
-                f();
-            }
-            t.elapsed().as_secs_f64() * 1e9 / batch as f64
-        })
-        .collect();
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+/// [`median_us`] in ns.
+fn median_ns(f: impl FnMut()) -> f64 {
+    1e3 * median_us(f)
 }
 
 fn main() {

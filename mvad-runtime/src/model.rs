@@ -621,16 +621,17 @@ where
             out.fill(0.0);
             return;
         };
-        let mut f = pt.x.clone_owned();
-        let mut xs = pt.x.clone_owned();
-        let mut minus = out.clone_owned();
-        xs.axpy(h, v, 1.0);
-        self.rhs_sens(Point { x: &xs, ..pt }, s, &mut f, out);
-        xs.copy_from(pt.x);
-        xs.axpy(-h, v, 1.0);
-        self.rhs_sens(Point { x: &xs, ..pt }, s, &mut f, &mut minus);
-        *out -= &minus;
-        *out /= 2.0 * h;
+        let (mut xu, mut xd) = (pt.x.clone_owned(), pt.x.clone_owned());
+        xu.axpy(h, v, 1.0);
+        xd.axpy(-h, v, 1.0);
+        rhs_sens_difference(
+            self,
+            Point { x: &xu, ..pt },
+            Point { x: &xd, ..pt },
+            s,
+            2.0 * h,
+            out,
+        );
     }
 
     /// ∂ₜ(f_x S + f_θ) into `out` (n×p): the time derivative of the sensitivity right-hand
@@ -644,12 +645,8 @@ where
         Self: HybridModel,
     {
         let h = time_step(pt.t);
-        let mut f = pt.x.clone_owned();
-        let mut minus = out.clone_owned();
-        self.rhs_sens(Point { t: pt.t + h, ..pt }, s, &mut f, out);
-        self.rhs_sens(Point { t: pt.t - h, ..pt }, s, &mut f, &mut minus);
-        *out -= &minus;
-        *out /= 2.0 * h;
+        let (up, dn) = (Point { t: pt.t + h, ..pt }, Point { t: pt.t - h, ..pt });
+        rhs_sens_difference(self, up, dn, s, 2.0 * h, out);
     }
 
     /// (∂/∂x (ℓ_x S + ℓ_θ)) · v into `out` (p): out = Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ, the
@@ -672,18 +669,11 @@ where
             out.fill(0.0);
             return;
         };
-        let mut xs = x.clone_owned();
-        xs.axpy(h, v, 1.0);
-        let mut lx = x.clone_owned();
-        let mut lx_minus = x.clone_owned();
-        let mut lp_minus = out.clone_owned();
-        self.running_cost_value_grad(sw, t, &xs, p, &mut lx, out);
-        xs.axpy(-2.0 * h, v, 1.0);
-        self.running_cost_value_grad(sw, t, &xs, p, &mut lx_minus, &mut lp_minus);
-        lx -= &lx_minus;
-        *out -= &lp_minus;
-        out.gemv_tr(1.0, s, &lx, 1.0);
-        *out /= 2.0 * h;
+        let (mut xu, mut xd) = (x.clone_owned(), x.clone_owned());
+        xu.axpy(h, v, 1.0);
+        xd.axpy(-h, v, 1.0);
+        let (up, dn) = (Point::new(0, sw, t, &xu, p), Point::new(0, sw, t, &xd, p));
+        running_cost_sens_difference(self, up, dn, s, 2.0 * h, out);
     }
 
     /// ∂ₜ(ℓ_x S + ℓ_θ) into `out` (p), at fixed x and S, with the frozen branches `sw`;
@@ -702,15 +692,53 @@ where
         Self: HybridModel,
     {
         let h = time_step(t);
-        let mut lx = x.clone_owned();
-        let mut lx_minus = x.clone_owned();
-        let mut lp_minus = out.clone_owned();
-        let plus = self.running_cost_value_grad(sw, t + h, x, p, &mut lx, out);
-        let minus = self.running_cost_value_grad(sw, t - h, x, p, &mut lx_minus, &mut lp_minus);
-        lx -= &lx_minus;
-        *out -= &lp_minus;
-        out.gemv_tr(1.0, s, &lx, 1.0);
-        *out /= 2.0 * h;
-        (plus - minus) / (2.0 * h)
+        let (up, dn) = (
+            Point::new(0, sw, t + h, x, p),
+            Point::new(0, sw, t - h, x, p),
+        );
+        running_cost_sens_difference(self, up, dn, s, 2.0 * h, out)
     }
+}
+
+/// out = (Ṡ(up) − Ṡ(dn))/h2 for Ṡ = f_x S + f_θ (the difference quotient of the defaults).
+fn rhs_sens_difference<M: HybridModel + ?Sized>(
+    m: &M,
+    up: Point<'_, M::N, M::P>,
+    dn: Point<'_, M::N, M::P>,
+    s: &OMatrix<f64, M::N, M::P>,
+    h2: f64,
+    out: &mut OMatrix<f64, M::N, M::P>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut f = up.x.clone_owned();
+    let mut minus = out.clone_owned();
+    m.rhs_sens(up, s, &mut f, out);
+    m.rhs_sens(dn, s, &mut f, &mut minus);
+    *out -= &minus;
+    *out /= h2;
+}
+
+/// out = (q̇_θ(up) − q̇_θ(dn))/h2 for q̇_θ = ℓ_x S + ℓ_θ; returns (ℓ(up) − ℓ(dn))/h2 (the
+/// difference quotients of the defaults; the points' modes are ignored).
+fn running_cost_sens_difference<M: HybridModel + ?Sized>(
+    m: &M,
+    up: Point<'_, M::N, M::P>,
+    dn: Point<'_, M::N, M::P>,
+    s: &OMatrix<f64, M::N, M::P>,
+    h2: f64,
+    out: &mut OVector<f64, M::P>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (mut lx, mut lx_dn, mut lp_dn) =
+        (up.x.clone_owned(), up.x.clone_owned(), out.clone_owned());
+    let l_up = m.running_cost_value_grad(up.sw, up.t, up.x, up.p, &mut lx, out);
+    let l_dn = m.running_cost_value_grad(dn.sw, dn.t, dn.x, dn.p, &mut lx_dn, &mut lp_dn);
+    lx -= &lx_dn;
+    *out -= &lp_dn;
+    out.gemv_tr(1.0, s, &lx, 1.0);
+    *out /= h2;
+    (l_up - l_dn) / h2
 }
