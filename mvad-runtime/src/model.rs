@@ -571,9 +571,13 @@ where
 /// and perturb it by O(1e-8) relative for cubic terms.
 const DIR_STEP: f64 = 1e-4;
 
-/// The step of the directional differences along v at x (see [`DIR_STEP`]); `None` when
-/// v = 0 (the product is zero) and NaN when v is not finite.
-fn dir_step<N: Dim>(x: &OVector<f64, N>, v: &OVector<f64, N>) -> Option<f64>
+/// The step h of the directional differences along v at x (see [`DIR_STEP`]) and the points
+/// x ± h v; `None` when v = 0 (the product is zero), h = NaN when v is not finite.
+#[allow(clippy::type_complexity)]
+fn dir_points<N: Dim>(
+    x: &OVector<f64, N>,
+    v: &OVector<f64, N>,
+) -> Option<(f64, OVector<f64, N>, OVector<f64, N>)>
 where
     DefaultAllocator: Allocator<N>,
 {
@@ -581,11 +585,15 @@ where
     if nv == 0.0 {
         return None;
     }
-    Some(if nv.is_finite() {
+    let h = if nv.is_finite() {
         DIR_STEP * x.norm().max(1.0) / nv
     } else {
         f64::NAN
-    })
+    };
+    let (mut up, mut dn) = (x.clone_owned(), x.clone_owned());
+    up.axpy(h, v, 1.0);
+    dn.axpy(-h, v, 1.0);
+    Some((h, up, dn))
 }
 
 /// The step of the central differences in t of the [`ModelSecondOrder`] defaults:
@@ -617,13 +625,10 @@ where
     ) where
         Self: HybridModel,
     {
-        let Some(h) = dir_step(pt.x, v) else {
+        let Some((h, xu, xd)) = dir_points(pt.x, v) else {
             out.fill(0.0);
             return;
         };
-        let (mut xu, mut xd) = (pt.x.clone_owned(), pt.x.clone_owned());
-        xu.axpy(h, v, 1.0);
-        xd.axpy(-h, v, 1.0);
         rhs_sens_difference(
             self,
             Point { x: &xu, ..pt },
@@ -665,13 +670,10 @@ where
     ) where
         Self: HybridModel,
     {
-        let Some(h) = dir_step(x, v) else {
+        let Some((h, xu, xd)) = dir_points(x, v) else {
             out.fill(0.0);
             return;
         };
-        let (mut xu, mut xd) = (x.clone_owned(), x.clone_owned());
-        xu.axpy(h, v, 1.0);
-        xd.axpy(-h, v, 1.0);
         let (up, dn) = (Point::new(0, sw, t, &xu, p), Point::new(0, sw, t, &xd, p));
         running_cost_sens_difference(self, up, dn, s, 2.0 * h, out);
     }
