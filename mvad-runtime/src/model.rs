@@ -562,13 +562,7 @@ where
 }
 
 /// Relative size of the perturbation of x in the directional differences of the
-/// [`ModelSecondOrder`] defaults: h = `DIR_STEP`·max(1, ‖x‖₂)/‖v‖₂.
-///
-/// Far larger than the usual ε^{1/3}: models with cancellation inside f_θ (a lag
-/// (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the rounding of x ± h v by 1/h, and with
-/// ε^{1/3} the sensitivity of a τ = 1e-8 lag had a 2e-6 error floor, with 1e-4 it is 4e-8.
-/// Central differences are exact when the differenced function is at most quadratic in x,
-/// and perturb it by O(1e-8) relative for cubic terms.
+/// [`ModelSecondOrder`] defaults: h = `DIR_STEP`·max(1, ‖x‖₂)/‖v‖₂ (why 1e-4: see the trait).
 const DIR_STEP: f64 = 1e-4;
 
 /// The step h of the directional differences along v at x (see [`DIR_STEP`]) and the points
@@ -606,9 +600,14 @@ fn time_step(t: f64) -> f64 {
 /// sensitivity equations and its time derivative (see `integrate::forward`).
 ///
 /// The defaults are central differences of the first-derivative methods ([`ModelSens::rhs_sens`],
-/// [`HybridModel::running_cost_value_grad`]): along v with the step of [`DIR_STEP`], in t
-/// with ε^{1/3}·max(1, |t|); they allocate scratch. Both doors (`hybrid!` and loaded models)
-/// override every method with exact products from symbolic second derivatives.
+/// [`HybridModel::running_cost_value_grad`]); they allocate scratch. Along v the step is
+/// h = 1e-4·max(1, ‖x‖₂)/‖v‖₂, far larger than the usual ε^{1/3}: models with cancellation
+/// inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the rounding of x ± h v by
+/// 1/h, and with ε^{1/3} the sensitivity of a τ = 1e-8 lag had a 2e-6 error floor, with 1e-4
+/// it is 4e-8; central differences are exact when the differenced function is at most
+/// quadratic in x and perturb it by O(1e-8) relative for cubic terms. In t the step is
+/// ε^{1/3}·max(1, |t|). Both doors (`hybrid!` and loaded models) override every method with
+/// exact products from symbolic second derivatives.
 pub trait ModelSecondOrder: ModelSens
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
