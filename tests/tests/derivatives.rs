@@ -93,6 +93,13 @@ enum Wrt {
     T,
 }
 
+/// [`fd_check`] of the three blocks ∂/∂x, ∂/∂θ, ∂/∂t of `val`, given in that order.
+fn fd_check_xpt(what: &str, pt: &Pt, sym: [&[f64]; 3], val: &dyn Fn(&Pt) -> Vec<f64>) {
+    for (wrt, sym) in [Wrt::X, Wrt::P, Wrt::T].into_iter().zip(sym) {
+        fd_check(what, pt, wrt, sym, val);
+    }
+}
+
 /// Compares `sym` (row-major outputs × vars of block `wrt`) with central differences of `val`.
 fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec<f64>) {
     let nout = val(pt).len();
@@ -165,9 +172,7 @@ where
         let mut ft = zn();
         m.rhs_dt(mvad::Point::new(mode, sw, t, &x, &pv), &mut ft);
         let what = format!("{} mode {mode} f", info.name);
-        fd_check(&what, pt, Wrt::X, &rows(&fx), &f);
-        fd_check(&what, pt, Wrt::P, &rows(&fp), &f);
-        fd_check(&what, pt, Wrt::T, ft.as_slice(), &f);
+        fd_check_xpt(&what, pt, [&rows(&fx), &rows(&fp), ft.as_slice()], &f);
         if !m.rhs_depends_on_t(mode) {
             assert!(
                 ft.iter().all(|&v| v == 0.0),
@@ -207,9 +212,12 @@ where
         let g = |q: &Pt| vec![m.guard(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
         let (mut gx, mut gp) = (zn(), zp());
         let gt = m.guard_grad(k, t, &x, &pv, &mut gx, &mut gp);
-        fd_check(&format!("{what} guard"), pt, Wrt::X, gx.as_slice(), &g);
-        fd_check(&format!("{what} guard"), pt, Wrt::P, gp.as_slice(), &g);
-        fd_check(&format!("{what} guard"), pt, Wrt::T, &[gt], &g);
+        fd_check_xpt(
+            &format!("{what} guard"),
+            pt,
+            [gx.as_slice(), gp.as_slice(), &[gt]],
+            &g,
+        );
 
         let r = |q: &Pt| {
             let mut xp = zn();
@@ -218,16 +226,22 @@ where
         };
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
         m.reset_jac(k, t, &x, &pv, &mut rx, &mut rp, &mut rt);
-        fd_check(&format!("{what} reset"), pt, Wrt::X, &rows(&rx), &r);
-        fd_check(&format!("{what} reset"), pt, Wrt::P, &rows(&rp), &r);
-        fd_check(&format!("{what} reset"), pt, Wrt::T, rt.as_slice(), &r);
+        fd_check_xpt(
+            &format!("{what} reset"),
+            pt,
+            [&rows(&rx), &rows(&rp), rt.as_slice()],
+            &r,
+        );
 
         let c = |q: &Pt| vec![m.event_cost(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
         let (mut cx, mut cp) = (zn(), zp());
         let ct = m.event_cost_grad(k, t, &x, &pv, &mut cx, &mut cp);
-        fd_check(&format!("{what} cost"), pt, Wrt::X, cx.as_slice(), &c);
-        fd_check(&format!("{what} cost"), pt, Wrt::P, cp.as_slice(), &c);
-        fd_check(&format!("{what} cost"), pt, Wrt::T, &[ct], &c);
+        fd_check_xpt(
+            &format!("{what} cost"),
+            pt,
+            [cx.as_slice(), cp.as_slice(), &[ct]],
+            &c,
+        );
     }
 
     // Switching functions.
@@ -236,9 +250,7 @@ where
         let s = |q: &Pt| vec![m.switch_value(j, q.t, &vn(m, &q.x), &vp(m, &q.p))];
         let (mut gx, mut gp) = (zn(), zp());
         let gt = m.switch_grad(j, t, &x, &pv, &mut gx, &mut gp);
-        fd_check(&what, pt, Wrt::X, gx.as_slice(), &s);
-        fd_check(&what, pt, Wrt::P, gp.as_slice(), &s);
-        fd_check(&what, pt, Wrt::T, &[gt], &s);
+        fd_check_xpt(&what, pt, [gx.as_slice(), gp.as_slice(), &[gt]], &s);
     }
 
     // Observables.
@@ -263,9 +275,12 @@ where
     let phi = |q: &Pt| vec![m.final_cost(q.t, &vn(m, &q.x), &vp(m, &q.p))];
     let (mut cx, mut cp) = (zn(), zp());
     let ct = m.final_cost_grad(t, &x, &pv, &mut cx, &mut cp);
-    fd_check(&format!("{} Φ", info.name), pt, Wrt::X, cx.as_slice(), &phi);
-    fd_check(&format!("{} Φ", info.name), pt, Wrt::P, cp.as_slice(), &phi);
-    fd_check(&format!("{} Φ", info.name), pt, Wrt::T, &[ct], &phi);
+    fd_check_xpt(
+        &format!("{} Φ", info.name),
+        pt,
+        [cx.as_slice(), cp.as_slice(), &[ct]],
+        &phi,
+    );
 
     // x₀(θ) and T(θ).
     let x0 = |q: &Pt| {
