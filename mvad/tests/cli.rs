@@ -408,17 +408,6 @@ fn bad_options_and_usage_errors_exit_2() {
 }
 
 #[test]
-fn a_model_without_horizon_needs_t_end() {
-    let (_dir, p) = scratch(
-        "nohorizon.hyb",
-        b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
-    );
-    let o = run_status(&["grad", &p], 2);
-    assert!(stderr(&o).contains("--t-end"), "{}", stderr(&o));
-    run_status(&["grad", &p, "--t-end", "1"], 0);
-}
-
-#[test]
 fn a_failed_run_exits_1_with_an_error_object() {
     let (_dir, p) = scratch(
         "nan.hyb",

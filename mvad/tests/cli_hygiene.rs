@@ -26,9 +26,23 @@ const ROWS: usize = 20;
 /// Event times listed by `fdcheck`.
 const TIMES: usize = 5;
 
-/// A temporary directory holding `saw.hyb` (removed when the guard drops) and the file's path.
-fn saw() -> (tempfile::TempDir, String) {
-    scratch("saw.hyb", SAW.as_bytes())
+/// `saw.hyb` in a temporary directory (removed when dropped), its path, and the number of
+/// events of its full run.
+struct Saw {
+    dir: tempfile::TempDir,
+    path: String,
+    events: usize,
+}
+
+/// Writes the sawtooth and counts its events with `grad --json`.
+fn saw() -> Saw {
+    let (dir, path) = scratch("saw.hyb", SAW.as_bytes());
+    let events = json(&["grad", &path, "--json"])["events"]
+        .as_array()
+        .expect("events")
+        .len();
+    assert!((999..=1000).contains(&events), "{events} events");
+    Saw { dir, path, events }
 }
 
 /// Standard output of a successful run.
@@ -39,14 +53,6 @@ fn ok(args: &[&str]) -> String {
 /// Standard output of a successful run, parsed as JSON.
 fn json(args: &[&str]) -> Value {
     common::json(&run_status(args, 0))
-}
-
-/// The number of events of the full run, from `grad --json`.
-fn event_count(model: &str) -> usize {
-    let v = json(&["grad", model, "--json"]);
-    let n = v["events"].as_array().expect("events").len();
-    assert!((999..=1000).contains(&n), "{n} events");
-    n
 }
 
 /// Lines of `text` that are rows of an event table: they start with an event index and
@@ -62,9 +68,8 @@ fn event_rows(text: &str) -> usize {
 
 #[test]
 fn grad_prints_twenty_events_and_json_all_of_them() {
-    let (_dir, model) = saw();
-    let model = model.as_str();
-    let n = event_count(model);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
     let out = ok(&["grad", model]);
     assert!(out.contains(&format!("events ({n}):")), "{out}");
     assert_eq!(event_rows(&out), ROWS, "{out}");
@@ -76,10 +81,9 @@ fn grad_prints_twenty_events_and_json_all_of_them() {
 
 #[test]
 fn simulate_event_table_is_capped_and_json_is_complete() {
-    let (dir, model) = saw();
-    let model = model.as_str();
-    let n = event_count(model);
-    let csv = dir.path().join("traj.csv");
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
+    let csv = saw.dir.path().join("traj.csv");
     let out = ok(&[
         "simulate",
         model,
@@ -104,9 +108,8 @@ fn simulate_event_table_is_capped_and_json_is_complete() {
 
 #[test]
 fn measure_atom_table_is_capped_and_json_is_complete() {
-    let (_dir, model) = saw();
-    let model = model.as_str();
-    let n = event_count(model);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
     let out = ok(&["measure", model, "--observable", "y"]);
     assert!(out.contains(&format!("atoms ({n}):")), "{out}");
     assert!(
@@ -119,9 +122,8 @@ fn measure_atom_table_is_capped_and_json_is_complete() {
 
 #[test]
 fn fdcheck_lists_five_event_times() {
-    let (_dir, model) = saw();
-    let model = model.as_str();
-    let n = event_count(model);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
     let out = ok(&["fdcheck", model]);
     let line = out
         .lines()
@@ -139,14 +141,24 @@ fn fdcheck_lists_five_event_times() {
 
 #[test]
 fn runtime_errors_get_their_flag_hints_from_the_cli() {
-    let (_dir, path) = scratch(
-        "endless.hyb",
-        b"model Endless { state x = 0; flow { der(x) = 1; } cost = integral(x); }",
-    );
-    let o = run_status(&["grad", &path], 2);
-    let err = stderr(&o);
-    assert!(err.contains("no horizon"), "{err}");
-    assert!(err.contains("--t-end"), "{err}");
+    // Models without a horizon need `--t-end`, and the CLI says so.
+    for (name, src) in [
+        (
+            "nohorizon.hyb",
+            "model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
+        ),
+        (
+            "endless.hyb",
+            "model Endless { state x = 0; flow { der(x) = 1; } cost = integral(x); }",
+        ),
+    ] {
+        let (_dir, path) = scratch(name, src.as_bytes());
+        let o = run_status(&["grad", &path], 2);
+        let err = stderr(&o);
+        assert!(err.contains("no horizon"), "{name}: {err}");
+        assert!(err.contains("--t-end"), "{name}: {err}");
+        run_status(&["grad", &path, "--t-end", "1"], 0);
+    }
     // The runtime's own message names no flag.
     let e = mvad::SolveError::NoHorizon.to_string();
     assert!(!e.contains("--"), "{e}");

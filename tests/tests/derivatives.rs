@@ -154,6 +154,17 @@ where
     let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(m.nstates(), m.nparams());
     let (x, pv) = (vn(m, &pt.x), vp(m, &pt.p));
     let t = pt.t;
+    // A scalar s(t, x, θ) whose gradient method fills ∂ₓs and ∂θs and returns ∂ₜs, against
+    // central differences of its value.
+    let check_scalar =
+        |what: String,
+         value: &dyn Fn(f64, &OVector<f64, M::N>, &OVector<f64, M::P>) -> f64,
+         grad: &dyn Fn(&mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64| {
+            let (mut gx, mut gp) = (zn(), zp());
+            let gt = grad(&mut gx, &mut gp);
+            let val = |q: &Pt| vec![value(q.t, &vn(m, &q.x), &vp(m, &q.p))];
+            fd_check_xpt(&what, pt, [gx.as_slice(), gp.as_slice(), &[gt]], &val);
+        };
 
     // Flow, per mode.
     for mode in 0..info.modes.len() {
@@ -209,14 +220,10 @@ where
     // Events.
     for k in 0..info.events.len() {
         let what = format!("{} event {k}", info.name);
-        let g = |q: &Pt| vec![m.guard(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-        let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.guard_grad(k, t, &x, &pv, &mut gx, &mut gp);
-        fd_check_xpt(
-            &format!("{what} guard"),
-            pt,
-            [gx.as_slice(), gp.as_slice(), &[gt]],
-            &g,
+        check_scalar(
+            format!("{what} guard"),
+            &|t, x, p| m.guard(k, t, x, p),
+            &|gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
         );
 
         let r = |q: &Pt| {
@@ -233,24 +240,20 @@ where
             &r,
         );
 
-        let c = |q: &Pt| vec![m.event_cost(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-        let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(k, t, &x, &pv, &mut cx, &mut cp);
-        fd_check_xpt(
-            &format!("{what} cost"),
-            pt,
-            [cx.as_slice(), cp.as_slice(), &[ct]],
-            &c,
+        check_scalar(
+            format!("{what} cost"),
+            &|t, x, p| m.event_cost(k, t, x, p),
+            &|cx, cp| m.event_cost_grad(k, t, &x, &pv, cx, cp),
         );
     }
 
     // Switching functions.
     for j in 0..info.switches {
-        let what = format!("{} switch {j}", info.name);
-        let s = |q: &Pt| vec![m.switch_value(j, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-        let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.switch_grad(j, t, &x, &pv, &mut gx, &mut gp);
-        fd_check_xpt(&what, pt, [gx.as_slice(), gp.as_slice(), &[gt]], &s);
+        check_scalar(
+            format!("{} switch {j}", info.name),
+            &|t, x, p| m.switch_value(j, t, x, p),
+            &|gx, gp| m.switch_grad(j, t, &x, &pv, gx, gp),
+        );
     }
 
     // Observables.
@@ -272,14 +275,10 @@ where
     assert_eq!(lv, l(pt)[0], "running_cost_value_grad returns ℓ");
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
-    let phi = |q: &Pt| vec![m.final_cost(q.t, &vn(m, &q.x), &vp(m, &q.p))];
-    let (mut cx, mut cp) = (zn(), zp());
-    let ct = m.final_cost_grad(t, &x, &pv, &mut cx, &mut cp);
-    fd_check_xpt(
-        &format!("{} Φ", info.name),
-        pt,
-        [cx.as_slice(), cp.as_slice(), &[ct]],
-        &phi,
+    check_scalar(
+        format!("{} Φ", info.name),
+        &|t, x, p| m.final_cost(t, x, p),
+        &|cx, cp| m.final_cost_grad(t, &x, &pv, cx, cp),
     );
 
     // x₀(θ) and T(θ).

@@ -13,6 +13,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use plotters::coord::combinators::{LogCoord, WithKeyPoints};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
