@@ -139,6 +139,24 @@ fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec
     }
 }
 
+/// A scalar s(t, x, θ) of `m` whose gradient method `grad` fills ∂ₓs and ∂θs and returns
+/// ∂ₜs, against central differences of its `value` at `pt`.
+fn check_scalar<M: HybridModel>(
+    m: &M,
+    pt: &Pt,
+    what: &str,
+    value: impl Fn(f64, &OVector<f64, M::N>, &OVector<f64, M::P>) -> f64,
+    grad: impl FnOnce(&mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut gx = OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    let mut gp = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    let gt = grad(&mut gx, &mut gp);
+    let val = |q: &Pt| vec![value(q.t, &vn(m, &q.x), &vp(m, &q.p))];
+    fd_check_xpt(what, pt, [gx.as_slice(), gp.as_slice(), &[gt]], &val);
+}
+
 /// Checks every partial of `m` at `pt` with switch word `sw`.
 pub fn check_model<M: HybridModel>(m: &M, pt: &Pt, sw: u64, rng: &mut Rng)
 where
@@ -154,18 +172,6 @@ where
     let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(m.nstates(), m.nparams());
     let (x, pv) = (vn(m, &pt.x), vp(m, &pt.p));
     let t = pt.t;
-    // A scalar s(t, x, θ) whose gradient method fills ∂ₓs and ∂θs and returns ∂ₜs, against
-    // central differences of its value.
-    let check_scalar =
-        |what: String,
-         value: &dyn Fn(f64, &OVector<f64, M::N>, &OVector<f64, M::P>) -> f64,
-         grad: &dyn Fn(&mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64| {
-            let (mut gx, mut gp) = (zn(), zp());
-            let gt = grad(&mut gx, &mut gp);
-            let val = |q: &Pt| vec![value(q.t, &vn(m, &q.x), &vp(m, &q.p))];
-            fd_check_xpt(&what, pt, [gx.as_slice(), gp.as_slice(), &[gt]], &val);
-        };
-
     // Flow, per mode.
     for mode in 0..info.modes.len() {
         let f = |q: &Pt| {
@@ -221,9 +227,11 @@ where
     for k in 0..info.events.len() {
         let what = format!("{} event {k}", info.name);
         check_scalar(
-            format!("{what} guard"),
-            &|t, x, p| m.guard(k, t, x, p),
-            &|gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
+            m,
+            pt,
+            &format!("{what} guard"),
+            |t, x, p| m.guard(k, t, x, p),
+            |gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
         );
 
         let r = |q: &Pt| {
@@ -241,18 +249,22 @@ where
         );
 
         check_scalar(
-            format!("{what} cost"),
-            &|t, x, p| m.event_cost(k, t, x, p),
-            &|cx, cp| m.event_cost_grad(k, t, &x, &pv, cx, cp),
+            m,
+            pt,
+            &format!("{what} cost"),
+            |t, x, p| m.event_cost(k, t, x, p),
+            |cx, cp| m.event_cost_grad(k, t, &x, &pv, cx, cp),
         );
     }
 
     // Switching functions.
     for j in 0..info.switches {
         check_scalar(
-            format!("{} switch {j}", info.name),
-            &|t, x, p| m.switch_value(j, t, x, p),
-            &|gx, gp| m.switch_grad(j, t, &x, &pv, gx, gp),
+            m,
+            pt,
+            &format!("{} switch {j}", info.name),
+            |t, x, p| m.switch_value(j, t, x, p),
+            |gx, gp| m.switch_grad(j, t, &x, &pv, gx, gp),
         );
     }
 
@@ -276,9 +288,11 @@ where
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
     check_scalar(
-        format!("{} Φ", info.name),
-        &|t, x, p| m.final_cost(t, x, p),
-        &|cx, cp| m.final_cost_grad(t, &x, &pv, cx, cp),
+        m,
+        pt,
+        &format!("{} Φ", info.name),
+        |t, x, p| m.final_cost(t, x, p),
+        |cx, cp| m.final_cost_grad(t, &x, &pv, cx, cp),
     );
 
     // x₀(θ) and T(θ).
