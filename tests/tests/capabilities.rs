@@ -18,6 +18,13 @@ mvad::hybrid! {
     }
 }
 
+/// The point both `Quad` tests evaluate at: a = 0.7, (x, y) = (0.4, −1), as
+/// (a, x, state vector, parameter vector).
+fn quad_point() -> (f64, f64, Vector2<f64>, Vector1<f64>) {
+    let (a, x) = (0.7, 0.4);
+    (a, x, Vector2::new(x, -1.0), Vector1::new(a))
+}
+
 #[test]
 fn adjoint_products_are_lambda_times_the_jacobians() {
     adjoint_products_of(&Quad::new());
@@ -26,8 +33,7 @@ fn adjoint_products_are_lambda_times_the_jacobians() {
 
 /// λᵀf_x, λᵀf_θ of `Quad` (its own product or the dense default).
 fn adjoint_products_of(m: &impl HybridModel<N = U2, P = U1>) {
-    let (a, x) = (0.7, 0.4);
-    let (xv, pv) = (Vector2::new(x, -1.0), Vector1::new(a));
+    let (a, x, xv, pv) = quad_point();
     let lam = Vector2::new(1.5, -2.0);
     let (mut vx, mut vp) = (Vector2::zeros(), Vector1::zeros());
     m.rhs_vjp(
@@ -54,8 +60,7 @@ fn second_order_default_is_the_directional_derivative_of_the_sensitivity_rhs() {
 
 /// Σᵢ vᵢ ∂(f_x S + f_θ)/∂xᵢ of `Quad` to `tol` (its own product or the default).
 fn second_order_of(m: &impl HybridModel<N = U2, P = U1>, tol: f64) {
-    let (a, x) = (0.7, 0.4);
-    let (xv, pv) = (Vector2::new(x, -1.0), Vector1::new(a));
+    let (a, x, xv, pv) = quad_point();
     let s = Matrix2x1::new(0.3, -0.8);
     let v = Vector2::new(0.9, 2.0);
     let mut out = Matrix2x1::zeros();
