@@ -700,8 +700,8 @@ fn vjp_rejects_bad_cotangents() {
 
 /// Against the thermostat's closed form (∫temp, all four parameters) at rtol 1e-8, 1e-10 and
 /// 1e-12 under every method, the adjoint's largest relative error is at most 5× forward
-/// mode's plus rtol: the primal run at 1/100 of the tolerances (`PRIMAL_TOL_FACTOR`) makes
-/// up for the sensitivities that hold forward mode's steps short.
+/// mode's or 5× rtol, whichever is larger: the primal run at 1/100 of the tolerances
+/// (`PRIMAL_TOL_FACTOR`) makes up for the sensitivities that hold forward mode's steps short.
 #[test]
 fn adjoint_as_accurate_as_forward_against_a_closed_form() {
     use common::models::thermostat_closed;
@@ -725,7 +725,7 @@ fn adjoint_as_accurate_as_forward_against_a_closed_form() {
                 f.stats.steps, a.stats.steps
             );
             assert!(
-                ea <= 5.0 * ef + rtol,
+                ea <= 5.0 * ef.max(rtol),
                 "{method:?} rtol {rtol:e}: {ea:e} vs {ef:e}"
             );
         }

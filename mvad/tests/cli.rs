@@ -3,71 +3,19 @@
 //! for malformed models (empty, binary, deeply nested, every semantic error class),
 //! none of which may panic.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
 use approx::assert_relative_eq;
+use common::{json, run_status, scratch, stderr, stdout};
 use serde_json::Value;
 
 #[path = "../src/cli/spec_keys.rs"]
 mod spec_keys;
 use spec_keys::missing_spec_keys;
 
-/// The workspace root (the models are under `models/`).
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn mvad(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mvad"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the binary runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs and asserts the exit status, and that nothing panicked.
-fn run_status(args: &[&str], status: i32) -> Output {
-    let o = mvad(args);
-    let err = stderr(&o);
-    assert!(!err.contains("panicked"), "panic for {args:?}: {err}");
-    assert_eq!(
-        o.status.code(),
-        Some(status),
-        "exit status of {args:?}\nstdout: {}\nstderr: {err}",
-        stdout(&o)
-    );
-    o
-}
-
 /// How many lines of `text` satisfy `pred`.
 fn count_lines(text: &str, pred: impl Fn(&str) -> bool) -> usize {
     text.lines().filter(|l| pred(l)).count()
-}
-
-fn json(o: &Output) -> Value {
-    serde_json::from_str(&stdout(o)).unwrap_or_else(|e| panic!("not JSON ({e}): {}", stdout(o)))
-}
-
-/// A scratch file `name` holding `contents` in a fresh temporary directory: the directory
-/// (removed when dropped) and the file's path as text.
-fn scratch(name: &str, contents: &[u8]) -> (tempfile::TempDir, String) {
-    let dir = tempfile::Builder::new()
-        .prefix("mvad-cli-")
-        .tempdir()
-        .expect("temp dir");
-    let path = dir.path().join(name);
-    std::fs::write(&path, contents).expect("write");
-    let path = path.to_string_lossy().into_owned();
-    (dir, path)
 }
 
 const BALL: &str = "models/bouncing_ball.hyb";
@@ -537,17 +485,6 @@ fn bad_options_and_usage_errors_exit_2() {
 }
 
 #[test]
-fn a_model_without_horizon_needs_t_end() {
-    let (_dir, p) = scratch(
-        "nohorizon.hyb",
-        b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
-    );
-    let o = run_status(&["grad", &p], 2);
-    assert!(stderr(&o).contains("--t-end"), "{}", stderr(&o));
-    run_status(&["grad", &p, "--t-end", "1"], 0);
-}
-
-#[test]
 fn a_failed_run_exits_1_with_an_error_object() {
     let (_dir, p) = scratch(
         "nan.hyb",
@@ -700,4 +637,77 @@ fn every_semantic_error_class_is_located() {
     for (name, src, line, fragment) in cases {
         assert_located(&format!("{name}.hyb"), src.as_bytes(), *line, fragment);
     }
+}
+
+#[test]
+fn guard_slope_is_the_total_rate_so_a_pure_time_guard_has_slope_one() {
+    // dg/dt = ∇ₓg·f + ∂g/∂t at t_k⁻: `t >= tdose` has ∇ₓg = 0 and ∂g/∂t = 1; a guard on a
+    // state x with ẋ = 2 moving as t (x − t >= 0.5, crossed where 2t − t = 0.5) has 2 − 1 = 1.
+    let (_dir, p) = scratch(
+        "dose.hyb",
+        b"model Dose {
+            param tdose = 0.5; param c = 0.5;
+            state x = 0;
+            flow { der(x) = 2; }
+            event dose when t >= tdose { x = x + 1; }
+            event moving when x - t >= c + 1 { x = x - 10; }
+            cost = integral(x);
+            horizon 2;
+        }",
+    );
+    let v = json(&run_status(&["grad", &p, "--json"], 0));
+    let events = v["events"].as_array().expect("events");
+    assert_eq!(events.len(), 2, "{v}");
+    for ev in events {
+        assert_relative_eq!(
+            ev["guard_slope"].as_f64().expect("n"),
+            1.0,
+            max_relative = 1e-12
+        );
+        assert_eq!(ev["transversal"], true);
+    }
+    // t' of the dose: dt/dtdose = 1 (C = ∫x moves by −1 per unit of tdose before the
+    // second event, which the dose brings forward by 1/(2 − 1) = 1 per unit).
+    assert_relative_eq!(
+        events[0]["dt"]["tdose"].as_f64().expect("n"),
+        1.0,
+        max_relative = 1e-12
+    );
+}
+
+#[test]
+fn report_runs_a_suite_and_refuses_a_missing_one() {
+    let (dir, _) = scratch("x", b"");
+    let out = dir.path().join("report");
+    let o = run_status(
+        &[
+            "report",
+            "suite",
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--only",
+            "zeno e=0.5",
+        ],
+        0,
+    );
+    assert!(
+        stdout(&o).contains("2 cases, 2 passed, 0 failed"),
+        "{}",
+        stdout(&o)
+    );
+    let md = std::fs::read_to_string(out.join("README.md")).expect("README.md");
+    assert!(md.contains("| zeno e=0.5 |"), "{md}");
+    assert!(out.join("zeno-e-0-5.png").is_file());
+    run_status(&["report", "/nonexistent/suite", "--out", "/tmp/x"], 2);
+    run_status(
+        &[
+            "report",
+            "suite",
+            "--out",
+            "/tmp/x",
+            "--only",
+            "no such case",
+        ],
+        2,
+    );
 }

@@ -21,17 +21,16 @@
 //! with W = I + hγ f_xᵀ (the `WMatrix` of J_λλ = −f_xᵀ, factorised once per attempt) a stage is
 //! solved exactly: K_λ = W⁻¹ hγ R_λ, K_g = hγ (R_g − f_θᵀ K_λ), the last a vector–Jacobian
 //! product at the step start. F depends on t through x(t) even for an autonomous flow, so F_t
-//! is the total derivative along the trajectory, a central difference
-//! [F(t₀ + δ, x₀ + δ f₀) − F(t₀ − δ, x₀ − δ f₀)]/(2δ) taken off the model's flow (smooth,
-//! unlike the recorded steps' seams). The adjoint of a stiff flow is
-//! stiff backwards in time (the eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x
+//! is the total derivative along the trajectory, the direction (1, f₀) of (t, x) at fixed λ:
+//! F_t = (−d(λᵀf_x) − w dℓ_x, −d(λᵀf_θ) − w dℓ_θ) from the model's products
+//! [`crate::model::ModelAdjoint::rhs_vjp_dir`] and
+//! [`crate::model::ModelAdjoint::running_cost_grad_dir`] (nothing here takes a difference
+//! quotient; their trait defaults do, on the scale of the direction, so that a stiff
+//! transient is differenced on its own time scale). The adjoint of a stiff flow is stiff
+//! backwards in time (the eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x
 //! stepped forwards), so `auto` switches to Rodas5P on it as on the forward run.
-//! F_t takes its step δ = ε^(1/3)·|h| from the step size, not from t: along a stiff
-//! transient x changes on the scale of h (with δ from t, 1e-5 at t ≈ 2.5, the stiff relay's
-//! transient of width τ = 1e-8 gave a meaningless F_t and steps of 1e-12).
 
 use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
-use super::forward::FD_REL_T;
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem, StageVector};
 use super::Integrator;
@@ -249,14 +248,11 @@ where
 {
     /// J_λλ = −f_xᵀ and the factors of W = I − hγ J_λλ.
     w: WMatrix<N>,
-    /// x and f at the step start, and x₀ ± δ f₀.
+    /// x and f at the step start.
     x0: OVector<f64, N>,
     f0: OVector<f64, N>,
-    xpert: OVector<f64, N>,
-    /// F_t at the step start, and F at the two points of its difference quotient.
+    /// F_t at the step start.
     dt: AdjState<N, P>,
-    fplus: AdjState<N, P>,
-    fminus: AdjState<N, P>,
     /// λᵀf_x scratch of the stage solve, and f_θᵀK_λ.
     vx: OVector<f64, N>,
     vp: OVector<f64, P>,
@@ -350,10 +346,7 @@ where
                 w: WMatrix::new(n, used),
                 x0: vn(),
                 f0: vn(),
-                xpert: vn(),
                 dt: AdjState::zeros(n, np),
-                fplus: AdjState::zeros(n, np),
-                fminus: AdjState::zeros(n, np),
                 vx: vn(),
                 vp: OVector::zeros_generic(np, Const::<1>),
                 prepared: false,
@@ -461,7 +454,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     /// J_λλ = −f_xᵀ (and its spectral radius) and F_t at the step start.
-    fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
+    fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t0);
         imp.x0.copy_from(&hist.x);
@@ -470,22 +463,21 @@ where
         imp.w.jac.transpose_mut();
         imp.w.jac.neg_mut();
         imp.w.power_iteration();
+        // F_t along the trajectory (direction (1, f₀)) at fixed λ: the model's products.
         rhs.model.rhs(pt, &mut imp.f0);
-        // The trajectory may change on the scale of the step (a stiff transient), so the
-        // difference step follows h, not t; the shifts of t actually represented are used
-        // for x too, so t and x move together.
-        let delta = (FD_REL_T * h.abs()).max(64.0 * f64::EPSILON * t0.abs());
-        let (tp, tm) = (t0 + delta, t0 - delta);
-        imp.xpert.copy_from(&imp.x0);
-        imp.xpert.axpy(tp - t0, &imp.f0, 1.0);
-        rhs.eval_at(tp, &imp.xpert, y0, &mut imp.fplus);
-        imp.xpert.copy_from(&imp.x0);
-        imp.xpert.axpy(tm - t0, &imp.f0, 1.0);
-        rhs.eval_at(tm, &imp.xpert, y0, &mut imp.fminus);
-        let s = 1.0 / (tp - tm);
-        imp.dt
-            .lincomb(s, &[1.0], std::slice::from_ref(&imp.fplus), true);
-        imp.dt.axpy(-s, &imp.fminus, true);
+        rhs.model
+            .rhs_vjp_dir(pt, &y0.lam, &imp.f0, &mut imp.dt.lam, &mut imp.dt.g);
+        if rhs.has_rc && rhs.cw != 0.0 {
+            let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
+            let (lx, lp) = (&mut rhs.lx, &mut rhs.lp);
+            rhs.model
+                .running_cost_grad_dir(sw, t, &imp.x0, p, &imp.f0, lx, lp);
+            negate_plus(imp.dt.lam.as_mut_slice(), -rhs.cw, rhs.lx.as_slice());
+            negate_plus(imp.dt.g.as_mut_slice(), -rhs.cw, rhs.lp.as_slice());
+        } else {
+            imp.dt.lam.neg_mut();
+            imp.dt.g.neg_mut();
+        }
         imp.prepared = true;
     }
 
