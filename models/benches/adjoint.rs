@@ -14,24 +14,20 @@
 //!   (a_j = 0.5/p, c_j ∈ (0, 1]); C = ∫(q₁² + q₄²) dt + Σ v₁². Here f itself has p terms, so
 //!   every evaluation, the primal's included, costs O(p).
 //!
-//! Per model and p: `forward`, forward sensitivities (O(n·p) per step); `adjoint`,
-//! `GradientMode::Adjoint` with the interpreter's vector–Jacobian products as they are today
-//! (the dense defaults of `ModelAdjoint`: f_x and f_θ, n × p, formed at every stage); and
-//! `adjoint_sparse`, the same sweep on the same model with the sparse λᵀf_θ the symbolic
-//! kernels will emit, written by hand here: what to expect once they land.
+//! Per model and p: `forward`, forward sensitivities (O(n·p) per step), and `adjoint`,
+//! `GradientMode::Adjoint` (a primal run at 1/100 of the tolerances, then the sweep, with the
+//! interpreter's sparse vector–Jacobian products: O(p) per stage for λᵀf_θ).
 //!
 //! After criterion, a table per model (medians of 9 runs in ms, for p = 1, 10, 20, 50, 100,
 //! 1000; steps; the forward record's memory; forward/adjoint agreement), the crossover p and
-//! the flatness ratio time(p = 1000)/time(p = 10) (target ≤ 3) are printed.
+//! the flatness ratio time(p = 1000)/time(p = 10) (target ≤ 3) are printed (not with
+//! `ADJOINT_BENCH_NO_TABLE` set, e.g. under a profiler with a criterion filter).
 
 use criterion::{criterion_group, Criterion};
 use mvad::interp::InterpretedModel;
-use mvad::model::{ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Point};
 use mvad::solution::{GradientMode, Options, Solution};
 use mvad::solve::solve;
-use mvad::{HybridModel, Switches};
-use nalgebra::{DMatrix, DVector, Dyn};
-use std::cell::RefCell;
+use nalgebra::DVector;
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -71,19 +67,6 @@ fn impact(p: usize) -> String {
     s
 }
 
-/// λᵀf_θ of the impact model: f = (v, −g − 0.05 v) depends on g alone.
-fn impact_vjp_p(_pt: &Point<'_, Dyn, Dyn>, lambda: &V, vp: &mut V) {
-    vp.fill(0.0);
-    vp[0] = -lambda[1];
-}
-
-/// λᵀf_θ of the chain: ∂f_{v_i}/∂a_j = −c_j q_i for the mass i that a_j stiffens.
-fn chain_vjp_p(pt: &Point<'_, Dyn, Dyn>, lambda: &V, vp: &mut V) {
-    for (j0, out) in vp.iter_mut().enumerate() {
-        let (j, i) = (j0 + 1, mass_of(j0 + 1));
-        *out = -lambda[2 * i + 1] * c(j) * pt.x[2 * i];
-    }
-}
 /// The parameter counts benchmarked by criterion.
 const PS: [usize; 4] = [1, 10, 100, 1000];
 /// The parameter counts of the summary table (finer, to locate the crossover).
@@ -138,159 +121,27 @@ fn chain(p: usize) -> String {
     s
 }
 
-/// λᵀf_θ of a generated model, written by hand.
-type VjpP = fn(&Point<'_, Dyn, Dyn>, &V, &mut V);
-
-/// A loaded model with a sparse `rhs_vjp` (λᵀf_x from the n × n Jacobian, λᵀf_θ by `vjp_p`);
-/// every other method is the interpreter's.
-struct SparseVjp {
-    m: InterpretedModel,
-    /// f_x scratch (n × n), so the product allocates nothing.
-    fx: RefCell<DMatrix<f64>>,
-    vjp_p: VjpP,
-}
-
-type V = DVector<f64>;
-type M = DMatrix<f64>;
-
-impl ModelDims for SparseVjp {
-    type N = Dyn;
-    type P = Dyn;
-}
-impl ModelSens for SparseVjp {}
-impl ModelSecondOrder for SparseVjp {}
-impl ModelAdjoint for SparseVjp {
-    fn rhs_vjp(&self, pt: Point<'_, Dyn, Dyn>, lambda: &V, vx: &mut V, vp: &mut V) {
-        let mut fx = self.fx.borrow_mut();
-        self.m.rhs_jac_x(pt, &mut fx);
-        fx.tr_mul_to(lambda, vx);
-        (self.vjp_p)(&pt, lambda, vp);
-    }
-}
-
-impl HybridModel for SparseVjp {
-    fn info(&self) -> &ModelInfo {
-        self.m.info()
-    }
-    fn nstates(&self) -> Dyn {
-        self.m.nstates()
-    }
-    fn nparams(&self) -> Dyn {
-        self.m.nparams()
-    }
-    fn initial_state(&self, p: &V, x0: &mut V) {
-        self.m.initial_state(p, x0)
-    }
-    fn initial_state_jac(&self, p: &V, dx0: &mut M) {
-        self.m.initial_state_jac(p, dx0)
-    }
-    fn horizon(&self, p: &V) -> Option<f64> {
-        self.m.horizon(p)
-    }
-    fn horizon_grad(&self, p: &V, dt: &mut V) {
-        self.m.horizon_grad(p, dt)
-    }
-    fn rhs(&self, pt: Point<'_, Dyn, Dyn>, f: &mut V) {
-        self.m.rhs(pt, f)
-    }
-    fn rhs_jac_x(&self, pt: Point<'_, Dyn, Dyn>, fx: &mut M) {
-        self.m.rhs_jac_x(pt, fx)
-    }
-    fn rhs_jac_p(&self, pt: Point<'_, Dyn, Dyn>, fp: &mut M) {
-        self.m.rhs_jac_p(pt, fp)
-    }
-    fn rhs_dt(&self, pt: Point<'_, Dyn, Dyn>, ft: &mut V) {
-        self.m.rhs_dt(pt, ft)
-    }
-    fn rhs_depends_on_t(&self, mode: usize) -> bool {
-        self.m.rhs_depends_on_t(mode)
-    }
-    fn guard(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
-        self.m.guard(k, t, x, p)
-    }
-    fn guard_grad(&self, k: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
-        self.m.guard_grad(k, t, x, p, gx, gp)
-    }
-    fn reset(&self, k: usize, t: f64, x: &V, p: &V, xp: &mut V) {
-        self.m.reset(k, t, x, p, xp)
-    }
-    fn reset_jac(&self, k: usize, t: f64, x: &V, p: &V, rx: &mut M, rp: &mut M, rt: &mut V) {
-        self.m.reset_jac(k, t, x, p, rx, rp, rt)
-    }
-    fn switch_value(&self, j: usize, t: f64, x: &V, p: &V) -> f64 {
-        self.m.switch_value(j, t, x, p)
-    }
-    fn switch_grad(&self, j: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
-        self.m.switch_grad(j, t, x, p, gx, gp)
-    }
-    fn observe(&self, t: f64, x: &V, p: &V, y: &mut [f64]) {
-        self.m.observe(t, x, p, y)
-    }
-    fn observe_jac(&self, t: f64, x: &V, p: &V, yx: &mut [f64], yp: &mut [f64]) {
-        self.m.observe_jac(t, x, p, yx, yp)
-    }
-    fn running_cost(&self, sw: &Switches, t: f64, x: &V, p: &V) -> f64 {
-        self.m.running_cost(sw, t, x, p)
-    }
-    fn running_cost_value_grad(
-        &self,
-        sw: &Switches,
-        t: f64,
-        x: &V,
-        p: &V,
-        lx: &mut V,
-        lp: &mut V,
-    ) -> f64 {
-        self.m.running_cost_value_grad(sw, t, x, p, lx, lp)
-    }
-    fn event_cost(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
-        self.m.event_cost(k, t, x, p)
-    }
-    fn event_cost_grad(&self, k: usize, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
-        self.m.event_cost_grad(k, t, x, p, cx, cp)
-    }
-    fn final_cost(&self, t: f64, x: &V, p: &V) -> f64 {
-        self.m.final_cost(t, x, p)
-    }
-    fn final_cost_grad(&self, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
-        self.m.final_cost_grad(t, x, p, cx, cp)
-    }
-}
-
-/// A generated model with p parameters, loaded twice (plain and with the sparse product),
-/// and θ.
+/// A generated model with p parameters, loaded, and θ.
 struct Case {
     family: &'static str,
     p: usize,
     loaded: InterpretedModel,
-    sparse: SparseVjp,
     theta: DVector<f64>,
 }
 
-/// The generated models: (name, text generator, hand-written λᵀf_θ).
-const FAMILIES: [(&str, fn(usize) -> String, VjpP); 2] = [
-    ("impact", impact, impact_vjp_p),
-    ("chain", chain, chain_vjp_p),
-];
+/// The generated models: (name, text generator).
+const FAMILIES: [(&str, fn(usize) -> String); 2] = [("impact", impact), ("chain", chain)];
 
 fn cases() -> Vec<Case> {
     let mut out = Vec::new();
-    for (family, text, vjp_p) in FAMILIES {
+    for (family, text) in FAMILIES {
         for p in TABLE_PS {
-            let text = text(p);
-            let loaded = InterpretedModel::from_source(&text).expect("the model loads");
+            let loaded = InterpretedModel::from_source(&text(p)).expect("the model loads");
             let theta = loaded.default_params();
-            let n = loaded.nstates().0;
-            let sparse = SparseVjp {
-                m: InterpretedModel::from_source(&text).expect("the model loads"),
-                fx: RefCell::new(DMatrix::zeros(n, n)),
-                vjp_p,
-            };
             out.push(Case {
                 family,
                 p,
                 loaded,
-                sparse,
                 theta,
             });
         }
@@ -305,18 +156,13 @@ fn opts(mode: GradientMode) -> Options {
     }
 }
 
-/// The three runs of a case.
+/// The two runs of a case: 0 forward, 1 adjoint.
 fn run(case: &Case, which: usize) -> Solution {
-    let theta = black_box(&case.theta);
-    match which {
-        0 => solve(&case.loaded, theta, &opts(GradientMode::Forward)),
-        1 => solve(&case.loaded, theta, &opts(GradientMode::Adjoint)),
-        _ => solve(&case.sparse, theta, &opts(GradientMode::Adjoint)),
-    }
-    .expect("the model runs")
+    let mode = [GradientMode::Forward, GradientMode::Adjoint][which];
+    solve(&case.loaded, black_box(&case.theta), &opts(mode)).expect("the model runs")
 }
 
-const NAMES: [&str; 3] = ["forward", "adjoint", "adjoint_sparse"];
+const NAMES: [&str; 2] = ["forward", "adjoint"];
 
 fn bench(c: &mut Criterion) {
     let cases = cases();
@@ -330,7 +176,11 @@ fn bench(c: &mut Criterion) {
         }
     }
     group.finish();
-    for (family, _, _) in FAMILIES {
+    // The table times every case again: skip it under a profiler or a criterion filter.
+    if std::env::var_os("ADJOINT_BENCH_NO_TABLE").is_some() {
+        return;
+    }
+    for (family, _) in FAMILIES {
         let of: Vec<&Case> = cases.iter().filter(|c| c.family == family).collect();
         summary(family, &of);
     }
@@ -353,52 +203,40 @@ fn median_ms(f: impl Fn() -> Solution) -> f64 {
 fn summary(family: &str, cases: &[&Case]) {
     println!("\n{family}:");
     println!(
-        "{:>5} {:>12} {:>12} {:>16} {:>8} {:>8} {:>11} {:>10}",
-        "p",
-        "forward ms",
-        "adjoint ms",
-        "adj. sparse ms",
-        "fwd st.",
-        "adj st.",
-        "record B",
-        "|Δ|/|g|"
+        "{:>5} {:>12} {:>12} {:>8} {:>8} {:>11} {:>10}",
+        "p", "forward ms", "adjoint ms", "fwd st.", "adj st.", "record B", "|Δ|/|g|"
     );
-    let mut t = vec![[0.0; 3]; cases.len()];
+    let mut t = vec![[0.0; 2]; cases.len()];
     for (row, &case) in t.iter_mut().zip(cases) {
-        let sols: Vec<Solution> = (0..3).map(|w| run(case, w)).collect();
+        let (f, a) = (run(case, 0), run(case, 1));
         for (w, cell) in row.iter_mut().enumerate() {
             *cell = median_ms(|| run(case, w));
         }
-        let g = &sols[0].gradient;
-        let scale = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let diff = sols[1..]
-            .iter()
-            .flat_map(|s| s.gradient.iter().zip(g).map(|(a, b)| (a - b).abs()))
+        let scale = f.gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = (a.gradient.iter().zip(&f.gradient))
+            .map(|(x, y)| (x - y).abs())
             .fold(0.0f64, f64::max);
         println!(
-            "{:>5} {:>12.3} {:>12.3} {:>16.3} {:>8} {:>8} {:>11} {:>10.1e}",
+            "{:>5} {:>12.3} {:>12.3} {:>8} {:>8} {:>11} {:>10.1e}",
             case.p,
             row[0],
             row[1],
-            row[2],
-            sols[0].stats.steps,
-            sols[1].stats.steps,
-            sols[1].stats.record_bytes,
+            f.stats.steps,
+            a.stats.steps,
+            a.stats.record_bytes,
             diff / scale
         );
     }
     let at = |p: usize| TABLE_PS.iter().position(|&q| q == p).expect("tabled p");
-    for (w, name) in [(1, "adjoint"), (2, "adjoint_sparse")] {
-        let cross = TABLE_PS
-            .iter()
-            .zip(&t)
-            .find(|(_, r)| r[w] < r[0])
-            .map_or("none up to 1000".into(), |(p, _)| format!("p = {p}"));
-        println!(
-            "{name}: time(p = 1000) / time(p = 10) = {:.2} (target ≤ 3); faster than forward from {cross}",
-            t[at(1000)][w] / t[at(10)][w]
-        );
-    }
+    let cross = TABLE_PS
+        .iter()
+        .zip(&t)
+        .find(|(_, r)| r[1] < r[0])
+        .map_or("none up to 1000".into(), |(p, _)| format!("p = {p}"));
+    println!(
+        "adjoint: time(p = 1000) / time(p = 10) = {:.2} (target ≤ 3); faster than forward from {cross}",
+        t[at(1000)][1] / t[at(10)][1]
+    );
     println!(
         "forward: time(p = 1000) / time(p = 10) = {:.2}",
         t[at(1000)][0] / t[at(10)][0]

@@ -45,7 +45,7 @@ use super::Integrator;
 use crate::model::ModelSecondOrder;
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
-use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// The forward augmented system (x, S, q, q_θ) of `model` at parameters θ in one mode with
 /// frozen switch bits (see the module doc).
@@ -94,6 +94,9 @@ where
     lx0: OVector<f64, N>,
     /// ℓ_θ scratch.
     lp0: OVector<f64, P>,
+    /// A zero S and its q̇_θ_t, full width, for ∂ₜℓ in a narrow primal run (else empty).
+    s0: OMatrix<f64, N, P>,
+    qp0: OVector<f64, P>,
     /// F_t at the step start.
     dt: AugState<N, P>,
     /// (f_x, ℓ_x, F_t) belong to the current step start.
@@ -112,18 +115,21 @@ where
 
     /// [`Forward::new`]; with `narrow`, a primal run (`opts.sensitivities == false`) of a
     /// model with a dynamic parameter dimension gets S of width 0 and q_θ of length 0, so
-    /// its vectors (see [`OdeSystem::zeros`]) carry nothing of size n·p. Not when Rodas5P may
-    /// run on a model with a running cost: its F_t needs ∂ₜℓ, which only
-    /// `running_cost_sens_dt` gives, and that takes a full S.
+    /// its vectors (see [`OdeSystem::zeros`]) carry nothing of size n·p. (Rodas5P's F_t needs
+    /// ∂ₜℓ, which only `running_cost_sens_dt` gives, and that takes a full S: such a run keeps
+    /// one zero S for that call.)
     fn sized(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options, narrow: bool) -> Self {
         let n = model.nstates();
         let np = model.nparams();
         let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
-        let narrow = narrow
-            && !opts.sensitivities
-            && M::P::try_to_usize().is_none()
-            && !(used && model.info().has_running_cost);
+        let narrow = narrow && !opts.sensitivities && M::P::try_to_usize().is_none();
         let sp = if narrow { M::P::from_usize(0) } else { np };
+        let zero_s = narrow && used && model.info().has_running_cost;
+        let s0p = if zero_s || M::P::try_to_usize().is_some() {
+            np
+        } else {
+            M::P::from_usize(0)
+        };
         // Unused Rodas5P buffers: empty for Dyn sizes (no allocation).
         let rn = if used || M::N::try_to_usize().is_some() {
             n
@@ -154,6 +160,8 @@ where
                 w: WMatrix::new(n, used),
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 lp0: OVector::zeros_generic(rp, Const::<1>),
+                s0: OMatrix::zeros_generic(n, s0p),
+                qp0: OVector::zeros_generic(s0p, Const::<1>),
                 dt: AugState::zeros(rn, rsp),
                 base_valid: false,
             },
@@ -314,7 +322,12 @@ where
         }
         if rhs.has_rc {
             model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
-            w.dt.q = model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &y0.s, &mut w.dt.qp);
+            w.dt.q = if y0.s.ncols() == p.len() {
+                model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &y0.s, &mut w.dt.qp)
+            } else {
+                // A narrow primal run: ∂ₜℓ alone, from the full-width zero S.
+                model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &w.s0, &mut w.qp0)
+            };
         } else {
             w.lx0.fill(0.0);
             w.dt.q = 0.0;
