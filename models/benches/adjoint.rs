@@ -129,8 +129,11 @@ struct Case {
     theta: DVector<f64>,
 }
 
+/// A generator of model text for p parameters.
+type Generator = fn(usize) -> String;
+
 /// The generated models: (name, text generator).
-const FAMILIES: [(&str, fn(usize) -> String); 2] = [("impact", impact), ("chain", chain)];
+const FAMILIES: [(&str, Generator); 2] = [("impact", impact), ("chain", chain)];
 
 fn cases() -> Vec<Case> {
     let mut out = Vec::new();

@@ -3,8 +3,9 @@
 //! Simulates hybrid models, locates their events, carries forward sensitivities
 //! S = ∂x/∂θ through every jump and returns the parameter derivative of a trajectory
 //! as a measure — a density on the smooth segments plus Dirac atoms at the events —
-//! and reduced to dC/dθ for the model's cost. Knows nothing of parsing: models come in
-//! through the [`HybridModel`] trait.
+//! and reduced to dC/dθ for the model's cost; or computes dC/dθ and vector–Jacobian
+//! products by one backward (adjoint) sweep ([`adjoint`], [`vjp`]). Knows nothing of
+//! parsing: models come in through the [`HybridModel`] trait.
 
 #[cfg(any(test, feature = "test-fixtures"))]
 #[doc(hidden)]

@@ -199,9 +199,8 @@ fn replay_events<M: HybridModel, K: EventSink>(
         work.approach(model, p, j, x_before, x_after);
         let gt = work.crossing_grad(model, p, j);
         let (slope, grazing) = work.slope_and_grazing(gt, opts.grazing_tol);
-        let (xm, xp) = work.states();
-        model.observe(j.t, xm, p, &mut obs_minus);
-        model.observe(j.t, xp, p, &mut obs_plus);
+        model.observe(j.t, work.x_minus(), p, &mut obs_minus);
+        model.observe(j.t, work.x_plus(), p, &mut obs_plus);
         sink.event(&EventView {
             index,
             event: k,

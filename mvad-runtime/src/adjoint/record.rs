@@ -183,7 +183,7 @@ impl Tape {
             Some(te) => te - t0,
             None => h,
         };
-        if !(len > 0.0) || h == 0.0 {
+        if len.is_nan() || len <= 0.0 || h == 0.0 {
             return;
         }
         let start = self.clock;

@@ -96,9 +96,14 @@ where
         (self.gx.dot(&self.f_minus), grazing)
     }
 
-    /// x⁻ and x⁺ as loaded by [`JumpWork::approach`].
-    pub(super) fn states(&self) -> (&OVector<f64, M::N>, &OVector<f64, M::N>) {
-        (&self.xm, &self.xp)
+    /// x⁻ as loaded by [`JumpWork::approach`].
+    pub(super) fn x_minus(&self) -> &OVector<f64, M::N> {
+        &self.xm
+    }
+
+    /// x⁺ as loaded by [`JumpWork::approach`].
+    pub(super) fn x_plus(&self) -> &OVector<f64, M::N> {
+        &self.xp
     }
 
     /// Loads x⁻, x⁺ and evaluates f⁻ = f_{m⁻}(t, x⁻) under b⁻ and f⁺ = f_{m⁺}(t, x⁺) under b⁺.
