@@ -30,7 +30,7 @@
 //! backwards in time (the eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x
 //! stepped forwards), so `auto` switches to Rodas5P on it as on the forward run.
 
-use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
+use super::aug::{axpy_slice, hermite_slice, mix5_slice, WeightedRms};
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem, StageVector};
 use super::Integrator;
@@ -140,54 +140,8 @@ where
     }
 
     #[inline]
-    fn primary_dist_sq(&self, other: &Self) -> f64 {
-        (&self.lam - &other.lam).norm_squared()
-    }
-
-    #[inline]
-    fn primary_into(&self, out: &mut OVector<f64, N>) {
-        out.copy_from(&self.lam);
-    }
-
-    #[inline]
-    fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
-        out.copy_from(&base.lam);
-        accumulate_slices(
-            out.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.lam.as_slice()),
-        );
-    }
-
-    #[inline]
-    fn lincomb_primary(out: &mut OVector<f64, N>, h: f64, coefs: &[f64], ks: &[Self]) {
-        out.fill(0.0);
-        accumulate_slices(
-            out.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.lam.as_slice()),
-        );
-    }
-
-    #[inline]
-    fn mix5_primary(out: &mut OVector<f64, N>, w: &[f64; 5], v: [&Self; 5]) {
-        mix5_slice(out.as_mut_slice(), w, v.map(|u| u.lam.as_slice()));
-    }
-
-    #[inline]
-    fn hermite_primary(
-        out: &mut OVector<f64, N>,
-        y0: &Self,
-        y1: &Self,
-        f0: &Self,
-        f1: &Self,
-        h: f64,
-        th: f64,
-    ) {
-        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.lam.as_slice());
-        hermite_slice(out.as_mut_slice(), a, b, g0, g1, h, th);
+    fn primary(&self) -> &[f64] {
+        self.lam.as_slice()
     }
 }
 

@@ -221,59 +221,8 @@ where
     }
 
     #[inline]
-    fn primary_dist_sq(&self, other: &Self) -> f64 {
-        let mut sum = 0.0;
-        for (a, b) in self.x.iter().zip(other.x.iter()) {
-            let d = a - b;
-            sum += d * d;
-        }
-        sum
-    }
-
-    #[inline]
-    fn primary_into(&self, out: &mut OVector<f64, N>) {
-        out.copy_from(&self.x);
-    }
-
-    #[inline]
-    fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
-        out.copy_from(&base.x);
-        accumulate_slices(
-            out.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.x.as_slice()),
-        );
-    }
-
-    #[inline]
-    fn lincomb_primary(out: &mut OVector<f64, N>, h: f64, coefs: &[f64], ks: &[Self]) {
-        out.fill(0.0);
-        accumulate_slices(
-            out.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.x.as_slice()),
-        );
-    }
-
-    #[inline]
-    fn mix5_primary(out: &mut OVector<f64, N>, w: &[f64; 5], v: [&Self; 5]) {
-        mix5_slice(out.as_mut_slice(), w, v.map(|u| u.x.as_slice()));
-    }
-
-    #[inline]
-    fn hermite_primary(
-        out: &mut OVector<f64, N>,
-        y0: &Self,
-        y1: &Self,
-        f0: &Self,
-        f1: &Self,
-        h: f64,
-        th: f64,
-    ) {
-        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.x.as_slice());
-        hermite_slice(out.as_mut_slice(), a, b, g0, g1, h, th);
+    fn primary(&self) -> &[f64] {
+        self.x.as_slice()
     }
 }
 
