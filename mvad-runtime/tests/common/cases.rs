@@ -603,6 +603,29 @@ pub fn run(case: &Case, method: Method) -> Vec<String> {
         .collect()
 }
 
+/// Runs every case under every method it applies to, except the [`KNOWN_FAILURES`], and
+/// asserts that there were at least `min_runs` runs and no failure (all reported at once).
+pub fn run_matrix(cases: impl IntoIterator<Item = Case>, min_runs: usize) {
+    let mut failures = vec![];
+    let mut runs = 0;
+    for case in cases {
+        for &method in case.methods {
+            if known(&case.name, method) {
+                continue;
+            }
+            failures.extend(run(&case, method));
+            runs += 1;
+        }
+    }
+    assert!(runs >= min_runs, "{runs} runs");
+    assert!(
+        failures.is_empty(),
+        "{} failures:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
 /// Whether (case, method) is a listed known failure.
 pub fn known(case: &str, method: Method) -> bool {
     KNOWN_FAILURES
