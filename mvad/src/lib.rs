@@ -11,6 +11,8 @@ pub use mvad_runtime::*;
 
 pub mod interp;
 pub mod load;
+pub mod report;
+pub mod setup;
 
 #[doc(hidden)]
 pub mod __private;

@@ -11,12 +11,12 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
-use super::grad::grad_json;
 use super::output::{g, json_text, num, Table};
 use super::progress::Progress;
 use super::{
     observable_index, param_index, parse_number, setup, solve_err, CliError, CmdResult, Common,
 };
+use mvad::report::grad_json;
 
 /// Arguments of `mvad sweep`.
 #[derive(Args, Debug)]
