@@ -27,6 +27,7 @@ pub mod sens;
 pub mod sink;
 pub mod solution;
 pub mod solve;
+pub mod vjp;
 
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};

@@ -9,6 +9,7 @@ pub use mvad_macros::hybrid;
 pub use mvad_runtime as runtime;
 pub use mvad_runtime::*;
 
+pub mod batch;
 pub mod interp;
 pub mod load;
 pub mod report;

@@ -134,7 +134,7 @@ pub type CmdResult = Result<String, CliError>;
 pub fn run<I, M, L>(args: I, load: L) -> ExitCode
 where
     I: IntoIterator<Item = OsString>,
-    M: HybridModel,
+    M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path) -> Result<M, String>,
 {
@@ -200,7 +200,7 @@ impl Cli {
 /// Runs the parsed command on the model `load` returns for the model path.
 fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
 where
-    M: HybridModel,
+    M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path) -> Result<M, String>,
 {
