@@ -1,8 +1,8 @@
 //! What a differentiable layer (a JAX `custom_vjp`, a PyTorch `autograd.Function`) asks of a
 //! run: the value on the way forward, the vector–Jacobian product on the way back.
 //!
-//! - the cost: C(θ) and dC/dθ together ([`cost_gradient`]); the layer's backward pass is
-//!   θ̄ = c̄ · dC/dθ;
+//! - the cost: C(θ) alone ([`cost`]), or with dC/dθ ([`cost_gradient`]); the layer's
+//!   backward pass is θ̄ = c̄ · dC/dθ;
 //! - observables at sample times tᵢ: yᵢₒ = hₒ(tᵢ, x(tᵢ), θ) ([`observe`], a run without
 //!   sensitivities) and, for a cotangent ȳ of the same shape, ([`observe_vjp`])
 //!
@@ -39,6 +39,22 @@ where
     };
     let sol = solve(model, params, &opts)?;
     Ok((sol.cost, sol.gradient))
+}
+
+/// C(θ) alone, from a run without sensitivities.
+pub fn cost<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+) -> Result<f64, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let opts = Options {
+        sensitivities: false,
+        ..opts.clone()
+    };
+    Ok(solve(model, params, &opts)?.cost)
 }
 
 /// The observables at `times`, row-major (time, observable), from a run without

@@ -90,6 +90,21 @@ pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
     Value::Object(m)
 }
 
+/// One event of a trajectory (`mvad simulate --json`, `Model.simulate`): index, name, t, the
+/// modes and the state on both sides, x(t_k⁻) and x(t_k⁺).
+pub fn trajectory_event_json(info: &ModelInfo, ev: &EventRecord) -> Value {
+    let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
+    serde_json::json!({
+        "index": ev.index,
+        "name": info.events.get(ev.event).map(|x| x.name.clone()),
+        "t": num(ev.t),
+        "mode_before": mode_name(ev.mode_before),
+        "mode_after": mode_name(ev.mode_after),
+        "x_before": ev.x_before.iter().map(|&z| num(z)).collect::<Vec<_>>(),
+        "x_after": ev.x_after.iter().map(|&z| num(z)).collect::<Vec<_>>(),
+    })
+}
+
 /// Diagnostics as `[{kind, t, message}]`.
 pub fn diagnostics_json(diags: &[Diagnostic]) -> Value {
     Value::Array(

@@ -92,6 +92,11 @@ pub enum SetupError {
         /// The model's name.
         model: String,
     },
+    /// A gradient mode that is not implemented (`adjoint`) or not known.
+    Mode {
+        /// The mode asked for.
+        mode: String,
+    },
     /// The model's horizon is not positive and finite at these parameters.
     BadHorizon {
         /// The model's name.
@@ -141,6 +146,14 @@ impl SetupError {
                 "model `{model}` declares no horizon; give one with {}",
                 spell.assign("t_end", "T")
             ),
+            SetupError::Mode { mode } if mode == "adjoint" => format!(
+                "{} is not yet supported; use {} (the default)",
+                spell.assign("mode", "adjoint"),
+                spell.assign("mode", "forward")
+            ),
+            SetupError::Mode { mode } => {
+                format!("unknown {} `{mode}`; use forward", spell.option("mode"))
+            }
             SetupError::BadHorizon { model, t } => format!(
                 "the horizon of model `{model}` evaluates to {t} at these parameters; \
                  it must be positive and finite (or pass {})",
@@ -203,6 +216,18 @@ pub fn wrt_indices(names: &[String], wrt: Option<&[String]>) -> Result<Vec<usize
         });
     }
     Ok(out)
+}
+
+/// Checks the gradient mode: `forward` (sensitivities carried along the run) is the one
+/// implemented; `adjoint` is in the spec and refused until it lands.
+pub fn check_mode(mode: &str) -> Result<(), SetupError> {
+    if mode == "forward" {
+        Ok(())
+    } else {
+        Err(SetupError::Mode {
+            mode: mode.to_string(),
+        })
+    }
 }
 
 /// θ: the declared values with `set` applied.

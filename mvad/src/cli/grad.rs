@@ -6,13 +6,14 @@ use clap::Args;
 use mvad::report::grad_json;
 use mvad::runtime::solution::Solution;
 use mvad::runtime::solve::solve;
+use mvad::setup::check_mode;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::DefaultAllocator;
 
 use super::output::{
     diagnostics_text, g, json_text, more_events, param_header, Table, MAX_EVENT_ROWS,
 };
-use super::{setup, solve_err, CliError, CmdResult, Common};
+use super::{setup, setup_err, solve_err, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
 #[derive(Args, Debug)]
@@ -32,11 +33,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let s = setup(model, &args.common)?;
-    if args.mode == "adjoint" {
-        return Err(CliError::Input(
-            "error: --mode adjoint is not yet supported; use --mode forward (the default)".into(),
-        ));
-    }
+    check_mode(&args.mode).map_err(setup_err)?;
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let info = model.info();
     if args.common.json {

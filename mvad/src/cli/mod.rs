@@ -355,15 +355,10 @@ pub fn solve_err(e: SolveError) -> CliError {
         SolveError::MaxSteps { .. } => " (--method auto or --method rosenbrock)",
         _ => "",
     };
-    match e {
-        SolveError::NoHorizon
-        | SolveError::BadHorizon { .. }
-        | SolveError::ParamCount { .. }
-        | SolveError::BadParam { .. }
-        | SolveError::BadOption { .. }
-        | SolveError::NoSuchObservable { .. }
-        | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}{hint}")),
-        _ => CliError::Run(format!("error: the run failed: {e}{hint}")),
+    if e.is_bad_input() {
+        CliError::Input(format!("error: {e}{hint}"))
+    } else {
+        CliError::Run(format!("error: the run failed: {e}{hint}"))
     }
 }
 
