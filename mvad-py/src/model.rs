@@ -96,19 +96,23 @@ impl Model {
         &self,
         py: Python<'_>,
         req: &Request,
-        thetas: &[f64],
+        thetas: &Rows,
         f: impl Fn(usize, &InterpretedModel, &DVector<f64>, &Resolved) -> Result<R, mvad::SolveError>
             + Sync,
     ) -> PyResult<Vec<R>> {
         let out = py.detach(|| {
             self.run(req, |model, s| {
                 let w = s.wrt.len();
-                if w == 0 || thetas.len() % w != 0 {
+                if thetas.cols != w {
                     return Err(Failure::Solve(mvad::SolveError::BadOption {
-                        what: format!("thetas must have {w} columns, one per wrt parameter"),
+                        what: format!(
+                            "thetas has {} columns; it needs {w}, one per wrt parameter",
+                            thetas.cols
+                        ),
                     }));
                 }
-                let rows: Vec<(usize, &[f64])> = thetas.chunks_exact(w).enumerate().collect();
+                let rows: Vec<(usize, &[f64])> =
+                    thetas.data.chunks_exact(w.max(1)).enumerate().collect();
                 let results = par_map(
                     model,
                     &rows,
@@ -131,9 +135,19 @@ impl Model {
     }
 }
 
-/// A (B, w) array as a flat row-major vector.
-fn rows(thetas: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<f64>> {
-    Ok(thetas.as_array().iter().copied().collect())
+/// A (B, w) array of parameter rows, copied out of Python before the GIL is released.
+struct Rows {
+    /// Row-major values.
+    data: Vec<f64>,
+    /// w.
+    cols: usize,
+}
+
+fn rows(thetas: &PyReadonlyArray2<'_, f64>) -> Rows {
+    Rows {
+        data: thetas.as_array().iter().copied().collect(),
+        cols: thetas.shape()[1],
+    }
 }
 
 /// The `wrt` list given, or every parameter.
@@ -347,7 +361,7 @@ impl Model {
         let wrt = wrt_or_all(&self.info, wrt);
         let w = wrt.len();
         let req = request(params, Some(wrt), options)?;
-        let flat = rows(&thetas)?;
+        let flat = rows(&thetas);
         let results = self.batch(py, &req, &flat, |_, m, p, s| {
             if gradient {
                 let (c, g) = vjp::cost_gradient(m, p, &s.opts)?;
@@ -376,7 +390,7 @@ impl Model {
     ) -> PyResult<Bound<'py, PyAny>> {
         let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
         let ts: Vec<f64> = times.as_array().iter().copied().collect();
-        let flat = rows(&thetas)?;
+        let flat = rows(&thetas);
         let results = self.batch(py, &req, &flat, |_, m, p, s| {
             vjp::observe(m, p, &s.opts, &ts)
         })?;
@@ -416,7 +430,7 @@ impl Model {
         }
         let cot: Vec<f64> = cotangents.as_array().iter().copied().collect();
         let per_row = ts.len() * m;
-        let results = self.batch(py, &req, &rows(&thetas)?, |i, model, p, s| {
+        let results = self.batch(py, &req, &rows(&thetas), |i, model, p, s| {
             let ybar = &cot[i * per_row..(i + 1) * per_row];
             let v = vjp::observe_vjp(model, p, &s.opts, &ts, ybar)?;
             Ok(s.wrt.iter().map(|&k| v[k]).collect::<Vec<_>>())

@@ -90,6 +90,20 @@ def test_cost_batch_equals_single_runs_in_order(ball):
     np.testing.assert_allclose(c2, c, rtol=1e-9)
 
 
+def test_observe_batch_rows_are_single_runs(ball):
+    times = np.linspace(0.1, 1.9, 7)
+    thetas = np.array([[0.6], [0.7], [0.8]])
+    ys = ball.observe_batch(thetas, times, wrt=["e"], **TIGHT)
+    assert ys.shape == (3, 7, 2)
+    for k, (e,) in enumerate(thetas):
+        s = ball.simulate(times, params={"e": e}, **TIGHT)
+        np.testing.assert_array_equal(ys[k, :, 0], s["observables"]["height"])
+    cot = np.ones((3, 7, 2))
+    v = ball.observe_vjp_batch(thetas, times, cot, wrt=["e"], **TIGHT)
+    single = ball.observe_vjp_batch(thetas[1:2], times, cot[1:2], wrt=["e"], **TIGHT)
+    assert v.shape == (3, 1) and v[1, 0] == single[0, 0]
+
+
 def test_a_bad_model_raises_model_error_with_the_location(tmp_path):
     bad = tmp_path / "bad.hyb"
     bad.write_text(BALL.read_text().replace("der(v) = -g;", "der(v) = -gg;"))
@@ -124,6 +138,8 @@ def test_bad_requests_are_value_errors(ball):
         ball.simulate(np.array([3.0]))
     with pytest.raises(ValueError, match="unknown observable"):
         ball.measure("speed")
+    with pytest.raises(ValueError, match="thetas has 3 columns; it needs 2"):
+        ball.cost_batch(np.ones((2, 3)), wrt=["e", "g"])
     with pytest.raises(ValueError, match="cotangents must have shape"):
         ball.observe_vjp_batch(np.ones((2, 1)), np.array([0.5]), np.ones((1, 1, 2)), wrt=["e"])
 

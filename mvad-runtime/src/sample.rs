@@ -137,8 +137,8 @@ mod tests {
     #[test]
     fn heights_and_their_jacobian_against_the_closed_form() {
         let (ball, p, sol) = run(true);
-        let g = 9.81;
-        let t1 = (2.0 * 2.0 / g as f64).sqrt();
+        let g: f64 = 9.81;
+        let t1 = (2.0 * 2.0 / g).sqrt();
         let times = [0.0, 0.3, 0.6, 0.7, 1.0];
         let smp = sample(&ball, &p, &sol, &times).expect("samples");
         assert_eq!((smp.nstates, smp.nobservables, smp.nparams), (2, 2, 4));

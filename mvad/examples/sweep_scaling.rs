@@ -56,8 +56,14 @@ fn main() {
         "{count} runs of the bouncing ball (e in [0.3, 0.95]), {} cores; {failed} failed",
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
-    println!("{:<22} {:>10} {:>10} {:>10}", "", "wall s", "× serial", "identical");
-    println!("{:<22} {:>10.3} {:>10.3} {:>10}", "serial loop", t_serial, 1.0, "-");
+    println!(
+        "{:<22} {:>10} {:>10} {:>10}",
+        "", "wall s", "× serial", "identical"
+    );
+    println!(
+        "{:<22} {:>10.3} {:>10.3} {:>10}",
+        "serial loop", t_serial, 1.0, "-"
+    );
 
     let max = std::thread::available_parallelism().map_or(1, |n| n.get());
     for threads in 1..=max {
