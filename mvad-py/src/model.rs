@@ -91,7 +91,8 @@ impl Model {
     }
 
     /// `f(row index, model, θ, setup)` on every row of `thetas` (θ ordered as `wrt`), across
-    /// cores, results in row order; the first failure in row order is raised.
+    /// cores, results in row order, with w (the number of `wrt` parameters once duplicates are
+    /// dropped); the first failure in row order is raised.
     fn batch<R: Send>(
         &self,
         py: Python<'_>,
@@ -99,7 +100,7 @@ impl Model {
         thetas: &Rows,
         f: impl Fn(usize, &InterpretedModel, &DVector<f64>, &Resolved) -> Result<R, mvad::SolveError>
             + Sync,
-    ) -> PyResult<Vec<R>> {
+    ) -> PyResult<(Vec<R>, usize)> {
         let out = py.detach(|| {
             self.run(req, |model, s| {
                 let w = s.wrt.len();
@@ -125,10 +126,11 @@ impl Model {
                     },
                     &|| {},
                 );
-                results
+                let out: Result<Vec<R>, Failure> = results
                     .into_iter()
                     .map(|r| r.map_err(Failure::Panic)?.map_err(Failure::Solve))
-                    .collect()
+                    .collect();
+                Ok((out?, w))
             })
         })?;
         Ok(out)
@@ -358,11 +360,9 @@ impl Model {
         gradient: bool,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let wrt = wrt_or_all(&self.info, wrt);
-        let w = wrt.len();
-        let req = request(params, Some(wrt), options)?;
+        let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
         let flat = rows(&thetas);
-        let results = self.batch(py, &req, &flat, |_, m, p, s| {
+        let (results, w) = self.batch(py, &req, &flat, |_, m, p, s| {
             if gradient {
                 let (c, g) = vjp::cost_gradient(m, p, &s.opts)?;
                 Ok((c, s.wrt.iter().map(|&k| g[k]).collect::<Vec<_>>()))
@@ -391,7 +391,7 @@ impl Model {
         let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
         let ts: Vec<f64> = times.as_array().iter().copied().collect();
         let flat = rows(&thetas);
-        let results = self.batch(py, &req, &flat, |_, m, p, s| {
+        let (results, _) = self.batch(py, &req, &flat, |_, m, p, s| {
             vjp::observe(m, p, &s.opts, &ts)
         })?;
         let b = results.len();
@@ -415,9 +415,7 @@ impl Model {
         params: Option<BTreeMap<String, f64>>,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let wrt = wrt_or_all(&self.info, wrt);
-        let w = wrt.len();
-        let req = request(params, Some(wrt), options)?;
+        let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
         let ts: Vec<f64> = times.as_array().iter().copied().collect();
         let m = self.info.nobservables();
         let b = thetas.shape()[0];
@@ -430,7 +428,7 @@ impl Model {
         }
         let cot: Vec<f64> = cotangents.as_array().iter().copied().collect();
         let per_row = ts.len() * m;
-        let results = self.batch(py, &req, &rows(&thetas), |i, model, p, s| {
+        let (results, w) = self.batch(py, &req, &rows(&thetas), |i, model, p, s| {
             let ybar = &cot[i * per_row..(i + 1) * per_row];
             let v = vjp::observe_vjp(model, p, &s.opts, &ts, ybar)?;
             Ok(s.wrt.iter().map(|&k| v[k]).collect::<Vec<_>>())

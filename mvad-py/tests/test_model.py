@@ -140,6 +140,9 @@ def test_bad_requests_are_value_errors(ball):
         ball.measure("speed")
     with pytest.raises(ValueError, match="thetas has 3 columns; it needs 2"):
         ball.cost_batch(np.ones((2, 3)), wrt=["e", "g"])
+    # A name given twice is one parameter, as in Model.grad.
+    c, g = ball.cost_batch(np.array([[0.8]]), wrt=["e", "e"])
+    assert g.shape == (1, 1)
     with pytest.raises(ValueError, match="cotangents must have shape"):
         ball.observe_vjp_batch(np.ones((2, 1)), np.array([0.5]), np.ones((1, 1, 2)), wrt=["e"])
 
