@@ -65,6 +65,8 @@ def test_jit_and_vmap_over_eight_parameter_sets(ball):
     batched = jax.jit(jax.vmap(jax.value_and_grad(f)))
     values, grads = batched(thetas)
     assert values.shape == (8,) and grads.shape == (8, 2)
+    # The primal alone (a run without sensitivities, so its steps differ slightly).
+    np.testing.assert_allclose(np.asarray(jax.vmap(f)(thetas)), np.asarray(values), rtol=1e-8)
     for k in range(8):
         r = ball.grad(params={"e": float(thetas[k, 0]), "g": float(thetas[k, 1])}, wrt=["e", "g"], **TIGHT)
         assert float(values[k]) == pytest.approx(r["cost"], rel=1e-12)
