@@ -73,6 +73,34 @@ pub fn ball_closed_form(e: f64, g: f64, h0: f64, v0: f64, t_end: f64) -> (f64, V
     (cost, impacts)
 }
 
+/// Median over 15 batches of the mean time per call of `f`, in µs, each batch sized to
+/// ~20 ms (for the benches and examples that print timing tables; robust on a shared machine).
+pub fn median_us<R>(mut f: impl FnMut() -> R) -> f64 {
+    let mut batch = 200usize;
+    // Size the batch to ~20 ms.
+    loop {
+        let t = std::time::Instant::now();
+        for _ in 0..batch {
+            std::hint::black_box(f());
+        }
+        if t.elapsed().as_secs_f64() > 0.02 || batch > 1_000_000 {
+            break;
+        }
+        batch *= 2;
+    }
+    let mut v: Vec<f64> = (0..15)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            for _ in 0..batch {
+                std::hint::black_box(f());
+            }
+            t.elapsed().as_secs_f64() * 1e6 / batch as f64
+        })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
 /// Derivative of `f` at `x`: [`derivative`] with a first step of 1e-2·max(1, |x|).
 pub fn central(f: impl Fn(f64) -> f64, x: f64) -> f64 {
     derivative(f, x, 1e-2 * x.abs().max(1.0))
