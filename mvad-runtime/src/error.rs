@@ -95,6 +95,21 @@ pub enum SolveError {
 }
 
 impl SolveError {
+    /// Whether the caller asked for something that cannot run (no or a bad horizon, wrong
+    /// parameters, a bad option or index), as opposed to a run that started and failed.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            SolveError::NoHorizon
+                | SolveError::BadHorizon { .. }
+                | SolveError::ParamCount { .. }
+                | SolveError::BadParam { .. }
+                | SolveError::BadOption { .. }
+                | SolveError::NoSuchObservable { .. }
+                | SolveError::NoSuchParam { .. }
+        )
+    }
+
     /// The spec's diagnostic for the numerical failures (`nonfinite`, `step_size_underflow`,
     /// `max_events`, `max_steps`); `None` for bad input.
     pub fn diagnostic(&self) -> Option<Diagnostic> {

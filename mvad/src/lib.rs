@@ -9,9 +9,12 @@ pub use mvad_macros::hybrid;
 pub use mvad_runtime as runtime;
 pub use mvad_runtime::*;
 
+pub mod batch;
 pub mod interp;
 pub mod load;
 pub mod suite;
+pub mod report;
+pub mod setup;
 
 #[doc(hidden)]
 pub mod __private;

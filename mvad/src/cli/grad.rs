@@ -3,17 +3,17 @@
 //! state and observable, and the atoms α_k = −J_k t_k'. `--json` prints the spec's object.
 
 use clap::Args;
+use mvad::report::grad_json;
 use mvad::runtime::solution::Solution;
 use mvad::runtime::solve::solve;
+use mvad::setup::check_mode;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::DefaultAllocator;
-use serde_json::{Map, Value};
 
 use super::output::{
-    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, more_events, num,
-    param_header, stats_json, Table, MAX_EVENT_ROWS,
+    diagnostics_text, g, json_text, more_events, param_header, Table, MAX_EVENT_ROWS,
 };
-use super::{setup, solve_err, CliError, CmdResult, Common};
+use super::{setup, setup_err, solve_err, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
 #[derive(Args, Debug)]
@@ -33,11 +33,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let s = setup(model, &args.common)?;
-    if args.mode == "adjoint" {
-        return Err(CliError::Input(
-            "error: --mode adjoint is not yet supported; use --mode forward (the default)".into(),
-        ));
-    }
+    check_mode(&args.mode).map_err(setup_err)?;
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let info = model.info();
     if args.common.json {
@@ -45,30 +41,6 @@ where
     } else {
         Ok(grad_text(info, file, &sol, &s.wrt))
     }
-}
-
-/// The spec's JSON object for a solution, derivatives restricted to `wrt`.
-pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) -> Value {
-    let all: Vec<usize> = (0..info.params.len()).collect();
-    let mut m = Map::new();
-    m.insert("model".into(), Value::from(info.name.clone()));
-    m.insert("t_end".into(), num(sol.t_end));
-    m.insert("params".into(), by_name(&info.params, &all, &sol.params));
-    m.insert("cost".into(), num(sol.cost));
-    m.insert("gradient".into(), by_name(&info.params, wrt, &sol.gradient));
-    m.insert(
-        "events".into(),
-        Value::Array(
-            sol.events
-                .iter()
-                .map(|e| event_json(info, e, wrt))
-                .collect(),
-        ),
-    );
-    m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
-    m.insert("stats".into(), stats_json(&sol.stats));
-    m.insert("mode".into(), Value::from(mode));
-    Value::Object(m)
 }
 
 /// The readable form: cost, gradient table, event table, atom table, warnings, stats.
@@ -179,6 +151,7 @@ mod tests {
     use crate::cli::spec_keys::missing_spec_keys;
     use crate::cli::test_support::{json, on_ball, tight};
     use approx::assert_relative_eq;
+    use serde_json::Value;
 
     #[test]
     fn json_has_every_key_of_the_spec_and_the_e1_values() {
