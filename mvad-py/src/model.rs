@@ -12,7 +12,7 @@ use std::sync::Mutex;
 
 use mvad::batch::{catch, par_map, Panicked};
 use mvad::interp::InterpretedModel;
-use mvad::report::{diagnostics_json, grad_json, trajectory_event_json};
+use mvad::json::{diagnostics_json, grad_json, trajectory_event_json};
 use mvad::runtime::{measure, sample, solve, vjp};
 use mvad::setup::{check_mode, resolve, Request, Setup, SetupError};
 use mvad::{HybridModel, ModelInfo};

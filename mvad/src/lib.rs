@@ -11,10 +11,10 @@ pub use mvad_runtime::*;
 
 pub mod batch;
 pub mod interp;
+pub mod json;
 pub mod load;
-pub mod suite;
-pub mod report;
 pub mod setup;
+pub mod suite;
 
 #[doc(hidden)]
 pub mod __private;

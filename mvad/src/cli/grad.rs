@@ -3,7 +3,7 @@
 //! state and observable, and the atoms α_k = −J_k t_k'. `--json` prints the spec's object.
 
 use clap::Args;
-use mvad::report::grad_json;
+use mvad::json::grad_json;
 use mvad::runtime::solution::Solution;
 use mvad::runtime::solve::solve;
 use mvad::setup::check_mode;

@@ -1,7 +1,7 @@
 //! Output helpers: number formatting and plain-text tables; the JSON pieces several
-//! commands share come from the library's [`mvad::report`] (one builder for every front end).
+//! commands share come from the library's [`mvad::json`] (one builder for every front end).
 
-pub use mvad::report::{diagnostics_json, num, stats_json};
+pub use mvad::json::{diagnostics_json, num, stats_json};
 use mvad::runtime::solution::Diagnostic;
 use serde_json::Value;
 

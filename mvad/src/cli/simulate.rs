@@ -15,7 +15,7 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
-use mvad::report::trajectory_event_json;
+use mvad::json::trajectory_event_json;
 
 use super::output::{
     diagnostics_json, diagnostics_text, g, json_text, more_events, num, stats_json, Table,

@@ -18,7 +18,7 @@ use super::progress::Progress;
 use super::{
     observable_index, param_index, parse_number, setup, solve_err, CliError, CmdResult, Common,
 };
-use mvad::report::grad_json;
+use mvad::json::grad_json;
 
 /// Arguments of `mvad sweep`.
 #[derive(Args, Debug)]
