@@ -1,7 +1,7 @@
 //! `mvad._mvad`, the native half of the Python package `mvad` (PyO3).
 //!
 //! [`load`] and [`from_source`] turn `.hyb` text into a [`model::Model`]; its methods return
-//! the JSON object of `mvad grad --json` as a dict (built by `mvad::report`, the builder the
+//! the JSON object of `mvad grad --json` as a dict (built by `mvad::json`, the builder the
 //! command line prints), trajectories and measures as numpy arrays, and the batched kernels
 //! the `mvad.jax` and `mvad.torch` layers call. Every solve runs with the GIL released, and
 //! batches run across cores (`mvad::batch::par_map`). Errors become Python exceptions
