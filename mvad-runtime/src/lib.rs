@@ -21,6 +21,7 @@ pub mod event;
 pub mod fd;
 pub mod integrate;
 pub mod measure;
+pub mod qp;
 pub mod reduce;
 pub mod sens;
 pub mod sink;
@@ -30,6 +31,7 @@ pub mod solve;
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
+pub use qp::{QpError, QpSolver};
 pub use sink::{EventCounts, EventSink, EventView, Stream};
 pub use solution::{
     Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,

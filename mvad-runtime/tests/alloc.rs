@@ -121,3 +121,37 @@ fn stepping_allocates_nothing_for_static_sizes() {
         assert_eq!(n, 0, "{method:?}: {:?}", it.stats());
     }
 }
+
+#[test]
+fn qp_solve_and_derivatives_allocate_nothing() {
+    use mvad_runtime::qp::{ConstraintKind, QpData, QpOptions, QpSolver, Side};
+    use nalgebra::{DMatrix, DVector};
+    // min ½‖u − (θ, 1, −θ)‖² s.t. u₁ ≤ 0, u₃ ≥ 0, u₁ + u₂ + u₃ = 1: the first two constraints
+    // are active for θ > 0, inactive for θ < 0 and weakly active (a kink) at θ = 0.
+    let kinds = [ConstraintKind::Le, ConstraintKind::Le, ConstraintKind::Eq];
+    let mut data = QpData {
+        h: DMatrix::identity(3, 3),
+        c: DVector::zeros(3),
+        a: DMatrix::from_row_slice(3, 3, &[1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 1.0, 1.0, 1.0]),
+        b: DVector::from_vec(vec![0.0, 0.0, 1.0]),
+    };
+    let mut dir = QpData::zeros(3, 3);
+    dir.c[0] = -1.0;
+    dir.c[2] = 1.0;
+    let mut s = QpSolver::new(3, &kinds, QpOptions::default());
+    let (mut du, mut dm) = ([0.0; 3], [0.0; 3]);
+    let before = allocations();
+    let mut kinks = 0;
+    for theta in [-0.5, 0.0, 0.5, 0.0, -0.25] {
+        data.c[0] = -theta;
+        data.c[1] = -1.0;
+        data.c[2] = theta;
+        s.solve(&data).unwrap();
+        kinks += usize::from(s.is_kink());
+        for side in [Side::Left, Side::Right] {
+            s.directional(&dir, side, &mut du, &mut dm).unwrap();
+        }
+    }
+    assert_eq!(kinks, 2);
+    assert_eq!(allocations() - before, 0);
+}
