@@ -1,4 +1,5 @@
 use super::*;
+use crate::ast::MAX_DEPTH;
 use crate::span::line_col;
 
 fn errors(src: &str) -> Vec<Diagnostic> {

@@ -1,0 +1,450 @@
+//! The model trait's methods, each cut from its kernel by [`Gen`]: the static description
+//! (`ModelInfo`), the `HybridModel` core and the fused sparse `ModelSens::rhs_sens`.
+
+use proc_macro2::{Ident, Literal, TokenStream};
+use quote::{format_ident, quote};
+
+use super::emit::Body;
+use super::{lit, usize_lit, Gen};
+use crate::ir::Direction;
+use crate::schedule::{GradKernels, Kernel, ModelKernels};
+
+impl Gen<'_> {
+    pub(super) fn info(&self, k: &ModelKernels) -> TokenStream {
+        let pr = quote!(::mvad::__private);
+        let strs = |v: &[String]| quote!(#pr::names(&[#(#v),*]));
+        let name = &k.name;
+        let states = strs(&k.states);
+        let params = strs(&k.params);
+        let defaults: Vec<TokenStream> = k.param_defaults.iter().map(|&v| lit(v)).collect();
+        let modes = strs(&k.mode_names);
+        let init = usize_lit(k.initial_mode);
+        let opt = |o: Option<usize>| match o {
+            Some(i) => {
+                let i = usize_lit(i);
+                quote!(::core::option::Option::Some(#i))
+            }
+            None => quote!(::core::option::Option::None),
+        };
+        let events = k.event_meta.iter().map(|e| {
+            let name = &e.name;
+            let dir = match e.direction {
+                Direction::Down => quote!(#pr::Direction::Down),
+                Direction::Up => quote!(#pr::Direction::Up),
+            };
+            let (mode, target) = (opt(e.mode), opt(e.target));
+            let (hr, hc) = (e.has_reset, e.has_cost);
+            quote!(#pr::EventInfo {
+                name: ::core::convert::From::from(#name),
+                direction: #dir,
+                mode: #mode,
+                target: #target,
+                has_reset: #hr,
+                has_cost: #hc,
+            })
+        });
+        let obs = strs(&k.observables);
+        let nsw = usize_lit(k.switches.len());
+        let (hrc, hfc, hh) = (
+            k.running_cost.is_some(),
+            k.final_cost.is_some(),
+            k.horizon.is_some(),
+        );
+        let sparsity = k.modes.iter().map(|m| {
+            let e = m.sparsity.iter().map(|&(r, c)| {
+                let (r, c) = (usize_lit(r), usize_lit(c));
+                quote!((#r, #c))
+            });
+            quote!(::core::convert::From::from([#(#e),*]))
+        });
+        quote!(#pr::ModelInfo {
+            name: ::core::convert::From::from(#name),
+            states: #states,
+            params: #params,
+            param_defaults: ::core::convert::From::from([#(#defaults),*]),
+            modes: #modes,
+            initial_mode: #init,
+            events: ::core::convert::From::from([#(#events),*]),
+            observables: #obs,
+            switches: #nsw,
+            has_running_cost: #hrc,
+            has_final_cost: #hfc,
+            has_horizon: #hh,
+            jacobian_sparsity: ::core::convert::From::from([#(#sparsity),*]),
+        })
+    }
+
+    /// The `HybridModel` methods and the `ModelSens` override.
+    pub(super) fn methods(&self, k: &ModelKernels) -> (TokenStream, TokenStream) {
+        let pr = quote!(::mvad::__private);
+        let n = k.nstates();
+        let p = k.nparams();
+        let nm = k.modes.len();
+        let xv = quote!(#pr::OVector<f64, Self::N>);
+        let pv = quote!(#pr::OVector<f64, Self::P>);
+        let mnn = quote!(#pr::OMatrix<f64, Self::N, Self::N>);
+        let mnp = quote!(#pr::OMatrix<f64, Self::N, Self::P>);
+        let sw_t = quote!(#pr::Switches);
+        let vecd = |buf: TokenStream| {
+            move |s: usize| {
+                let i = usize_lit(s);
+                quote!(#buf[#i])
+            }
+        };
+        let matd = |buf: TokenStream, cols: usize, off: usize| {
+            move |s: usize| {
+                let (r, c) = (
+                    usize_lit((s - off) / cols.max(1)),
+                    usize_lit((s - off) % cols.max(1)),
+                );
+                quote!(#buf[(#r, #c)])
+            }
+        };
+        let nan_fill = |buf: TokenStream| quote!(#buf.fill(f64::NAN););
+
+        // Initial state and horizon.
+        let x0 = self.fill_body(&k.x0, quote!(x0), vecd(quote!(x0)));
+        let x0j = self.fill_body(&k.x0_jac, quote!(dx0), matd(quote!(dx0), p, 0));
+        let (hz, hzg) = match &k.horizon {
+            Some((h, hg)) => {
+                let v = self.scalar(h);
+                (
+                    quote!(::core::option::Option::Some(#v)),
+                    self.fill_body(hg, quote!(dt), vecd(quote!(dt))),
+                )
+            }
+            None => (quote!(::core::option::Option::None), quote!(dt.fill(0.0);)),
+        };
+
+        // Flow.
+        let per_mode = |f: &dyn Fn(usize) -> TokenStream, buf: TokenStream| {
+            let arms: Vec<(usize, TokenStream)> = (0..nm).map(|m| (m, f(m))).collect();
+            self.dispatch(quote!(mode), arms, nan_fill(buf), nm)
+        };
+        let rhs = per_mode(
+            &|m| self.fill_body(&k.modes[m].rhs, quote!(f), vecd(quote!(f))),
+            quote!(f),
+        );
+        let jx = per_mode(
+            &|m| self.fill_body(&k.modes[m].jac_x, quote!(fx), matd(quote!(fx), n, 0)),
+            quote!(fx),
+        );
+        let jp = per_mode(
+            &|m| self.fill_body(&k.modes[m].jac_p, quote!(fp), matd(quote!(fp), p, 0)),
+            quote!(fp),
+        );
+        let any_t = k.modes.iter().any(|m| m.depends_on_t);
+        let dt = if any_t {
+            per_mode(
+                &|m| self.fill_body(&k.modes[m].dt, quote!(ft), vecd(quote!(ft))),
+                quote!(ft),
+            )
+        } else {
+            quote!(ft.fill(0.0);)
+        };
+        let dep_t: Vec<Literal> = k
+            .modes
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.depends_on_t)
+            .map(|(i, _)| usize_lit(i))
+            .collect();
+        let dep_t = if dep_t.is_empty() {
+            quote!(false)
+        } else {
+            quote!(matches!(mode, #(#dep_t)|*))
+        };
+        let sens = per_mode(&|m| self.sens_body(k, m), quote!(f));
+
+        // Events.
+        let ne = k.events.len();
+        let ev_arms = |f: &dyn Fn(usize) -> Option<TokenStream>| -> Vec<(usize, TokenStream)> {
+            (0..ne).filter_map(|e| f(e).map(|b| (e, b))).collect()
+        };
+        let guard = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| Some(self.scalar(&k.events[e].guard.value))),
+            quote!(f64::NAN),
+            ne,
+        );
+        let guard_grad = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| Some(self.grad_body(&k.events[e].guard, n, p, quote!(gx), quote!(gp)))),
+            quote!(gx.fill(f64::NAN); gp.fill(f64::NAN); f64::NAN),
+            ne,
+        );
+        let reset = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| {
+                Some(self.fill_body(&k.events[e].reset, quote!(xplus), vecd(quote!(xplus))))
+            }),
+            nan_fill(quote!(xplus)),
+            ne,
+        );
+        let reset_jac = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| Some(self.reset_jac_body(&k.events[e].reset_jac, n, p))),
+            quote!(rx.fill(f64::NAN); rp.fill(f64::NAN); rt.fill(f64::NAN);),
+            ne,
+        );
+        let ecost = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| k.events[e].cost.as_ref().map(|c| self.scalar(&c.value))),
+            quote!(0.0),
+            ne,
+        );
+        let ecost_grad = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| {
+                k.events[e]
+                    .cost
+                    .as_ref()
+                    .map(|c| self.grad_body(c, n, p, quote!(cx), quote!(cp)))
+            }),
+            quote!(cx.fill(0.0); cp.fill(0.0); 0.0),
+            ne,
+        );
+
+        // Switching functions.
+        let ns = k.switches.len();
+        let sw_arms = |f: &dyn Fn(&GradKernels) -> TokenStream| -> Vec<(usize, TokenStream)> {
+            k.switches
+                .iter()
+                .enumerate()
+                .map(|(j, g)| (j, f(g)))
+                .collect()
+        };
+        let swv = self.dispatch(
+            quote!(j),
+            sw_arms(&|g| self.scalar(&g.value)),
+            quote!(f64::NAN),
+            ns,
+        );
+        let swg = self.dispatch(
+            quote!(j),
+            sw_arms(&|g| self.grad_body(g, n, p, quote!(gx), quote!(gp))),
+            quote!(gx.fill(f64::NAN); gp.fill(f64::NAN); f64::NAN),
+            ns,
+        );
+
+        // Observables.
+        let nobs = k.observables.len();
+        let nobs_l = usize_lit(nobs);
+        let (obs, obs_jac) = if nobs == 0 {
+            (quote!(), quote!())
+        } else {
+            let Body { lets, outputs, .. } = self.body(&k.observe);
+            let mut written = vec![false; nobs];
+            let mut stores = TokenStream::new();
+            for (s, v) in outputs {
+                written[s] = true;
+                let i = usize_lit(s);
+                stores.extend(quote!(y[#i] = #v;));
+            }
+            for (s, w) in written.iter().enumerate() {
+                if !w {
+                    let i = usize_lit(s);
+                    stores.extend(quote!(y[#i] = 0.0;));
+                }
+            }
+            let obs = quote!(if y.len() < #nobs_l { return; } #lets #stores);
+            let Body { lets, outputs, .. } = self.body(&k.observe_jac);
+            let mut stores = TokenStream::new();
+            for (s, v) in outputs {
+                let (buf, i) = if s < nobs * n {
+                    (quote!(yx), s)
+                } else {
+                    (quote!(yp), s - nobs * n)
+                };
+                let i = usize_lit(i);
+                stores.extend(quote!(#buf[#i] = #v;));
+            }
+            let (lx, lp) = (usize_lit(nobs * n), usize_lit(nobs * p));
+            let jac = quote!(
+                if yx.len() < #lx || yp.len() < #lp { return; }
+                yx[..#lx].fill(0.0); yp[..#lp].fill(0.0);
+                #lets #stores
+            );
+            (obs, jac)
+        };
+
+        // Cost.
+        let (rc, rcg) = match &k.running_cost {
+            Some(c) => (
+                self.scalar(&c.value),
+                self.grad_body(c, n, p, quote!(lx), quote!(lp)),
+            ),
+            None => (quote!(0.0), quote!(lx.fill(0.0); lp.fill(0.0); 0.0)),
+        };
+        let (fc, fcg) = match &k.final_cost {
+            Some(c) => (
+                self.scalar(&c.value),
+                self.grad_body(c, n, p, quote!(cx), quote!(cp)),
+            ),
+            None => (quote!(0.0), quote!(cx.fill(0.0); cp.fill(0.0); 0.0)),
+        };
+
+        let sens_methods = quote! {
+            #[inline]
+            fn rhs_sens(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, f: &mut #xv, ds: &mut #mnp) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #sens }
+        };
+        let core = quote! {
+            fn info(&self) -> &#pr::ModelInfo { &self.info }
+            fn nstates(&self) -> Self::N { #pr::Const }
+            fn nparams(&self) -> Self::P { #pr::Const }
+            fn initial_state(&self, p: &#pv, x0: &mut #xv) { #x0 }
+            fn initial_state_jac(&self, p: &#pv, dx0: &mut #mnp) { #x0j }
+            fn horizon(&self, p: &#pv) -> ::core::option::Option<f64> { #hz }
+            fn horizon_grad(&self, p: &#pv, dt: &mut #pv) { #hzg }
+            #[inline]
+            fn rhs(&self, pt: #pr::Point<'_, Self::N, Self::P>, f: &mut #xv) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
+            fn rhs_jac_x(&self, pt: #pr::Point<'_, Self::N, Self::P>, fx: &mut #mnn) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #jx }
+            fn rhs_jac_p(&self, pt: #pr::Point<'_, Self::N, Self::P>, fp: &mut #mnp) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #jp }
+            fn rhs_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, ft: &mut #xv) {
+        let #pr::Point { mode, sw, t, x, p } = pt; #dt }
+            fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
+            fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
+            fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
+            fn reset(&self, event: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #reset }
+            fn reset_jac(&self, event: usize, t: f64, x: &#xv, p: &#pv, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #reset_jac }
+            fn switch_value(&self, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #swv }
+            fn switch_grad(&self, j: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #swg }
+            fn observe(&self, t: f64, x: &#xv, p: &#pv, y: &mut [f64]) { #obs }
+            fn observe_jac(&self, t: f64, x: &#xv, p: &#pv, yx: &mut [f64], yp: &mut [f64]) { #obs_jac }
+            fn running_cost(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv) -> f64 { #rc }
+            fn running_cost_value_grad(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, lx: &mut #xv, lp: &mut #pv) -> f64 { #rcg }
+            fn event_cost(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #ecost }
+            fn event_cost_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #ecost_grad }
+            fn final_cost(&self, t: f64, x: &#xv, p: &#pv) -> f64 { #fc }
+            fn final_cost_grad(&self, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #fcg }
+        };
+        (core, sens_methods)
+    }
+
+    /// ∂R/∂x, ∂R/∂θ, ∂R/∂t from one kernel, each block zero-filled unless dense.
+    fn reset_jac_body(&self, kernel: &Kernel, n: usize, p: usize) -> TokenStream {
+        let Body { lets, outputs, .. } = self.body(kernel);
+        let mut counts = [0usize; 3];
+        let mut stores = TokenStream::new();
+        for (s, v) in outputs {
+            let (blk, buf, cols, off) = if s < n * n {
+                (0, quote!(rx), n, 0)
+            } else if s < n * n + n * p {
+                (1, quote!(rp), p, n * n)
+            } else {
+                (2, quote!(rt), 1, n * n + n * p)
+            };
+            counts[blk] += 1;
+            let (r, c) = ((s - off) / cols.max(1), (s - off) % cols.max(1));
+            let d = if blk == 2 {
+                let r = usize_lit(r);
+                quote!(#buf[#r])
+            } else {
+                let (r, c) = (usize_lit(r), usize_lit(c));
+                quote!(#buf[(#r, #c)])
+            };
+            stores.extend(quote!(#d = #v;));
+        }
+        let mut fills = TokenStream::new();
+        for (i, (buf, size)) in [(quote!(rx), n * n), (quote!(rp), n * p), (quote!(rt), n)]
+            .into_iter()
+            .enumerate()
+        {
+            if counts[i] < size {
+                fills.extend(quote!(#buf.fill(0.0);));
+            }
+        }
+        quote!(#fills #lets #stores)
+    }
+
+    /// f and Ṡ = f_x S + f_θ for mode `m`, unrolled over the non-zero f_x entries.
+    fn sens_body(&self, k: &ModelKernels, m: usize) -> TokenStream {
+        let n = k.nstates();
+        let p = k.nparams();
+        let mk = &k.modes[m];
+        let nnz = mk.sparsity.len();
+        let Body {
+            lets,
+            outputs,
+            is_if,
+        } = self.body(&mk.sens);
+        let mut stores = TokenStream::new();
+        // Per non-zero f_x entry: a constant, or the name it is bound to.
+        let mut fxv: Vec<Option<FxVal>> = vec![None; nnz];
+        let mut fpv: Vec<Option<TokenStream>> = vec![None; n * p];
+        let mut fwritten = vec![false; n];
+        for (((s, v), &(_, e)), wrap) in outputs.into_iter().zip(&mk.sens.outputs).zip(is_if) {
+            if s < n {
+                let i = usize_lit(s);
+                stores.extend(quote!(f[#i] = #v;));
+                fwritten[s] = true;
+            } else if s < n + nnz {
+                fxv[s - n] = Some(match self.ar.as_const(e) {
+                    Some(c) => FxVal::Const(c),
+                    None => {
+                        let id = format_ident!("fx{}", s - n);
+                        stores.extend(quote!(let #id: f64 = #v;));
+                        FxVal::Named(id)
+                    }
+                });
+            } else {
+                // Each f_θ entry is used once: inlined (an `if` in parentheses).
+                fpv[s - n - nnz] = Some(if wrap { quote!((#v)) } else { v });
+            }
+        }
+        for (i, w) in fwritten.iter().enumerate() {
+            if !w {
+                let i = usize_lit(i);
+                stores.extend(quote!(f[#i] = 0.0;));
+            }
+        }
+        for r in 0..n {
+            let row: Vec<(usize, &FxVal)> = mk
+                .sparsity
+                .iter()
+                .enumerate()
+                .filter(|(_, &(rr, _))| rr == r)
+                .filter_map(|(e, &(_, c))| fxv[e].as_ref().map(|v| (c, v)))
+                .collect();
+            for c in 0..p {
+                // ds = f_θ + Σ f_x·S, summed left to right as the tape does.
+                let mut sum = fpv[r * p + c].clone();
+                let cl = usize_lit(c);
+                for (kk, v) in &row {
+                    let kl = usize_lit(*kk);
+                    let s_kc = quote!(s[(#kl, #cl)]);
+                    let (neg, term) = match v {
+                        FxVal::Const(a) if *a == 1.0 => (false, s_kc),
+                        FxVal::Const(a) if *a == -1.0 => (true, s_kc),
+                        FxVal::Const(a) => {
+                            let a = lit(*a);
+                            (false, quote!((#a) * #s_kc))
+                        }
+                        FxVal::Named(id) => (false, quote!(#id * #s_kc)),
+                    };
+                    sum = Some(match (sum, neg) {
+                        (None, false) => term,
+                        (None, true) => quote!(-#term),
+                        (Some(acc), false) => quote!(#acc + #term),
+                        (Some(acc), true) => quote!(#acc - #term),
+                    });
+                }
+                let rl = usize_lit(r);
+                let rhs = sum.unwrap_or_else(|| quote!(0.0));
+                stores.extend(quote!(ds[(#rl, #cl)] = #rhs;));
+            }
+        }
+        quote!(#lets #stores)
+    }
+}
+
+/// A non-zero ∂f/∂x entry in the fused sensitivity code.
+#[derive(Clone)]
+enum FxVal {
+    Const(f64),
+    Named(Ident),
+}
