@@ -16,6 +16,12 @@
 //! | if L >(=) R then A else B | L − R | A | B |
 //! | if L <(=) R then A else B | L − R | B | A |
 //!
+//! A qp's objective and constraints become its data H, c, A, b (`lower/qp.rs`, which also
+//! checks symbolically that the objective is quadratic and strictly convex and the
+//! constraints affine); `NAME.VAR` becomes the leaf [`Node::QpSol`]. Static cost terms are
+//! added to the final cost Φ. A model without states (but with qps) gets one mode `main`
+//! with an empty flow.
+//!
 //! Everywhere else (guards, resets, observables, x₀, horizon, event and final costs) the
 //! same functions are lowered pointwise ([`Node::Select`] and
 //! `abs`/`sign` calls), with the derivative of the side actually taken. A kink whose σ
@@ -37,8 +43,10 @@ pub const MAX_SWITCHES: usize = u32::MAX as usize;
 
 /// Lowers a checked model to a [`Program`].
 ///
-/// The one user error found here is a model with more than [`MAX_SWITCHES`] kinks (known
-/// only once the switching functions are deduplicated). Everything else lowering relies on
+/// The user errors found here are a model with more than [`MAX_SWITCHES`] kinks (known
+/// only once the switching functions are deduplicated) and qps whose objective is not
+/// quadratic and strictly convex or whose constraints are not affine (decided on the
+/// lowered expressions). Everything else lowering relies on
 /// (names resolve, modes and events exist, guards and `if` conditions are comparisons,
 /// constant expressions are constant, depths are bounded) is [`crate::check`]'s job; a model
 /// that breaks it anyway yields `internal error: ...` diagnostics, never a panic.
@@ -66,6 +74,8 @@ enum Sym<'a> {
     Param(usize),
     Const(f64),
     Observable(&'a ast::Expr),
+    /// A qp, by index into `Lowerer::qp_vars`.
+    Qp(usize),
 }
 
 struct Lowerer<'a> {
@@ -81,6 +91,12 @@ struct Lowerer<'a> {
     consts_only: bool,
     depth: usize,
     diags: Vec<Diagnostic>,
+    /// Per qp: the [`Node::QpSol`] index of its first variable and its variables' names.
+    qp_vars: Vec<(usize, Vec<&'a str>)>,
+    /// The qp whose data are being lowered (its variables are in scope).
+    qp_scope: Option<usize>,
+    /// Per qp variable: whether its solution can depend on (x, t).
+    qp_deps: Vec<(bool, bool)>,
 }
 
 impl<'a> Lowerer<'a> {
@@ -95,6 +111,13 @@ impl<'a> Lowerer<'a> {
         for (i, s) in model.states().enumerate() {
             names.insert(s.name.name.as_str(), Sym::State(i));
         }
+        let mut qp_vars = Vec::new();
+        let mut offset = 0;
+        for (i, q) in model.qps().enumerate() {
+            names.insert(q.name.name.as_str(), Sym::Qp(i));
+            qp_vars.push((offset, q.vars.iter().map(|v| v.name.as_str()).collect()));
+            offset += q.vars.len();
+        }
         Lowerer {
             ar: ExprArena::new(),
             names,
@@ -105,11 +128,18 @@ impl<'a> Lowerer<'a> {
             consts_only: false,
             depth: 0,
             diags: Vec::new(),
+            qp_vars,
+            qp_scope: None,
+            qp_deps: Vec::new(),
         }
     }
 
     fn error(&mut self, span: Span, msg: impl Into<String>) {
         self.diags.push(Diagnostic::new(span, msg));
+    }
+
+    fn error_with_help(&mut self, span: Span, msg: impl Into<String>, help: impl Into<String>) {
+        self.diags.push(Diagnostic::new(span, msg).with_help(help));
     }
 
     /// A broken invariant that [`crate::check`] establishes: a bug if it is ever reported.
@@ -163,6 +193,14 @@ impl<'a> Lowerer<'a> {
             })
             .collect();
 
+        let qps: Vec<crate::ir::Qp> = model
+            .qps()
+            .enumerate()
+            .map(|(i, q)| self.qp(q, i))
+            .collect();
+        let deps = std::mem::take(&mut self.qp_deps);
+        self.ar.set_qp_deps(deps);
+
         // Modes.
         let mut modes = Vec::new();
         let mut mode_index: HashMap<&str, usize> = HashMap::new();
@@ -182,7 +220,13 @@ impl<'a> Lowerer<'a> {
                 flow: f,
             });
         }
-        if modes.is_empty() {
+        if modes.is_empty() && n == 0 && !qps.is_empty() {
+            // A stateless model: one mode with an empty flow, so the runtime sees a model.
+            modes.push(Mode {
+                name: "main".into(),
+                flow: Vec::new(),
+            });
+        } else if modes.is_empty() {
             self.internal(
                 model.name.span,
                 format!("model `{}` has no `flow` and no `mode`", model.name.name),
@@ -277,7 +321,9 @@ impl<'a> Lowerer<'a> {
             for term in &cost.terms {
                 let (target, e) = match &term.kind {
                     CostKind::Integral(e) => (&mut running, self.expr(e, Ctx::Frozen)),
-                    CostKind::Final(e) => (&mut fin, self.expr(e, Ctx::Pointwise)),
+                    CostKind::Final(e) | CostKind::Static(e) => {
+                        (&mut fin, self.expr(e, Ctx::Pointwise))
+                    }
                     CostKind::Sum { event, value } => {
                         let v = self.expr(value, Ctx::Pointwise);
                         match event_index.get(event.name.as_str()) {
@@ -325,6 +371,7 @@ impl<'a> Lowerer<'a> {
             final_cost: fin,
             horizon,
             switches: std::mem::take(&mut self.switches),
+            qps,
         }
     }
 
@@ -391,6 +438,7 @@ impl<'a> Lowerer<'a> {
                 self.ar.time()
             }
             ExprKind::Name(id) => self.name(id, ctx),
+            ExprKind::Column { table, column } => self.qp_solution(table, column),
             ExprKind::Neg(a) => {
                 let a = self.expr(a, ctx);
                 self.ar.neg(a)
@@ -440,6 +488,9 @@ impl<'a> Lowerer<'a> {
     }
 
     fn name(&mut self, id: &'a ast::Ident, ctx: Ctx) -> ExprId {
+        if let Some(k) = self.qp_variable(&id.name) {
+            return self.ar.intern(Node::QpSol(k as u32));
+        }
         let sym = self.names.get(id.name.as_str()).copied();
         match sym {
             Some(Sym::Const(v)) => self.ar.constant(v),
@@ -462,6 +513,10 @@ impl<'a> Lowerer<'a> {
                 let r = self.expr(e, ctx);
                 self.inlining.pop();
                 r
+            }
+            Some(Sym::Qp(_)) => {
+                self.internal(id.span, format!("qp `{}` used as a value", id.name));
+                self.ar.constant(f64::NAN)
             }
             None => {
                 self.internal(id.span, format!("undefined name `{}`", id.name));
@@ -563,6 +618,8 @@ impl<'a> Lowerer<'a> {
         self.ar.switch(j, pos, neg)
     }
 }
+
+mod qp;
 
 #[cfg(test)]
 mod tests {

@@ -9,7 +9,7 @@
 //! the same kernels.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, Node, Program};
+use crate::ir::{Direction, ExprArena, ExprId, Node, Program, QpKind, Wrt};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -121,6 +121,27 @@ pub struct EventMeta {
     pub has_cost: bool,
 }
 
+/// The kernels of one qp: its data and their derivatives, which the back ends hand to the
+/// runtime's qp solver.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QpKernels {
+    /// The qp's name.
+    pub name: String,
+    /// Its variables' names.
+    pub vars: Vec<String>,
+    /// Each constraint's kind.
+    pub kinds: Vec<QpKind>,
+    /// The [`Node::QpSol`] index of its first variable.
+    pub offset: usize,
+    /// Whether the data read states or t.
+    pub dynamic: bool,
+    /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
+    pub data: Kernel,
+    /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
+    /// ([`Wrt::column`]).
+    pub data_jac: Kernel,
+}
+
 /// Everything the back ends need: the arena, names and one kernel per model function.
 #[derive(Clone, Debug)]
 pub struct ModelKernels {
@@ -160,8 +181,10 @@ pub struct ModelKernels {
     pub observe_jac: Kernel,
     /// ℓ and (ℓ_x, ℓ_θ, ℓ), if the cost has `integral` terms.
     pub running_cost: Option<GradKernels>,
-    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` terms.
+    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` or static terms.
     pub final_cost: Option<GradKernels>,
+    /// Per qp, in declaration order.
+    pub qps: Vec<QpKernels>,
 }
 
 impl ModelKernels {
@@ -196,7 +219,15 @@ impl ModelKernels {
         for c in [&self.running_cost, &self.final_cost].into_iter().flatten() {
             v.extend([&c.value, &c.grad]);
         }
+        for q in &self.qps {
+            v.extend([&q.data, &q.data_jac]);
+        }
         v
+    }
+
+    /// Number of qp solution variables (all qps).
+    pub fn nqp_vars(&self) -> usize {
+        self.qps.iter().map(|q| q.vars.len()).sum()
     }
 }
 
@@ -285,7 +316,10 @@ pub fn kernels(program: &Program) -> ModelKernels {
             let depends_on_t = m
                 .flow
                 .iter()
-                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)));
+                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)))
+                || ft
+                    .iter()
+                    .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::QpDeriv(_, Wrt::Time))));
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
@@ -332,6 +366,34 @@ pub fn kernels(program: &Program) -> ModelKernels {
         .final_cost
         .map(|c| grad_kernels(&mut ar, c, n, p, false));
 
+    let qps = program
+        .qps
+        .iter()
+        .map(|q| {
+            let data = q.data();
+            let jac = jacobian(&mut ar, &data, Var::State, n);
+            let dp = jacobian(&mut ar, &data, Var::Param, p);
+            let dt = jacobian(&mut ar, &data, |_| Var::Time, 1);
+            // Interleave to slot d·(n + p + 1) + w.
+            let w = n + p + 1;
+            let mut dj = Vec::with_capacity(data.len() * w);
+            for d in 0..data.len() {
+                dj.extend_from_slice(&jac[d * n..(d + 1) * n]);
+                dj.extend_from_slice(&dp[d * p..(d + 1) * p]);
+                dj.push(dt[d]);
+            }
+            QpKernels {
+                name: q.name.clone(),
+                vars: q.vars.clone(),
+                kinds: q.kinds.clone(),
+                offset: q.offset,
+                dynamic: q.dynamic,
+                data: Kernel::new(&ar, &data),
+                data_jac: Kernel::new(&ar, &dj),
+            }
+        })
+        .collect();
+
     ModelKernels {
         name: program.name.clone(),
         states: program.states.clone(),
@@ -362,6 +424,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
         observe_jac: Kernel::new(&ar, &oj),
         running_cost,
         final_cost,
+        qps,
         arena: ar,
     }
 }

@@ -27,6 +27,7 @@
 //!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
 //! - Gradient methods *overwrite* every entry of their outputs (zeros included).
 
+use crate::qp::{QpError, QpLayerInfo, QpState, Side};
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Bound alias for the allocators a model's dimensions need (one line in every where-clause).
@@ -454,6 +455,36 @@ where
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
+
+    // ---- optimisation layers (qp) ------------------------------------------------------
+    //
+    // A model's qps are solved inside its evaluation methods (see `crate::qp::QpBank`); the
+    // runtime only reports on them. A model without qps keeps these defaults.
+
+    /// The model's qp layers, in declaration order.
+    fn qps(&self) -> &[QpLayerInfo] {
+        &[]
+    }
+    /// Every qp solved at (t, x, θ): solutions, multipliers and constraint statuses, for
+    /// reports (it may allocate); the first failure as (qp index, error).
+    fn qp_states(
+        &self,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> Result<Vec<QpState>, (usize, QpError)> {
+        let _ = (t, x, p);
+        Ok(Vec::new())
+    }
+    /// Chooses the one-sided derivative the qps give at a kink from now on (right by
+    /// default).
+    fn set_qp_side(&self, side: Side) {
+        let _ = side;
+    }
+    /// The qp failure behind the non-finite values of the last evaluation, if any.
+    fn qp_failure(&self) -> Option<(usize, QpError)> {
+        None
+    }
 }
 
 /// Capability: the forward-sensitivity right-hand side.

@@ -7,13 +7,18 @@
 //! kernel: f, the non-zero entries of f_x and f_θ in one pass, then
 //! Ṡ = f_θ + Σ_{(i,k) ∈ nz(f_x)} (f_x)_{ik} S_{k·}, the same sums in the same order as the
 //! generated code.
+//!
+//! A model with qps keeps a [`QpBank`]: a tape that reads qp solutions first has the bank
+//! evaluate them at its point (the data tapes fill each qp's data and Jacobian), then runs
+//! with the bank's u* and ∂u*/∂(x, θ, t) as inputs.
 
 use std::cell::RefCell;
 
 use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
-use mvad_dsl::ir::{self, Point};
+use mvad_dsl::ir::{self, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
+use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
 use mvad_runtime::{
     EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
     Switches,
@@ -69,6 +74,12 @@ pub struct InterpretedModel {
     running_cost: Option<GradTapes>,
     final_cost: Option<GradTapes>,
     scratch: RefCell<Scratch>,
+    /// Per qp: its data tape and their Jacobian's.
+    qp_tapes: Vec<(Tape, Tape)>,
+    qp_info: Vec<QpLayerInfo>,
+    qp_bank: RefCell<QpBank>,
+    /// Registers for the data tapes (run while `scratch` is borrowed).
+    qp_regs: RefCell<Vec<f64>>,
 }
 
 type X = DVector<f64>;
@@ -115,7 +126,37 @@ impl InterpretedModel {
         let all = k.all_kernels();
         let nregs = all.iter().map(|k| k.nodes.len()).max().unwrap_or(0);
         let nout = all.iter().map(|k| k.len).max().unwrap_or(0);
+        let qp_info: Vec<QpLayerInfo> = k
+            .qps
+            .iter()
+            .map(|q| QpLayerInfo {
+                name: q.name.clone(),
+                vars: q.vars.clone(),
+                kinds: q
+                    .kinds
+                    .iter()
+                    .map(|kind| match kind {
+                        ir::QpKind::Eq => ConstraintKind::Eq,
+                        ir::QpKind::Le => ConstraintKind::Le,
+                    })
+                    .collect(),
+                dynamic: q.dynamic,
+            })
+            .collect();
         InterpretedModel {
+            qp_tapes: k
+                .qps
+                .iter()
+                .map(|q| (tape(&q.data), tape(&q.data_jac)))
+                .collect(),
+            qp_bank: RefCell::new(QpBank::new(
+                qp_info.clone(),
+                k.nstates(),
+                k.nparams(),
+                QpOptions::default(),
+            )),
+            qp_info,
+            qp_regs: RefCell::new(vec![0.0; nregs]),
             n: k.nstates(),
             p: k.nparams(),
             x0: tape(&k.x0),
@@ -167,6 +208,51 @@ impl InterpretedModel {
         X::from_column_slice(&self.info.param_defaults)
     }
 
+    /// Has the qp bank solve every qp at the point of `at` (with derivatives if `derivs`).
+    fn evaluate_qps(&self, at: &At<'_>, derivs: bool) {
+        let mut regs = self.qp_regs.borrow_mut();
+        let Point { t, x, p, .. } = at.pt;
+        self.qp_bank
+            .borrow_mut()
+            .evaluate(t, x, p, derivs, |q, data, jac| {
+                let (dt, jt) = &self.qp_tapes[q];
+                dt.eval_with(&at.pt, at.hi, &mut regs, data);
+                if let Some(jac) = jac {
+                    jt.eval_with(&at.pt, at.hi, &mut regs, jac);
+                }
+            });
+    }
+
+    /// Runs `tape` into `regs`, first solving the qps it reads.
+    fn run(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64]) -> bool {
+        if !tape.reads_qp() {
+            return tape.run_with(&at.pt, at.hi, regs);
+        }
+        self.evaluate_qps(at, tape.reads_qp_derivs());
+        let bank = self.qp_bank.borrow();
+        let qp = QpValues {
+            u: bank.u(),
+            du: bank.du(),
+            n: self.n,
+            p: self.p,
+        };
+        tape.run_qp(&at.pt, at.hi, &qp, regs)
+    }
+
+    /// Runs `tape` and writes its dense output (zeros included) into `out`; NaN on failure.
+    fn eval(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64], out: &mut [f64]) {
+        let ok = self.run(tape, at, regs);
+        let fill = if ok { 0.0 } else { f64::NAN };
+        out.iter_mut().take(tape.len()).for_each(|o| *o = fill);
+        if ok {
+            for (s, r) in tape.outputs() {
+                if let Some(o) = out.get_mut(s) {
+                    *o = regs[r];
+                }
+            }
+        }
+    }
+
     /// Runs `tape` and hands the registers and the dense output buffer to `f`.
     fn with<R>(
         &self,
@@ -176,14 +262,14 @@ impl InterpretedModel {
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        let ok = tape.run_with(&at.pt, at.hi, regs);
+        let ok = self.run(tape, at, regs);
         f(ok, regs, out)
     }
 
     /// Writes a vector kernel into `v` (dense, zeros included).
     fn vec_out(&self, tape: &Tape, at: &At<'_>, v: &mut X) {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_with(&at.pt, at.hi, &mut sc.regs, v.as_mut_slice());
+        self.eval(tape, at, &mut sc.regs, v.as_mut_slice());
     }
 
     /// Writes a row-major matrix block of a kernel (slots `off..off + rows·cols`) into `m`.
@@ -212,7 +298,9 @@ impl InterpretedModel {
 
     fn scalar(&self, tape: &Tape, at: &At<'_>) -> f64 {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_scalar_with(&at.pt, at.hi, &mut sc.regs)
+        let mut out = [0.0];
+        self.eval(tape, at, &mut sc.regs, &mut out);
+        out[0]
     }
 
     /// Gradient kernel into `gx`, `gp`; returns the last slot.
@@ -220,7 +308,7 @@ impl InterpretedModel {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        g.grad.eval_with(&at.pt, at.hi, regs, out);
+        self.eval(&g.grad, at, regs, out);
         copy_into(gx.as_mut_slice(), &out[..n]);
         copy_into(gp.as_mut_slice(), &out[n..n + p]);
         out[n + p]
@@ -419,7 +507,7 @@ impl HybridModel for InterpretedModel {
         }
         let mut sc = self.scratch.borrow_mut();
         let at = pt0(t, x, p);
-        self.observe.eval_with(&at.pt, at.hi, &mut sc.regs, y);
+        self.eval(&self.observe, &at, &mut sc.regs, y);
     }
     fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
         let nobs = self.info.observables.len();
@@ -504,6 +592,20 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
+
+    fn qps(&self) -> &[QpLayerInfo] {
+        &self.qp_info
+    }
+    fn qp_states(&self, t: f64, x: &X, p: &X) -> Result<Vec<QpState>, (usize, QpError)> {
+        self.evaluate_qps(&pt0(t, x, p), false);
+        self.qp_bank.borrow().states()
+    }
+    fn set_qp_side(&self, side: Side) {
+        self.qp_bank.borrow_mut().set_side(side);
+    }
+    fn qp_failure(&self) -> Option<(usize, QpError)> {
+        self.qp_bank.borrow().failure().map(|(q, e)| (q, e.clone()))
+    }
 }
 
 impl ModelSens for InterpretedModel {
@@ -530,7 +632,7 @@ impl ModelSens for InterpretedModel {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
         let at = at_sw(t, x, p, sw);
-        m.sens.eval_with(&at.pt, at.hi, regs, out);
+        self.eval(&m.sens, &at, regs, out);
         copy_into(f.as_mut_slice(), &out[..n]);
         let fp = &out[n + nnz..n + nnz + n * np];
         for r in 0..n {

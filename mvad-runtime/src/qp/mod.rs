@@ -38,11 +38,13 @@
 //! (only an error's constraint list does).
 
 mod active_set;
+mod bank;
 mod derivative;
 mod error;
 mod factor;
 mod solver;
 
+pub use bank::{QpBank, QpLayerInfo, QpState};
 pub use error::QpError;
 pub use solver::QpSolver;
 

@@ -323,6 +323,8 @@ where
             opts.t_end = Some(t);
         }
         None => match model.horizon(&params) {
+            // A model without states has no time (its cost is static).
+            None if info.states.is_empty() => {}
             None => {
                 return Err(CliError::Input(format!(
                     "error: model `{}` declares no horizon; give one with --t-end T",
