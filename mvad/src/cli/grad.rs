@@ -3,6 +3,7 @@
 //! state and observable, and the atoms α_k = −J_k t_k'. `--json` prints the spec's object.
 
 use clap::Args;
+use mvad::qp::QpLayerInfo;
 use mvad::runtime::solution::Solution;
 use mvad::runtime::solve::solve;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
@@ -13,6 +14,7 @@ use super::output::{
     by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, more_events, num,
     param_header, stats_json, Table, MAX_EVENT_ROWS,
 };
+use super::qp_output::{add_qp_keys, qp_text};
 use super::{setup, solve_err, CliError, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
@@ -41,14 +43,27 @@ where
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let info = model.info();
     if args.common.json {
-        Ok(json_text(&grad_json(info, &sol, &s.wrt, &args.mode)))
+        Ok(json_text(&grad_json(
+            info,
+            model.qps(),
+            &sol,
+            &s.wrt,
+            &args.mode,
+        )))
     } else {
-        Ok(grad_text(info, file, &sol, &s.wrt))
+        Ok(grad_text(info, model.qps(), file, &sol, &s.wrt))
     }
 }
 
-/// The spec's JSON object for a solution, derivatives restricted to `wrt`.
-pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) -> Value {
+/// The spec's JSON object for a solution, derivatives restricted to `wrt` (with the qp keys
+/// when the model has qps).
+pub fn grad_json(
+    info: &ModelInfo,
+    qps: &[QpLayerInfo],
+    sol: &Solution,
+    wrt: &[usize],
+    mode: &str,
+) -> Value {
     let all: Vec<usize> = (0..info.params.len()).collect();
     let mut m = Map::new();
     m.insert("model".into(), Value::from(info.name.clone()));
@@ -68,11 +83,18 @@ pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) ->
     m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
     m.insert("stats".into(), stats_json(&sol.stats));
     m.insert("mode".into(), Value::from(mode));
+    add_qp_keys(&mut m, qps, &info.params, sol, wrt);
     Value::Object(m)
 }
 
 /// The readable form: cost, gradient table, event table, atom table, warnings, stats.
-pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) -> String {
+pub fn grad_text(
+    info: &ModelInfo,
+    qps: &[QpLayerInfo],
+    file: &str,
+    sol: &Solution,
+    wrt: &[usize],
+) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "model {} ({file}), T = {}\n",
@@ -81,15 +103,26 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
     ));
     s.push_str(&format!("cost C = {}\n\n", g(sol.cost, 15)));
 
-    let mut t = Table::new(&["param", "value", "dC/dθ"]);
+    let left = sol.gradient_left.as_deref();
+    let header: &[&str] = if left.is_some() {
+        &["param", "value", "dC/dθ (right)", "dC/dθ (left)"]
+    } else {
+        &["param", "value", "dC/dθ"]
+    };
+    let mut t = Table::new(header);
     for &k in wrt {
-        t.row(vec![
+        let mut row = vec![
             info.params[k].clone(),
             g(sol.params.get(k).copied().unwrap_or(f64::NAN), 10),
             g(sol.gradient.get(k).copied().unwrap_or(f64::NAN), 15),
-        ]);
+        ];
+        if let Some(l) = left {
+            row.push(g(l.get(k).copied().unwrap_or(f64::NAN), 15));
+        }
+        t.row(row);
     }
     s.push_str(&t.render());
+    s.push_str(&qp_text(qps, &sol.qp));
 
     s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
     if !sol.events.is_empty() {

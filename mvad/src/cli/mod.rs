@@ -23,6 +23,7 @@ pub mod measure;
 pub mod output;
 pub mod plot;
 pub mod progress;
+pub mod qp_output;
 pub mod simulate;
 #[cfg(test)]
 pub mod spec_keys;
