@@ -60,3 +60,123 @@ fn e3_sweep_compiled_and_loaded() {
         assert!(mean <= 1e-15, "mean error {mean}");
     }
 }
+
+/// J = u*(θ) itself: du/dθ at the kink θ = 0 is 0 from the left and 1 from the right.
+mod linear_cost {
+    mvad::hybrid! {
+        model QpLinear {
+            param theta = 0.0;
+            qp u_star(u) { minimize 0.5 * u^2 - theta * u; subject to u >= 0; }
+            cost = u_star.u;
+        }
+    }
+}
+
+const LINEAR: &str = "model QpLinear { param theta = 0.0;
+    qp u_star(u) { minimize 0.5 * u^2 - theta * u; subject to u >= 0; }
+    cost = u_star.u; }";
+
+fn one_sided_at_zero<M: HybridModel>(m: &M) -> (f64, Option<f64>)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let p = OVector::<f64, M::P>::zeros_generic(m.nparams(), nalgebra::Const::<1>);
+    let sol = solve(m, &p, &Options::default()).expect("solves");
+    assert!(sol.diagnostics.iter().any(|d| d.kind == DiagnosticKind::Kink
+        && d.message.contains("`u_star`")
+        && d.message.contains("constraint 0")));
+    (sol.gradient[0], sol.gradient_left.map(|g| g[0]))
+}
+
+#[test]
+fn e3_du_dtheta_at_the_kink_is_one_sided() {
+    let loaded = InterpretedModel::from_source(LINEAR).expect("loads");
+    assert_eq!(one_sided_at_zero(&linear_cost::QpLinear::new()), (1.0, Some(0.0)));
+    assert_eq!(one_sided_at_zero(&loaded), (1.0, Some(0.0)));
+}
+
+/// A qp of the state read pointwise: in a guard, a reset, an observable and the final cost.
+mod projected {
+    mvad::hybrid! {
+        model Projected {
+            param a = 1.2; param b = 0.3; param c = 0.8; param k = 0.5;
+            state x = 0.2; state y = 1.0;
+            flow { der(x) = y; der(y) = -a * x; }
+            qp q(u, v) {
+                minimize 0.5*(u - x)^2 + 0.5*(v - y)^2 + 0.1*u*v + k*t*u;
+                subject to u + v <= c; u >= -b;
+            }
+            event hit when q.u + x >= 0.9 { y = -0.5 * y + q.v; }
+            observe pu = q.u;
+            cost = final(q.u^2 + 3*q.v) + integral(x^2);
+            horizon 2;
+        }
+    }
+}
+
+const PROJECTED: &str = "model Projected {
+    param a = 1.2; param b = 0.3; param c = 0.8; param k = 0.5;
+    state x = 0.2; state y = 1.0;
+    flow { der(x) = y; der(y) = -a * x; }
+    qp q(u, v) {
+        minimize 0.5*(u - x)^2 + 0.5*(v - y)^2 + 0.1*u*v + k*t*u;
+        subject to u + v <= c; u >= -b;
+    }
+    event hit when q.u + x >= 0.9 { y = -0.5 * y + q.v; }
+    observe pu = q.u;
+    cost = final(q.u^2 + 3*q.v) + integral(x^2);
+    horizon 2;
+}";
+
+fn tight() -> Options {
+    Options {
+        rtol: 1e-12,
+        atol: 1e-14,
+        ..Options::default()
+    }
+}
+
+#[test]
+fn pointwise_qps_of_the_state_against_finite_differences() {
+    let compiled = projected::Projected::new();
+    let loaded = InterpretedModel::from_source(PROJECTED).expect("loads");
+    let pc = compiled.default_params();
+    let pl = loaded.default_params();
+    let sc = solve(&compiled, &pc, &tight()).expect("compiled solves");
+    let sl = solve(&loaded, &pl, &tight()).expect("loaded solves");
+    // The event fires, no qp is at a kink at T, and the doors agree.
+    assert_eq!(sc.events.len(), 1, "{:?}", sc.events);
+    assert!(sc.diagnostics.iter().all(|d| d.kind != DiagnosticKind::Kink));
+    assert!((sc.cost - sl.cost).abs() <= 1e-13 * sc.cost.abs());
+    for (a, b) in sc.gradient.iter().zip(&sl.gradient) {
+        assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} vs {b}");
+    }
+    assert_eq!(sc.qp[0].status, sl.qp[0].status);
+    // Central differences at three steps: the best agrees to 1e-7.
+    for i in 0..4 {
+        let best = [1e-4, 1e-5, 1e-6]
+            .iter()
+            .map(|&h| {
+                let fd = mvad::fd_gradient(&compiled, &pc, &tight(), i, h).expect("fd");
+                (fd - sc.gradient[i]).abs() / sc.gradient[i].abs().max(1.0)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(best <= 1e-7, "param {i}: {best:e}");
+    }
+}
+
+#[test]
+fn an_infeasible_qp_is_a_located_run_error() {
+    let src = "model Bad { param a = 1;
+        qp q(u) { minimize u^2; subject to u >= a; u <= 0; }
+        cost = q.u; }";
+    let m = InterpretedModel::from_source(src).expect("loads");
+    let e = solve(&m, &m.default_params(), &Options::default()).expect_err("infeasible");
+    assert_eq!(
+        e.to_string(),
+        "qp `q` at t = 0: qp is infeasible: constraint 1 cannot be satisfied"
+    );
+    // Feasible again at a ≤ 0.
+    let p = OVector::<f64, nalgebra::Dyn>::from_element(1, -0.5);
+    assert_eq!(solve(&m, &p, &Options::default()).expect("feasible").cost, 0.0);
+}

@@ -238,3 +238,6 @@ pub(super) fn qps_with_var<'a>(model: &'a Model, name: &str) -> Vec<&'a str> {
     out.retain(|q| seen.insert(*q));
     out
 }
+
+#[cfg(test)]
+mod tests;
