@@ -485,6 +485,11 @@ where
     fn qp_failure(&self) -> Option<(usize, QpError)> {
         None
     }
+    /// The first weakly active constraint of the last evaluation, as (qp, constraint): the
+    /// point is a kink of the qp's solution map. Allocates nothing.
+    fn qp_kink(&self) -> Option<(usize, usize)> {
+        None
+    }
 }
 
 /// Capability: the forward-sensitivity right-hand side.

@@ -82,16 +82,22 @@ where
 {
     let p = OVector::<f64, M::P>::zeros_generic(m.nparams(), nalgebra::Const::<1>);
     let sol = solve(m, &p, &Options::default()).expect("solves");
-    assert!(sol.diagnostics.iter().any(|d| d.kind == DiagnosticKind::Kink
-        && d.message.contains("`u_star`")
-        && d.message.contains("constraint 0")));
+    assert!(sol
+        .diagnostics
+        .iter()
+        .any(|d| d.kind == DiagnosticKind::Kink
+            && d.message.contains("`u_star`")
+            && d.message.contains("constraint 0")));
     (sol.gradient[0], sol.gradient_left.map(|g| g[0]))
 }
 
 #[test]
 fn e3_du_dtheta_at_the_kink_is_one_sided() {
     let loaded = InterpretedModel::from_source(LINEAR).expect("loads");
-    assert_eq!(one_sided_at_zero(&linear_cost::QpLinear::new()), (1.0, Some(0.0)));
+    assert_eq!(
+        one_sided_at_zero(&linear_cost::QpLinear::new()),
+        (1.0, Some(0.0))
+    );
     assert_eq!(one_sided_at_zero(&loaded), (1.0, Some(0.0)));
 }
 
@@ -146,7 +152,10 @@ fn pointwise_qps_of_the_state_against_finite_differences() {
     let sl = solve(&loaded, &pl, &tight()).expect("loaded solves");
     // The event fires, no qp is at a kink at T, and the doors agree.
     assert_eq!(sc.events.len(), 1, "{:?}", sc.events);
-    assert!(sc.diagnostics.iter().all(|d| d.kind != DiagnosticKind::Kink));
+    assert!(sc
+        .diagnostics
+        .iter()
+        .all(|d| d.kind != DiagnosticKind::Kink));
     assert!((sc.cost - sl.cost).abs() <= 1e-13 * sc.cost.abs());
     for (a, b) in sc.gradient.iter().zip(&sl.gradient) {
         assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} vs {b}");
@@ -178,5 +187,8 @@ fn an_infeasible_qp_is_a_located_run_error() {
     );
     // Feasible again at a ≤ 0.
     let p = OVector::<f64, nalgebra::Dyn>::from_element(1, -0.5);
-    assert_eq!(solve(&m, &p, &Options::default()).expect("feasible").cost, 0.0);
+    assert_eq!(
+        solve(&m, &p, &Options::default()).expect("feasible").cost,
+        0.0
+    );
 }

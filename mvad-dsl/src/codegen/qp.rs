@@ -141,6 +141,9 @@ impl Gen<'_> {
                 fn qp_failure(&self) -> ::core::option::Option<(usize, #pr::QpError)> {
                     self.qp.borrow().failure().map(|(q, e)| (q, ::core::clone::Clone::clone(e)))
                 }
+                fn qp_kink(&self) -> ::core::option::Option<(usize, usize)> {
+                    self.qp.borrow().kink()
+                }
             },
         }
     }

@@ -112,10 +112,11 @@ impl Dual {
         self.dot(i, &self.v) - self.beta[i]
     }
 
-    /// The scale a slack of constraint i is measured against: |βᵢ| + ‖wᵢ‖(‖v‖ + ‖v₀‖).
-    /// It is homogeneous in (v₀, β), so every test is invariant under scaling of the data.
-    pub fn slack_scale(&self, i: usize) -> f64 {
-        self.beta[i].abs() + self.wnorm[i] * self.force_scale()
+    /// The scale a slack of constraint i is measured against: |βᵢ| + ‖wᵢ‖·`force` with
+    /// `force` = [`Dual::force_scale`] = ‖v‖ + ‖v₀‖. It is homogeneous in (v₀, β), so every
+    /// test is invariant under scaling of the data.
+    pub fn slack_scale(&self, i: usize, force: f64) -> f64 {
+        self.beta[i].abs() + self.wnorm[i] * force
     }
 
     /// The scale of the forces λᵢwᵢ: ‖v‖ + ‖v₀‖ (they sum to v₀ − v).
@@ -188,6 +189,7 @@ impl Dual {
     /// (slack / ‖wᵢ‖), if any exceeds `feas` times its scale.
     fn most_violated(&self, feas: f64) -> Option<(usize, f64)> {
         let mut best: Option<(usize, f64)> = None;
+        let force = self.force_scale();
         for (i, role) in self.role.iter().enumerate() {
             if self.member[i] {
                 continue;
@@ -200,7 +202,7 @@ impl Dual {
                 }
                 Role::Le => {
                     let s = self.slack(i);
-                    if s > feas * self.slack_scale(i) {
+                    if s > feas * self.slack_scale(i, force) {
                         let key = if self.wnorm[i] > 0.0 {
                             s / self.wnorm[i]
                         } else {
@@ -261,13 +263,15 @@ impl Dual {
                 }
             }
             if t1.is_infinite() && t2.is_infinite() {
-                return Err(if viol <= tols.feas * self.slack_scale(p) {
-                    let mut constraints = self.idx.clone();
-                    constraints.push(p);
-                    QpError::Degenerate { constraints }
-                } else {
-                    QpError::Infeasible { constraint: p }
-                });
+                return Err(
+                    if viol <= tols.feas * self.slack_scale(p, self.force_scale()) {
+                        let mut constraints = self.idx.clone();
+                        constraints.push(p);
+                        QpError::Degenerate { constraints }
+                    } else {
+                        QpError::Infeasible { constraint: p }
+                    },
+                );
             }
             let step = t1.min(t2);
             if !dependent {

@@ -62,7 +62,9 @@ impl QpState {
 /// The point a cached result belongs to.
 #[derive(Clone, Debug)]
 struct Key {
+    /// Whether the solution at the point is cached.
     valid: bool,
+    /// Whether its derivatives are too.
     derivs: bool,
     side: Side,
     t: f64,
@@ -71,21 +73,12 @@ struct Key {
 }
 
 impl Key {
-    /// Whether (t, x, θ) with these flags is the cached point (t and x ignored when static).
-    fn matches(
-        &self,
-        dynamic: bool,
-        derivs: bool,
-        side: Side,
-        t: f64,
-        x: &[f64],
-        p: &[f64],
-    ) -> bool {
+    /// Whether (t, x, θ) on `side` is the cached point (t and x ignored when static).
+    fn matches(&self, dynamic: bool, side: Side, t: f64, x: &[f64], p: &[f64]) -> bool {
         let same = |a: &[f64], b: &[f64]| {
             a.len() == b.len() && a.iter().zip(b).all(|(u, v)| u.to_bits() == v.to_bits())
         };
         self.valid
-            && (self.derivs || !derivs)
             && self.side == side
             && same(&self.p, p)
             && (!dynamic || (self.t.to_bits() == t.to_bits() && same(&self.x, x)))
@@ -210,15 +203,23 @@ impl QpBank {
         let (side, nw) = (self.side, self.n + self.p + 1);
         let mut ok = true;
         for (q, layer) in self.layers.iter_mut().enumerate() {
-            if layer.key.matches(layer.info.dynamic, derivs, side, t, x, p) {
+            let dynamic = layer.info.dynamic;
+            let cached = layer.key.matches(dynamic, side, t, x, p);
+            if cached && (layer.key.derivs || !derivs) {
                 ok &= layer.failure.is_none();
                 continue;
             }
-            fill(q, &mut layer.flat, derivs.then_some(&mut layer.jac[..]));
             let rows = layer.info.vars.len();
             let u = &mut self.u[layer.offset..layer.offset + rows];
             let du = &mut self.du[layer.offset * nw..(layer.offset + rows) * nw];
-            match layer.solve(derivs, side, nw, du) {
+            // At a cached point only the derivatives are missing: no second solve.
+            let solve = !cached;
+            fill(q, &mut layer.flat, derivs.then_some(&mut layer.jac[..]));
+            let result = if solve { layer.solve() } else { Ok(()) }.and_then(|()| match derivs {
+                true => layer.differentiate(side, nw, du),
+                false => Ok(()),
+            });
+            match result {
                 Ok(()) => {
                     u.copy_from_slice(layer.solver.u().as_slice());
                     layer.failure = None;
@@ -240,6 +241,17 @@ impl QpBank {
         ok
     }
 
+    /// The first weakly active constraint at the last evaluation, as (qp, constraint): where
+    /// the solution map has a kink. Allocates nothing.
+    pub fn kink(&self) -> Option<(usize, usize)> {
+        self.layers.iter().enumerate().find_map(|(q, l)| {
+            if l.failure.is_some() || !l.solver.is_kink() {
+                return None;
+            }
+            l.solver.weakly_active().next().map(|i| (q, i))
+        })
+    }
+
     /// Every qp's state at the last evaluation (solution, multipliers, statuses), or the
     /// first failure.
     pub fn states(&self) -> Result<Vec<QpState>, (usize, QpError)> {
@@ -259,21 +271,16 @@ impl QpBank {
 }
 
 impl Layer {
-    /// Solves at the data in `flat` and, with `derivs`, writes ∂u*/∂w into column w of the
-    /// rows of `du` (n + p + 1 columns) for every column of `jac`.
-    fn solve(
-        &mut self,
-        derivs: bool,
-        side: Side,
-        nw: usize,
-        du: &mut [f64],
-    ) -> Result<(), QpError> {
+    /// Solves at the data in `flat`.
+    fn solve(&mut self) -> Result<(), QpError> {
         let flat = &self.flat;
         unflatten(&mut self.data, |d| flat[d]);
-        self.solver.solve(&self.data)?;
-        if !derivs {
-            return Ok(());
-        }
+        self.solver.solve(&self.data)
+    }
+
+    /// Writes ∂u*/∂w into column w of the rows of `du` (n + p + 1 columns) for every
+    /// column of `jac`, on `side`.
+    fn differentiate(&mut self, side: Side, nw: usize, du: &mut [f64]) -> Result<(), QpError> {
         let len = self.flat.len();
         for w in 0..nw {
             let jac = &self.jac;

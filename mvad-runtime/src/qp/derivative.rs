@@ -68,12 +68,13 @@ impl QpSolver {
         }
         let dual = &mut self.dual;
         self.hfac.lower_tr_solve_mut(&mut dual.v);
+        // (+ 0.0 turns the −0.0 of a negated zero into 0.0.)
         for (o, v) in du.iter_mut().zip(dual.v.iter()) {
-            *o = s * v;
+            *o = s * v + 0.0;
         }
         dmult.fill(0.0);
         for (a, &i) in dual.idx.iter().enumerate() {
-            dmult[i] = s * dual.sign[a] * dual.lam[a];
+            dmult[i] = s * dual.sign[a] * dual.lam[a] + 0.0;
         }
         Ok(())
     }

@@ -43,6 +43,15 @@ impl SpdFactor {
         mut entry: impl FnMut(usize, usize) -> f64,
     ) -> Result<(), usize> {
         self.valid = false;
+        if k == 0 {
+            // Nothing to factor: keep the buffer where it is.
+            self.diag.clear();
+            if let Some(ch) = self.chol.take() {
+                self.spare = ch.unpack_dirty().data.into();
+            }
+            self.valid = true;
+            return Ok(());
+        }
         let mut buf: Vec<f64> = match self.chol.take() {
             Some(ch) => ch.unpack_dirty().data.into(),
             None => std::mem::take(&mut self.spare),

@@ -131,12 +131,12 @@ impl QpSolver {
     pub(super) fn check_data(&self, d: &QpData) -> Result<(), QpError> {
         let (n, m) = (self.nvars(), self.nconstraints());
         let parts = [
-            ("H", (n, n), d.h.shape(), d.h.as_slice()),
-            ("c", (n, 1), d.c.shape(), d.c.as_slice()),
-            ("A", (m, n), d.a.shape(), d.a.as_slice()),
-            ("b", (m, 1), d.b.shape(), d.b.as_slice()),
+            ("H", (n, n), d.h.shape()),
+            ("c", (n, 1), d.c.shape()),
+            ("A", (m, n), d.a.shape()),
+            ("b", (m, 1), d.b.shape()),
         ];
-        for (what, expected, got, values) in parts {
+        for (what, expected, got) in parts {
             if expected != got {
                 return Err(QpError::Shape {
                     what,
@@ -144,6 +144,28 @@ impl QpSolver {
                     got,
                 });
             }
+        }
+        // One pass over all values: v·0 is 0 for a finite v and NaN otherwise, so the sum is
+        // 0 exactly when every value is finite; only then is the part at fault searched.
+        let total: f64 = [
+            d.h.as_slice(),
+            d.c.as_slice(),
+            d.a.as_slice(),
+            d.b.as_slice(),
+        ]
+        .iter()
+        .flat_map(|s| s.iter())
+        .map(|v| v * 0.0)
+        .sum();
+        if total == 0.0 {
+            return Ok(());
+        }
+        for (what, values) in [
+            ("H", d.h.as_slice()),
+            ("c", d.c.as_slice()),
+            ("A", d.a.as_slice()),
+            ("b", d.b.as_slice()),
+        ] {
             if values.iter().any(|v| !v.is_finite()) {
                 return Err(QpError::NonFinite { what });
             }
@@ -204,7 +226,7 @@ impl QpSolver {
         self.near.clear();
         self.kink = false;
         for i in 0..self.kinds.len() {
-            let slack_zero = dual.slack(i).abs() <= tol * dual.slack_scale(i);
+            let slack_zero = dual.slack(i).abs() <= tol * dual.slack_scale(i, force);
             let force_i = self.mult[i].abs() * dual.wnorm[i];
             self.status[i] = match self.kinds[i] {
                 ConstraintKind::Eq => ConstraintStatus::Active,

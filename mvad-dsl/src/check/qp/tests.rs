@@ -17,8 +17,10 @@ fn errors(src: &str) -> Vec<(usize, usize, String)> {
 
 #[track_caller]
 fn expect(src: &str, want: &[(usize, usize, &str)]) {
-    let want: Vec<(usize, usize, String)> =
-        want.iter().map(|&(l, c, m)| (l, c, m.to_string())).collect();
+    let want: Vec<(usize, usize, String)> = want
+        .iter()
+        .map(|&(l, c, m)| (l, c, m.to_string()))
+        .collect();
     assert_eq!(errors(src), want, "{src}");
 }
 

@@ -76,9 +76,7 @@ fn objectives_must_be_quadratic() {
         ("u^2 + (if u > 0 then u else 0)", "in `u`"),
     ];
     for (obj, var) in cases {
-        let src = format!(
-            "model M {{ param a = 1;\n qp q(u) {{ minimize {obj}; }} cost = q.u; }}"
-        );
+        let src = format!("model M {{ param a = 1;\n qp q(u) {{ minimize {obj}; }} cost = q.u; }}");
         let want = format!("the objective of qp `q` is not quadratic {var}");
         assert_eq!(errors(&src), [(2, 21, want)], "{obj}");
     }
@@ -118,7 +116,9 @@ fn objectives_must_be_strictly_convex_where_constants_decide() {
         [(2, 24, "the objective of qp `q` is not strictly convex in (`u`, `v`): its Hessian has a non-positive 2×2 minor".to_string())]
     );
     // A coefficient that depends on a param is the solver's to check at run time.
-    assert!(errors("model M { param a = -1;\n qp q(u) { minimize a*u^2; } cost = q.u; }").is_empty());
+    assert!(
+        errors("model M { param a = -1;\n qp q(u) { minimize a*u^2; } cost = q.u; }").is_empty()
+    );
 }
 
 #[test]
