@@ -568,6 +568,11 @@ pub struct Qp {
     pub b: Vec<ExprId>,
     /// Whether the data read states or t (solved along the trajectory) rather than only θ.
     pub dynamic: bool,
+    /// When a flow or ℓ reads the solution of this dynamic qp: the switch index of the
+    /// first of its bits, one per inequality constraint in order (after the kinks'
+    /// switching functions in [`Program::switches`]); bit set ⇔ the constraint is held
+    /// active.
+    pub switches: Option<usize>,
 }
 
 impl Qp {
@@ -626,4 +631,15 @@ impl Program {
     pub fn nparams(&self) -> usize {
         self.params.len()
     }
+    /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
+    pub fn nswitches(&self) -> usize {
+        self.switches.len() + qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
+    }
+}
+
+/// The number of qp switch bits: one per inequality constraint of each qp that has them.
+pub fn qp_switch_bits<'a>(qps: impl Iterator<Item = (Option<usize>, &'a Vec<QpKind>)>) -> usize {
+    qps.filter(|(s, _)| s.is_some())
+        .map(|(_, kinds)| kinds.iter().filter(|&&k| k == QpKind::Le).count())
+        .sum()
 }

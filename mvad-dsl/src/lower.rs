@@ -97,6 +97,8 @@ struct Lowerer<'a> {
     qp_scope: Option<usize>,
     /// Per qp variable: whether its solution can depend on (x, t).
     qp_deps: Vec<(bool, bool)>,
+    /// Per qp: whether a flow or the running cost reads its solution.
+    qp_in_flow: Vec<bool>,
 }
 
 impl<'a> Lowerer<'a> {
@@ -131,6 +133,7 @@ impl<'a> Lowerer<'a> {
             qp_vars,
             qp_scope: None,
             qp_deps: Vec::new(),
+            qp_in_flow: vec![false; model.qps().count()],
         }
     }
 
@@ -193,7 +196,7 @@ impl<'a> Lowerer<'a> {
             })
             .collect();
 
-        let qps: Vec<crate::ir::Qp> = model
+        let mut qps: Vec<crate::ir::Qp> = model
             .qps()
             .enumerate()
             .map(|(i, q)| self.qp(q, i))
@@ -350,6 +353,8 @@ impl<'a> Lowerer<'a> {
             ev.cost = *c;
         }
 
+        self.assign_qp_switches(&mut qps);
+
         let horizon = model.horizon().map(|h| {
             let id = self.expr(&h.value, Ctx::Pointwise);
             self.no_state_or_time(id, h.value.span, "the horizon");
@@ -438,7 +443,7 @@ impl<'a> Lowerer<'a> {
                 self.ar.time()
             }
             ExprKind::Name(id) => self.name(id, ctx),
-            ExprKind::Column { table, column } => self.qp_solution(table, column),
+            ExprKind::Column { table, column } => self.qp_solution(table, column, ctx),
             ExprKind::Neg(a) => {
                 let a = self.expr(a, ctx);
                 self.ar.neg(a)

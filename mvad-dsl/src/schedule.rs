@@ -135,6 +135,8 @@ pub struct QpKernels {
     pub offset: usize,
     /// Whether the data read states or t.
     pub dynamic: bool,
+    /// The switch index of its first switch bit, if a flow reads it ([`crate::ir::Qp::switches`]).
+    pub switches: Option<usize>,
     /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
     pub data: Kernel,
     /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
@@ -223,6 +225,12 @@ impl ModelKernels {
             v.extend([&q.data, &q.data_jac]);
         }
         v
+    }
+
+    /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
+    pub fn nswitches(&self) -> usize {
+        self.switches.len()
+            + crate::ir::qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
     }
 
     /// Number of qp solution variables (all qps).
@@ -388,6 +396,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 kinds: q.kinds.clone(),
                 offset: q.offset,
                 dynamic: q.dynamic,
+                switches: q.switches,
                 data: Kernel::new(&ar, &data),
                 data_jac: Kernel::new(&ar, &dj),
             }

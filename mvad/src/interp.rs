@@ -117,7 +117,7 @@ impl InterpretedModel {
                 })
                 .collect(),
             observables: k.observables.clone(),
-            switches: k.switches.len(),
+            switches: k.nswitches(),
             has_running_cost: k.running_cost.is_some(),
             has_final_cost: k.final_cost.is_some(),
             has_horizon: k.horizon.is_some(),
@@ -141,6 +141,7 @@ impl InterpretedModel {
                     })
                     .collect(),
                 dynamic: q.dynamic,
+                switches: q.switches,
             })
             .collect();
         InterpretedModel {
@@ -208,19 +209,28 @@ impl InterpretedModel {
         X::from_column_slice(&self.info.param_defaults)
     }
 
-    /// Has the qp bank solve every qp at the point of `at` (with derivatives if `derivs`).
+    /// Has the qp bank solve every qp at the point of `at` (on the frozen active sets of a
+    /// flow's point; with derivatives if `derivs`).
     fn evaluate_qps(&self, at: &At<'_>, derivs: bool) {
-        let mut regs = self.qp_regs.borrow_mut();
         let Point { t, x, p, .. } = at.pt;
         self.qp_bank
             .borrow_mut()
-            .evaluate(t, x, p, derivs, |q, data, jac| {
-                let (dt, jt) = &self.qp_tapes[q];
-                dt.eval_with(&at.pt, at.hi, &mut regs, data);
-                if let Some(jac) = jac {
-                    jt.eval_with(&at.pt, at.hi, &mut regs, jac);
-                }
-            });
+            .evaluate(t, x, p, at.frozen, derivs, self.qp_fill(at));
+    }
+
+    /// The closure that writes qp q's data (and Jacobian) at the point of `at`.
+    fn qp_fill<'s>(
+        &'s self,
+        at: &'s At<'_>,
+    ) -> impl FnMut(usize, &mut [f64], Option<&mut [f64]>) + 's {
+        move |q, data, jac| {
+            let mut regs = self.qp_regs.borrow_mut();
+            let (dt, jt) = &self.qp_tapes[q];
+            dt.eval_with(&at.pt, at.hi, &mut regs, data);
+            if let Some(jac) = jac {
+                jt.eval_with(&at.pt, at.hi, &mut regs, jac);
+            }
+        }
     }
 
     /// Runs `tape` into `regs`, first solving the qps it reads.
@@ -324,10 +334,12 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
     dst[..k].copy_from_slice(&src[..k]);
 }
 
-/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest.
+/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest;
+/// `frozen` is the whole switch set at a flow's point (qps are then solved on it).
 struct At<'a> {
     pt: Point<'a>,
     hi: &'a [u64],
+    frozen: Option<&'a Switches>,
 }
 
 /// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
@@ -340,6 +352,7 @@ fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
             sw: sw.low_word(),
         },
         hi: sw.high_words(),
+        frozen: Some(sw),
     }
 }
 
@@ -353,6 +366,7 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
             sw: 0,
         },
         hi: &[],
+        frozen: None,
     }
 }
 
@@ -366,6 +380,7 @@ fn pt_theta(p: &X) -> At<'_> {
             sw: 0,
         },
         hi: &[],
+        frozen: None,
     }
 }
 
@@ -485,18 +500,29 @@ impl HybridModel for InterpretedModel {
     }
 
     fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
+        let at = pt0(t, x, p);
         match self.switches.get(j) {
-            Some(s) => self.scalar(&s.value, &pt0(t, x, p)),
-            None => f64::NAN,
+            Some(s) => self.scalar(&s.value, &at),
+            // Past the kinks' switching functions: the qps' constraints.
+            None => self.qp_bank.borrow_mut().switch_value(
+                j,
+                t,
+                x.as_slice(),
+                p.as_slice(),
+                self.qp_fill(&at),
+            ),
         }
     }
     fn switch_grad(&self, j: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
+        let at = pt0(t, x, p);
         match self.switches.get(j) {
-            Some(s) => self.grad(s, &pt0(t, x, p), gx, gp),
+            Some(s) => self.grad(s, &at, gx, gp),
             None => {
-                gx.fill(f64::NAN);
-                gp.fill(f64::NAN);
-                f64::NAN
+                let fill = self.qp_fill(&at);
+                let (gx, gp) = (gx.as_mut_slice(), gp.as_mut_slice());
+                let mut bank = self.qp_bank.borrow_mut();
+                bank.switch_grad(j, t, x.as_slice(), p.as_slice(), fill, gx, gp)
+                    .1
             }
         }
     }

@@ -37,6 +37,9 @@ pub(super) struct Body {
 
 pub(super) struct Gen<'a> {
     pub(super) ar: &'a ExprArena,
+    /// Whether the bodies being generated evaluate under frozen switch bits `sw` (flows
+    /// and ℓ), so that qps read there are solved on their frozen active sets.
+    pub(super) frozen: std::cell::Cell<bool>,
     /// Number of states and params: the row length n + p + 1 of the qp derivatives `qd`.
     pub(super) n: usize,
     pub(super) p: usize,

@@ -31,6 +31,7 @@ const MAX_INLINE_DEPTH: u32 = 24;
 pub fn generate(k: &ModelKernels) -> TokenStream {
     let cg = Gen {
         ar: &k.arena,
+        frozen: std::cell::Cell::new(false),
         n: k.nstates(),
         p: k.nparams(),
     };

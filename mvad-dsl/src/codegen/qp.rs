@@ -33,7 +33,13 @@ impl Gen<'_> {
         if !values && !derivs {
             return TokenStream::new();
         }
-        let mut out = quote!(let __qp = self.__qp_eval(t, x.as_slice(), p.as_slice(), #derivs););
+        let frozen = if self.frozen.get() {
+            quote!(::core::option::Option::Some(sw))
+        } else {
+            quote!(::core::option::Option::None)
+        };
+        let mut out =
+            quote!(let __qp = self.__qp_eval(t, x.as_slice(), p.as_slice(), #frozen, #derivs););
         if values {
             out.extend(quote!(let qu: &[f64] = __qp.u();));
         }
@@ -65,11 +71,19 @@ impl Gen<'_> {
                     QpKind::Le => quote!(#pr::ConstraintKind::Le),
                 });
                 let dynamic = q.dynamic;
+                let switches = match q.switches {
+                    Some(j) => {
+                        let j = usize_lit(j);
+                        quote!(::core::option::Option::Some(#j))
+                    }
+                    None => quote!(::core::option::Option::None),
+                };
                 quote!(#pr::QpLayerInfo {
                     name: ::core::convert::From::from(#name),
                     vars: #pr::names(&[#(#vars),*]),
                     kinds: ::core::convert::From::from([#(#kinds),*]),
                     dynamic: #dynamic,
+                    switches: #switches,
                 })
             })
             .collect();
@@ -115,12 +129,27 @@ impl Gen<'_> {
                         _ => data.fill(f64::NAN),
                     }
                 }
-                /// Solves every qp at (t, x, θ) (cached per point) and lends the bank.
-                fn __qp_eval(&self, t: f64, x: &[f64], p: &[f64], derivs: bool) -> ::core::cell::Ref<'_, #pr::QpBank> {
-                    self.qp.borrow_mut().evaluate(t, x, p, derivs, |q, data, jac| {
+                /// Solves every qp at (t, x, θ), on the active sets `frozen` holds if given
+                /// (cached per point), and lends the bank.
+                fn __qp_eval(&self, t: f64, x: &[f64], p: &[f64], frozen: ::core::option::Option<&#pr::Switches>, derivs: bool) -> ::core::cell::Ref<'_, #pr::QpBank> {
+                    self.qp.borrow_mut().evaluate(t, x, p, frozen, derivs, |q, data, jac| {
                         self.__qp_fill(q, t, x, p, data, jac)
                     });
                     self.qp.borrow()
+                }
+                /// The switching function of qp switch bit `j`.
+                #[allow(dead_code)]
+                fn __qp_switch_value(&self, j: usize, t: f64, x: &[f64], p: &[f64]) -> f64 {
+                    self.qp.borrow_mut().switch_value(j, t, x, p, |q, data, jac| {
+                        self.__qp_fill(q, t, x, p, data, jac)
+                    })
+                }
+                /// Its gradient (∂/∂x into `gx`, ∂/∂θ into `gp`); returns ∂/∂t.
+                #[allow(dead_code)]
+                fn __qp_switch_grad(&self, j: usize, t: f64, x: &[f64], p: &[f64], gx: &mut [f64], gp: &mut [f64]) -> f64 {
+                    self.qp.borrow_mut().switch_grad(j, t, x, p, |q, data, jac| {
+                        self.__qp_fill(q, t, x, p, data, jac)
+                    }, gx, gp).1
                 }
             },
             methods: quote! {
@@ -133,7 +162,7 @@ impl Gen<'_> {
                     x: &#pr::OVector<f64, Self::N>,
                     p: &#pr::OVector<f64, Self::P>,
                 ) -> ::core::result::Result<::std::vec::Vec<#pr::QpState>, (usize, #pr::QpError)> {
-                    self.__qp_eval(t, x.as_slice(), p.as_slice(), false).states()
+                    self.__qp_eval(t, x.as_slice(), p.as_slice(), ::core::option::Option::None, false).states()
                 }
                 fn set_qp_side(&self, side: #pr::Side) {
                     self.qp.borrow_mut().set_side(side);

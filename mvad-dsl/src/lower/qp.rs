@@ -13,6 +13,9 @@
 //!   Hₖₖ positive; a constant 2×2 principal minor HₖₖHₗₗ − Hₖₗ² positive. What depends on θ,
 //!   x or t is the solver's to refuse at run time (`QpError::NotConvex`).
 //! - Every constraint involves at least one variable.
+//!
+//! A dynamic qp that a flow or ℓ reads gets one switch bit per inequality constraint
+//! ([`Qp::switches`]): its frozen active set.
 
 use super::{Ctx, Lowerer, Sym};
 use crate::ast::{self, ConstraintOp};
@@ -86,10 +89,16 @@ impl<'a> Lowerer<'a> {
         vars.iter().position(|v| *v == name).map(|k| off + k)
     }
 
-    /// `NAME.VAR`: the leaf u*_k.
-    pub(super) fn qp_solution(&mut self, table: &ast::Ident, column: &ast::Ident) -> ExprId {
+    /// `NAME.VAR`: the leaf u*_k (read in a flow or ℓ when `ctx` is frozen).
+    pub(super) fn qp_solution(
+        &mut self,
+        table: &ast::Ident,
+        column: &ast::Ident,
+        ctx: Ctx,
+    ) -> ExprId {
         let found = match self.names.get(table.name.as_str()) {
             Some(&Sym::Qp(q)) => {
+                self.qp_in_flow[q] |= ctx == Ctx::Frozen;
                 let (off, vars) = &self.qp_vars[q];
                 vars.iter().position(|v| *v == column.name).map(|k| off + k)
             }
@@ -103,6 +112,20 @@ impl<'a> Lowerer<'a> {
                     format!("`{}.{}` is not a qp variable", table.name, column.name),
                 );
                 self.ar.constant(f64::NAN)
+            }
+        }
+    }
+
+    /// Gives every dynamic qp that a flow or ℓ reads one switch bit per inequality
+    /// constraint (its frozen active set), after the kinks' switching functions: a change of
+    /// its active set is a kink of the flow, located like the others.
+    pub(super) fn assign_qp_switches(&mut self, qps: &mut [Qp]) {
+        let mut next = self.switches.len();
+        for (q, qp) in qps.iter_mut().enumerate() {
+            let le = qp.kinds.iter().filter(|&&k| k == QpKind::Le).count();
+            if self.qp_in_flow[q] && qp.dynamic && le > 0 {
+                qp.switches = Some(next);
+                next += le;
             }
         }
     }
@@ -202,6 +225,7 @@ impl<'a> Lowerer<'a> {
             a,
             b,
             dynamic,
+            switches: None,
         }
     }
 

@@ -13,8 +13,14 @@
 //! so a back end that evaluates several kernels at one point solves once. Every buffer is
 //! allocated by [`QpBank::new`]; an evaluation allocates nothing. A qp that fails leaves NaN
 //! in its entries and its error in [`QpBank::failure`].
+//!
+//! A qp that a flow reads has switch bits (`QpLayerInfo::switches`): evaluations with the
+//! run's frozen bits solve on the active set they hold, and [`QpBank::switch_value`] /
+//! [`QpBank::switch_grad`] are its switching functions (see `layer.rs`).
 
-use super::{ConstraintKind, ConstraintStatus, QpData, QpError, QpOptions, QpSolver, Side};
+use super::layer::Layer;
+use super::{ConstraintKind, ConstraintStatus, QpError, QpOptions, Side};
+use crate::model::Switches;
 
 /// Static description of one qp layer.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,6 +34,10 @@ pub struct QpLayerInfo {
     /// Whether its data depend on states or t (solved along the trajectory) rather than only
     /// on θ.
     pub dynamic: bool,
+    /// The model's switch index of the first of its switch bits, one per inequality
+    /// constraint in order, when a flow reads its solution (its active set is then frozen
+    /// along the steps); `None` otherwise.
+    pub switches: Option<usize>,
 }
 
 /// A qp's solution at one point: what `grad --json` reports under `"qp"`.
@@ -59,51 +69,6 @@ impl QpState {
     }
 }
 
-/// The point a cached result belongs to.
-#[derive(Clone, Debug)]
-struct Key {
-    /// Whether the solution at the point is cached.
-    valid: bool,
-    /// Whether its derivatives are too.
-    derivs: bool,
-    side: Side,
-    t: f64,
-    x: Vec<f64>,
-    p: Vec<f64>,
-}
-
-impl Key {
-    /// Whether (t, x, θ) on `side` is the cached point (t and x ignored when static).
-    fn matches(&self, dynamic: bool, side: Side, t: f64, x: &[f64], p: &[f64]) -> bool {
-        let same = |a: &[f64], b: &[f64]| {
-            a.len() == b.len() && a.iter().zip(b).all(|(u, v)| u.to_bits() == v.to_bits())
-        };
-        self.valid
-            && self.side == side
-            && same(&self.p, p)
-            && (!dynamic || (self.t.to_bits() == t.to_bits() && same(&self.x, x)))
-    }
-}
-
-/// One qp layer with its solver and buffers.
-#[derive(Clone, Debug)]
-struct Layer {
-    info: QpLayerInfo,
-    offset: usize,
-    solver: QpSolver,
-    data: QpData,
-    /// The data slots as the kernel writes them.
-    flat: Vec<f64>,
-    /// ∂data/∂(x, θ, t), slot d·(n + p + 1) + w.
-    jac: Vec<f64>,
-    /// Scratch: one direction of the data.
-    dir: QpData,
-    du: Vec<f64>,
-    dm: Vec<f64>,
-    key: Key,
-    failure: Option<QpError>,
-}
-
 /// The qp layers of a model (see the module documentation).
 #[derive(Clone, Debug)]
 pub struct QpBank {
@@ -113,6 +78,11 @@ pub struct QpBank {
     u: Vec<f64>,
     du: Vec<f64>,
     side: Side,
+    /// The switch index of the first qp switch bit, and the (qp, constraint) of each.
+    switch_base: usize,
+    switch_owner: Vec<(usize, usize)>,
+    /// Scratch: ∂σ/∂(x, θ, t) of a switching function.
+    grad: Vec<f64>,
 }
 
 impl QpBank {
@@ -120,36 +90,30 @@ impl QpBank {
     /// buffer.
     pub fn new(layers: Vec<QpLayerInfo>, n: usize, p: usize, opts: QpOptions) -> Self {
         let mut offset = 0;
-        let nw = n + p + 1;
+        let mut switch_owner = Vec::new();
+        let mut switch_base = usize::MAX;
+        for (q, info) in layers.iter().enumerate() {
+            if let Some(first) = info.switches {
+                switch_base = switch_base.min(first);
+                let le = (0..info.kinds.len()).filter(|&i| info.kinds[i] == ConstraintKind::Le);
+                for (k, i) in le.enumerate() {
+                    switch_owner.push((first + k, q, i));
+                }
+            }
+        }
+        switch_owner.sort_unstable();
+        let switch_owner: Vec<(usize, usize)> =
+            switch_owner.into_iter().map(|(_, q, i)| (q, i)).collect();
         let layers: Vec<Layer> = layers
             .into_iter()
             .map(|info| {
-                let (v, m) = (info.vars.len(), info.kinds.len());
-                let len = v * v + v + m * v + m;
-                let layer = Layer {
-                    offset,
-                    solver: QpSolver::new(v, &info.kinds, opts),
-                    data: QpData::zeros(v, m),
-                    flat: vec![0.0; len],
-                    jac: vec![0.0; len * nw],
-                    dir: QpData::zeros(v, m),
-                    du: vec![0.0; v],
-                    dm: vec![0.0; m],
-                    key: Key {
-                        valid: false,
-                        derivs: false,
-                        side: Side::Right,
-                        t: 0.0,
-                        x: vec![0.0; n],
-                        p: vec![0.0; p],
-                    },
-                    failure: None,
-                    info,
-                };
+                let v = info.vars.len();
+                let layer = Layer::new(info, offset, n, p, opts);
                 offset += v;
                 layer
             })
             .collect();
+        let nw = n + p + 1;
         QpBank {
             layers,
             n,
@@ -157,6 +121,13 @@ impl QpBank {
             u: vec![0.0; offset],
             du: vec![0.0; offset * nw],
             side: Side::Right,
+            switch_base: if switch_owner.is_empty() {
+                0
+            } else {
+                switch_base
+            },
+            switch_owner,
+            grad: vec![0.0; nw],
         }
     }
 
@@ -189,56 +160,96 @@ impl QpBank {
             .find_map(|(q, l)| l.failure.as_ref().map(|e| (q, e)))
     }
 
-    /// Solves every qp at (t, x, θ) and, with `derivs`, differentiates it along each
-    /// column of its data Jacobian. `fill(q, data, jac)` writes qp q's data slots and, when
-    /// `jac` is given, their Jacobian. Returns false when a qp failed (its entries are NaN).
+    /// Solves every qp at (t, x, θ) — on the active sets the bits `frozen` hold for the qps
+    /// that have switch bits, when given (a flow's evaluation) — and, with `derivs`,
+    /// differentiates it along each column of its data Jacobian. `fill(q, data, jac)` writes
+    /// qp q's data slots and, when `jac` is given, their Jacobian. Returns false when a qp
+    /// failed (its entries are NaN).
     pub fn evaluate(
         &mut self,
         t: f64,
         x: &[f64],
         p: &[f64],
+        frozen: Option<&Switches>,
         derivs: bool,
         mut fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
     ) -> bool {
         let (side, nw) = (self.side, self.n + self.p + 1);
         let mut ok = true;
         for (q, layer) in self.layers.iter_mut().enumerate() {
-            let dynamic = layer.info.dynamic;
-            let cached = layer.key.matches(dynamic, side, t, x, p);
-            if cached && (layer.key.derivs || !derivs) {
-                ok &= layer.failure.is_none();
-                continue;
-            }
             let rows = layer.info.vars.len();
             let u = &mut self.u[layer.offset..layer.offset + rows];
             let du = &mut self.du[layer.offset * nw..(layer.offset + rows) * nw];
-            // At a cached point only the derivatives are missing: no second solve.
-            let solve = !cached;
-            fill(q, &mut layer.flat, derivs.then_some(&mut layer.jac[..]));
-            let result = if solve { layer.solve() } else { Ok(()) }.and_then(|()| match derivs {
-                true => layer.differentiate(side, nw, du),
-                false => Ok(()),
-            });
-            match result {
-                Ok(()) => {
-                    u.copy_from_slice(layer.solver.u().as_slice());
-                    layer.failure = None;
-                }
-                Err(e) => {
-                    u.fill(f64::NAN);
-                    du.fill(f64::NAN);
-                    layer.failure = Some(e);
-                    ok = false;
-                }
-            }
-            layer.key.valid = true;
-            layer.key.derivs = derivs;
-            layer.key.side = side;
-            layer.key.t = t;
-            copy_prefix(&mut layer.key.x, x);
-            copy_prefix(&mut layer.key.p, p);
+            let fill_q = |data: &mut [f64], jac: Option<&mut [f64]>| fill(q, data, jac);
+            ok &= layer.evaluate(t, x, p, frozen, derivs, side, fill_q, u, du);
         }
         ok
+    }
+
+    /// The qp and constraint of the model's switch index j, if it is a qp switch bit.
+    pub fn switch_owner(&self, j: usize) -> Option<(usize, usize)> {
+        j.checked_sub(self.switch_base)
+            .and_then(|k| self.switch_owner.get(k))
+            .copied()
+    }
+
+    /// The switching function σ = sᵢ + μᵢ of qp switch j at (t, x, θ) (pointwise solve):
+    /// negative while constraint i is inactive, positive while it is active; NaN if j is not
+    /// a qp switch or the qp fails.
+    pub fn switch_value(
+        &mut self,
+        j: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
+    ) -> f64 {
+        let Some((q, i)) = self.switch_owner(j) else {
+            return f64::NAN;
+        };
+        if !self.evaluate(t, x, p, None, false, fill) {
+            return f64::NAN;
+        }
+        self.layers[q].switch_value(i)
+    }
+
+    /// σ of qp switch j and its gradient: ∂σ/∂x into `gx`, ∂σ/∂θ into `gp`; returns
+    /// (σ, ∂σ/∂t). NaN everywhere if j is not a qp switch or the qp fails.
+    #[allow(clippy::too_many_arguments)]
+    pub fn switch_grad(
+        &mut self,
+        j: usize,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        mut fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
+        gx: &mut [f64],
+        gp: &mut [f64],
+    ) -> (f64, f64) {
+        let nan = |gx: &mut [f64], gp: &mut [f64]| {
+            gx.fill(f64::NAN);
+            gp.fill(f64::NAN);
+            (f64::NAN, f64::NAN)
+        };
+        let Some((q, i)) = self.switch_owner(j) else {
+            return nan(gx, gp);
+        };
+        if !self.evaluate(t, x, p, None, false, &mut fill) {
+            return nan(gx, gp);
+        }
+        let fill_q = |data: &mut [f64], jac: Option<&mut [f64]>| fill(q, data, jac);
+        match self.layers[q].switch_grad(i, fill_q, &mut self.grad) {
+            Ok(value) => {
+                let (n, np) = (self.n, self.p);
+                copy_prefix(gx, &self.grad[..n]);
+                copy_prefix(gp, &self.grad[n..n + np]);
+                (value, self.grad[n + np])
+            }
+            Err(e) => {
+                self.layers[q].failure = Some(e);
+                nan(gx, gp)
+            }
+        }
     }
 
     /// The first weakly active constraint at the last evaluation, as (qp, constraint): where
@@ -267,53 +278,6 @@ impl QpBank {
                 status: l.solver.status().to_vec(),
             })
             .collect())
-    }
-}
-
-impl Layer {
-    /// Solves at the data in `flat`.
-    fn solve(&mut self) -> Result<(), QpError> {
-        let flat = &self.flat;
-        unflatten(&mut self.data, |d| flat[d]);
-        self.solver.solve(&self.data)
-    }
-
-    /// Writes ∂u*/∂w into column w of the rows of `du` (n + p + 1 columns) for every
-    /// column of `jac`, on `side`.
-    fn differentiate(&mut self, side: Side, nw: usize, du: &mut [f64]) -> Result<(), QpError> {
-        let len = self.flat.len();
-        for w in 0..nw {
-            let jac = &self.jac;
-            if (0..len).all(|d| jac[d * nw + w] == 0.0) {
-                du.iter_mut().skip(w).step_by(nw).for_each(|v| *v = 0.0);
-                continue;
-            }
-            unflatten(&mut self.dir, |d| jac[d * nw + w]);
-            self.solver
-                .directional(&self.dir, side, &mut self.du, &mut self.dm)?;
-            for (k, &v) in self.du.iter().enumerate() {
-                du[k * nw + w] = v;
-            }
-        }
-        Ok(())
-    }
-}
-
-/// Fills `data` from slot values: H (row-major v×v), c (v), A (row-major m×v), b (m).
-fn unflatten(data: &mut QpData, slot: impl Fn(usize) -> f64) {
-    let (v, m) = (data.c.len(), data.b.len());
-    for i in 0..v {
-        for j in 0..v {
-            data.h[(i, j)] = slot(i * v + j);
-        }
-        data.c[i] = slot(v * v + i);
-    }
-    let off = v * v + v;
-    for i in 0..m {
-        for j in 0..v {
-            data.a[(i, j)] = slot(off + i * v + j);
-        }
-        data.b[i] = slot(off + m * v + i);
     }
 }
 

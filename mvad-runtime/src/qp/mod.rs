@@ -42,6 +42,7 @@ mod bank;
 mod derivative;
 mod error;
 mod factor;
+mod layer;
 mod solver;
 
 pub use bank::{QpBank, QpLayerInfo, QpState};

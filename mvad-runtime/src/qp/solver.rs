@@ -33,6 +33,8 @@ pub struct QpSolver {
     pub(super) u: DVector<f64>,
     /// Multipliers μ, one per constraint (zero when inactive).
     pub(super) mult: Vec<f64>,
+    /// Slacks aᵢᵀu − bᵢ.
+    slacks: Vec<f64>,
     pub(super) status: Vec<ConstraintStatus>,
     /// Scratch: the constraints with zero slack.
     near: Vec<usize>,
@@ -56,6 +58,7 @@ impl QpSolver {
             dual: Dual::new(n, m),
             u: DVector::zeros(n),
             mult: vec![0.0; m],
+            slacks: vec![0.0; m],
             status: vec![ConstraintStatus::Inactive; m],
             near: Vec::with_capacity(m),
             kink: false,
@@ -177,6 +180,57 @@ impl QpSolver {
     /// [`QpSolver::multipliers`] and [`QpSolver::status`] describe the solution, and the
     /// derivatives ([`QpSolver::directional`]) are available.
     pub fn solve(&mut self, data: &QpData) -> Result<(), QpError> {
+        self.prepare(data, |_, kind| match kind {
+            ConstraintKind::Eq => Role::Eq,
+            ConstraintKind::Le => Role::Le,
+        })?;
+        let tols = self.tols();
+        self.iterations = self.dual.solve(&tols)?;
+        self.classify()?;
+        self.record_slacks();
+        self.solved = true;
+        Ok(())
+    }
+
+    /// Solves the QP with a frozen active set: the equalities and the inequalities with
+    /// `active(i)` as equalities, the other inequalities dropped — the smooth piece of the
+    /// solution map on which that set is active, continued beyond where it is optimal (a
+    /// multiplier may be negative, a dropped constraint violated). Statuses are `Active`
+    /// for the frozen set and `Inactive` otherwise, so [`QpSolver::directional`] is the
+    /// (linear) derivative of that piece. Linearly dependent frozen constraints are
+    /// [`QpError::Degenerate`].
+    pub fn solve_frozen(
+        &mut self,
+        data: &QpData,
+        active: impl Fn(usize) -> bool,
+    ) -> Result<(), QpError> {
+        self.prepare(data, |i, kind| match kind {
+            ConstraintKind::Le if !active(i) => Role::Off,
+            _ => Role::Eq,
+        })?;
+        let tols = self.tols();
+        self.iterations = self.dual.solve(&tols)?;
+        self.u.copy_from(&self.dual.v);
+        self.hfac.lower_tr_solve_mut(&mut self.u);
+        self.mult.fill(0.0);
+        self.status.fill(ConstraintStatus::Inactive);
+        for (a, &i) in self.dual.idx.iter().enumerate() {
+            self.mult[i] = self.dual.sign[a] * self.dual.lam[a];
+            self.status[i] = ConstraintStatus::Active;
+        }
+        self.kink = false;
+        self.record_slacks();
+        self.solved = true;
+        Ok(())
+    }
+
+    /// Checks the data, factorises H, and sets up the iteration in v = Lᵀu: the normals,
+    /// v₀, β, and each constraint's role `role(i, kind)`.
+    fn prepare(
+        &mut self,
+        data: &QpData,
+        role: impl Fn(usize, ConstraintKind) -> Role,
+    ) -> Result<(), QpError> {
         self.solved = false;
         self.check_data(data)?;
         let n = self.nvars();
@@ -198,17 +252,22 @@ impl QpSolver {
         self.hfac.lower_solve_mut(&mut dual.v0);
         dual.v0.neg_mut();
         dual.beta.copy_from_slice(data.b.as_slice());
-        for (role, kind) in dual.role.iter_mut().zip(&self.kinds) {
-            *role = match kind {
-                ConstraintKind::Eq => Role::Eq,
-                ConstraintKind::Le => Role::Le,
-            };
+        for (i, (r, &kind)) in dual.role.iter_mut().zip(&self.kinds).enumerate() {
+            *r = role(i, kind);
         }
-        let tols = self.tols();
-        self.iterations = self.dual.solve(&tols)?;
-        self.classify()?;
-        self.solved = true;
         Ok(())
+    }
+
+    /// The slacks aᵢᵀu − bᵢ at the last solution, one per constraint.
+    pub fn slacks(&self) -> &[f64] {
+        &self.slacks
+    }
+
+    /// Records the slacks of the iterate (the solution, after a solve).
+    fn record_slacks(&mut self) {
+        for (i, s) in self.slacks.iter_mut().enumerate() {
+            *s = self.dual.slack(i);
+        }
     }
 
     /// u = L⁻ᵀv, the multipliers per constraint, each constraint's status, and the check
