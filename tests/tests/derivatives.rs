@@ -326,5 +326,7 @@ fn compiled_models_match_finite_differences() {
     check_all(&models::stiff_relay::StiffRelay::new(), 4, 20);
     check_all(&models::thermostat::Thermostat::new(), 5, 20);
     check_all(&models::zeno_ball::ZenoBall::new(), 6, 20);
+    check_all(&models::qp_kink::QpKink::new(), 13, 20);
+    check_all(&models::qp_cart::QpCart::new(), 14, 20);
     check_all(&Sink::new(), 12, 60);
 }

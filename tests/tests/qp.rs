@@ -56,6 +56,7 @@ where
 fn e3_sweep_compiled_and_loaded() {
     let loaded = InterpretedModel::from_source(&model_source("qp_kink.hyb")).expect("loads");
     for (counts, mean) in [e3_sweep(&QpKink::new()), e3_sweep(&loaded)] {
+        eprintln!("E3 sweep: counts {counts:?}, mean |dJ/dθ − θH(θ)| = {mean:e}");
         assert_eq!(counts, (50, 1, 50));
         assert!(mean <= 1e-15, "mean error {mean}");
     }
@@ -170,6 +171,7 @@ fn pointwise_qps_of_the_state_against_finite_differences() {
                 (fd - sc.gradient[i]).abs() / sc.gradient[i].abs().max(1.0)
             })
             .fold(f64::INFINITY, f64::min);
+        eprintln!("projected param {i}: FD rel err {best:.1e}");
         assert!(best <= 1e-7, "param {i}: {best:e}");
     }
 }

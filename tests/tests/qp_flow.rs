@@ -7,48 +7,11 @@
 //! against central finite differences; a two-variable controller with a coupled
 //! constraint and an equality against finite differences; compiled and loaded alike.
 
+use models::qp_cart::{QpCart, MINMAX_SOURCE};
 use mvad::interp::InterpretedModel;
 use mvad::{fd_gradient, solve, HybridModel, ModelAlloc, Options, Solution};
+use mvad_tests::model_source;
 use nalgebra::DefaultAllocator;
-
-const QP_CART: &str = "model QpCart {
-    param k = -2.0; param c = -0.5; param umax = 1.0; param e = 0.7; param x0 = 1.5;
-    state x = x0; state v = 0.0;
-    qp ctl(u) {
-        minimize 0.5 * (u - k*x - c*v)^2;
-        subject to u <= umax; u >= -umax;
-    }
-    flow { der(x) = v; der(v) = ctl.u; }
-    event wall when x <= 0 { v = -e * v; }
-    cost = integral(x^2 + 0.1 * ctl.u^2);
-    horizon 4;
-}";
-
-const MINMAX_CART: &str = "model MinMaxCart {
-    param k = -2.0; param c = -0.5; param umax = 1.0; param e = 0.7; param x0 = 1.5;
-    state x = x0; state v = 0.0;
-    flow { der(x) = v; der(v) = max(-umax, min(umax, k*x + c*v)); }
-    event wall when x <= 0 { v = -e * v; }
-    cost = integral(x^2 + 0.1 * max(-umax, min(umax, k*x + c*v))^2);
-    horizon 4;
-}";
-
-mod compiled {
-    mvad::hybrid! {
-        model QpCart {
-            param k = -2.0; param c = -0.5; param umax = 1.0; param e = 0.7; param x0 = 1.5;
-            state x = x0; state v = 0.0;
-            qp ctl(u) {
-                minimize 0.5 * (u - k*x - c*v)^2;
-                subject to u <= umax; u >= -umax;
-            }
-            flow { der(x) = v; der(v) = ctl.u; }
-            event wall when x <= 0 { v = -e * v; }
-            cost = integral(x^2 + 0.1 * ctl.u^2);
-            horizon 4;
-        }
-    }
-}
 
 /// Two controls sharing a budget, one pinned by an equality: u₁ + u₂ ≤ b, u₁ − u₂ = d·x.
 const TWO_CONTROLS: &str = "model TwoControls {
@@ -94,9 +57,9 @@ where
 
 #[test]
 fn cart_with_a_saturating_qp_matches_min_max_and_fd() {
-    let qp = InterpretedModel::from_source(QP_CART).expect("loads");
-    let mm = InterpretedModel::from_source(MINMAX_CART).expect("loads");
-    let cc = compiled::QpCart::new();
+    let qp = InterpretedModel::from_source(&model_source("qp_cart.hyb")).expect("loads");
+    let mm = InterpretedModel::from_source(MINMAX_SOURCE).expect("loads");
+    let cc = QpCart::new();
     let p = qp.default_params();
     let (sq, sm) = (run(&qp, &p), run(&mm, &p));
     let sc = run(&cc, &cc.default_params());
@@ -118,6 +81,11 @@ fn cart_with_a_saturating_qp_matches_min_max_and_fd() {
             "param {i}: compiled {c} vs {a}"
         );
         let err = fd_error(&qp, &p, &sq.gradient, i);
+        eprintln!(
+            "cart param {i}: qp {a:.15e}, |qp − min/max| {:.1e}, |compiled − loaded| {:.1e}, FD rel err {err:.1e}",
+            (a - b).abs(),
+            (c - a).abs()
+        );
         assert!(err <= 1e-6, "param {i}: FD error {err:e}");
     }
 }
@@ -130,6 +98,7 @@ fn two_controls_with_a_coupled_constraint_against_fd() {
     assert!(sol.stats.switch_crossings >= 1, "{:?}", sol.stats);
     for i in 0..p.len() {
         let err = fd_error(&m, &p, &sol.gradient, i);
+        eprintln!("two controls param {i}: FD rel err {err:.1e}");
         assert!(err <= 1e-6, "param {i}: FD error {err:e}");
     }
 }

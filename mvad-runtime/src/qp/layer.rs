@@ -144,7 +144,7 @@ impl Layer {
     ) -> bool {
         let frozen = self.load_bits(sw);
         let cached = self.cached(frozen, side, t, x, p);
-        if cached && (self.key.derivs || !derivs) {
+        if cached && (self.key.derivs || !derivs || self.failure.is_some()) {
             return self.failure.is_none();
         }
         fill(&mut self.flat, derivs.then_some(&mut self.jac[..]));
