@@ -13,12 +13,10 @@
 
 use criterion::{criterion_group, Criterion};
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
+use models::median_us;
 use mvad::solution::Options;
 use mvad::solve::solve;
 use std::hint::black_box;
-
-mod common;
-use common::median_us;
 
 /// E1 through both doors: the compiled model with its θ, and `bouncing_ball.hyb` loaded at
 /// run time with the same θ.
@@ -41,11 +39,7 @@ fn setup() -> E1 {
     )))
     .expect("bouncing_ball.hyb loads");
     let pl = nalgebra::DVector::from_column_slice(p.as_slice());
-    let grad = Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..Options::default()
-    };
+    let grad = models::tolerances(1e-10, 1e-12);
     let primal = Options {
         sensitivities: false,
         ..grad.clone()

@@ -21,8 +21,7 @@ use mvad::HybridModel;
 use nalgebra::SVector;
 use std::hint::black_box;
 
-mod common;
-use common::median_us;
+use models::median_us;
 
 /// The 101 parameter vectors of the sweep.
 fn thetas() -> Vec<SVector<f64, 1>> {

@@ -39,6 +39,16 @@ pub const SOURCES: [(&str, &str); 8] = [
     ("qp_cart.hyb", include_str!("../qp_cart.hyb")),
 ];
 
+/// Default options but for the tolerances (rtol, atol): the reference runs of the tests,
+/// the examples and the benchmark.
+pub fn tolerances(rtol: f64, atol: f64) -> mvad::solution::Options {
+    mvad::solution::Options {
+        rtol,
+        atol,
+        ..Default::default()
+    }
+}
+
 /// A ball under gravity g with restitution e on a floor at h = 0, from (h0, v0): the
 /// cost ∫₀ᵀ h dt and the impact times, in closed form.
 ///
@@ -67,6 +77,34 @@ pub fn ball_closed_form(e: f64, g: f64, h0: f64, v0: f64, t_end: f64) -> (f64, V
         }
     }
     (cost, impacts)
+}
+
+/// Median over 15 batches of the mean time per call of `f`, in µs, each batch sized to
+/// ~20 ms (for the benches and examples that print timing tables; robust on a shared machine).
+pub fn median_us<R>(mut f: impl FnMut() -> R) -> f64 {
+    let mut batch = 200usize;
+    // Size the batch to ~20 ms.
+    loop {
+        let t = std::time::Instant::now();
+        for _ in 0..batch {
+            std::hint::black_box(f());
+        }
+        if t.elapsed().as_secs_f64() > 0.02 || batch > 1_000_000 {
+            break;
+        }
+        batch *= 2;
+    }
+    let mut v: Vec<f64> = (0..15)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            for _ in 0..batch {
+                std::hint::black_box(f());
+            }
+            t.elapsed().as_secs_f64() * 1e6 / batch as f64
+        })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// Derivative of `f` at `x`: [`derivative`] with a first step of 1e-2·max(1, |x|).

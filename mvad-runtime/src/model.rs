@@ -597,13 +597,53 @@ where
     }
 }
 
-/// Capability: second-derivative directional products, for the implicit method's
-/// Jacobian of the sensitivity equations.
+/// Relative size of the perturbation of x in the directional differences of the
+/// [`ModelSecondOrder`] defaults: h = `DIR_STEP`·max(1, ‖x‖₂)/‖v‖₂ (why 1e-4: see the trait).
+const DIR_STEP: f64 = 1e-4;
+
+/// The step h of the directional differences along v at x (see [`DIR_STEP`]) and the points
+/// x ± h v; `None` when v = 0 (the product is zero), h = NaN when v is not finite.
+#[allow(clippy::type_complexity)]
+fn dir_points<N: Dim>(
+    x: &OVector<f64, N>,
+    v: &OVector<f64, N>,
+) -> Option<(f64, OVector<f64, N>, OVector<f64, N>)>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    let nv = v.norm();
+    if nv == 0.0 {
+        return None;
+    }
+    let h = if nv.is_finite() {
+        DIR_STEP * x.norm().max(1.0) / nv
+    } else {
+        f64::NAN
+    };
+    let (mut up, mut dn) = (x.clone_owned(), x.clone_owned());
+    up.axpy(h, v, 1.0);
+    dn.axpy(-h, v, 1.0);
+    Some((h, up, dn))
+}
+
+/// The step of the central differences in t of the [`ModelSecondOrder`] defaults:
+/// ε^{1/3}·max(1, |t|) (truncation and rounding errors balance at O(ε^{2/3})).
+fn time_step(t: f64) -> f64 {
+    f64::EPSILON.cbrt() * t.abs().max(1.0)
+}
+
+/// Capability: second-derivative products, for the implicit method's Jacobian of the
+/// sensitivity equations and its time derivative (see `integrate::forward`).
 ///
-/// The default differentiates [`ModelSens::rhs_sens`] by central differences along v with
-/// the step h = ε^{1/3} (1 + ‖x‖∞) / ‖v‖∞ (ε the machine epsilon; truncation and rounding
-/// errors balance at O(ε^{2/3})); it allocates scratch. A model with symbolic second
-/// derivatives overrides it with the exact product.
+/// The defaults are central differences of the first-derivative methods ([`ModelSens::rhs_sens`],
+/// [`HybridModel::running_cost_value_grad`]); they allocate scratch. Along v the step is
+/// h = 1e-4·max(1, ‖x‖₂)/‖v‖₂, far larger than the usual ε^{1/3}: models with cancellation
+/// inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the rounding of x ± h v by
+/// 1/h, and with ε^{1/3} the sensitivity of a τ = 1e-8 lag had a 2e-6 error floor, with 1e-4
+/// it is 4e-8; central differences are exact when the differenced function is at most
+/// quadratic in x and perturb it by O(1e-8) relative for cubic terms. In t the step is
+/// ε^{1/3}·max(1, |t|). Both doors (`hybrid!` and loaded models) override every method with
+/// exact products from symbolic second derivatives.
 pub trait ModelSecondOrder: ModelSens
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
@@ -620,22 +660,122 @@ where
     ) where
         Self: HybridModel,
     {
-        let Point { mode, sw, t, x, p } = pt;
-        let vmax = v.amax();
-        if vmax == 0.0 || !vmax.is_finite() {
-            out.fill(if vmax == 0.0 { 0.0 } else { f64::NAN });
+        let Some((h, xu, xd)) = dir_points(pt.x, v) else {
+            out.fill(0.0);
             return;
-        }
-        let h = f64::EPSILON.cbrt() * (1.0 + x.amax()) / vmax;
-        let mut f = x.clone_owned();
-        let mut xs = x.clone_owned();
-        let mut minus = out.clone_owned();
-        xs.axpy(h, v, 1.0);
-        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, out);
-        xs.copy_from(x);
-        xs.axpy(-h, v, 1.0);
-        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, &mut minus);
-        *out -= &minus;
-        *out /= 2.0 * h;
+        };
+        rhs_sens_difference(
+            self,
+            Point { x: &xu, ..pt },
+            Point { x: &xd, ..pt },
+            s,
+            2.0 * h,
+            out,
+        );
     }
+
+    /// ∂ₜ(f_x S + f_θ) into `out` (n×p): the time derivative of the sensitivity right-hand
+    /// side at fixed x and S (zeros for an autonomous flow).
+    fn rhs_sens_dt(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        out: &mut OMatrix<f64, Self::N, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let h = time_step(pt.t);
+        let (up, dn) = (Point { t: pt.t + h, ..pt }, Point { t: pt.t - h, ..pt });
+        rhs_sens_difference(self, up, dn, s, 2.0 * h, out);
+    }
+
+    /// (∂/∂x (ℓ_x S + ℓ_θ)) · v into `out` (p): out = Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ, the
+    /// derivative of the running cost's sensitivity integrand along v (with the frozen
+    /// branches `sw`; zeros without a running cost).
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dir_x(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        v: &OVector<f64, Self::N>,
+        out: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        let Some((h, xu, xd)) = dir_points(x, v) else {
+            out.fill(0.0);
+            return;
+        };
+        let (up, dn) = (Point::new(0, sw, t, &xu, p), Point::new(0, sw, t, &xd, p));
+        running_cost_sens_difference(self, up, dn, s, 2.0 * h, out);
+    }
+
+    /// ∂ₜ(ℓ_x S + ℓ_θ) into `out` (p), at fixed x and S, with the frozen branches `sw`;
+    /// returns ∂ₜℓ (zeros and 0 without a running cost).
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dt(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        out: &mut OVector<f64, Self::P>,
+    ) -> f64
+    where
+        Self: HybridModel,
+    {
+        let h = time_step(t);
+        let (up, dn) = (
+            Point::new(0, sw, t + h, x, p),
+            Point::new(0, sw, t - h, x, p),
+        );
+        running_cost_sens_difference(self, up, dn, s, 2.0 * h, out)
+    }
+}
+
+/// out = (Ṡ(up) − Ṡ(dn))/h2 for Ṡ = f_x S + f_θ (the difference quotient of the defaults).
+fn rhs_sens_difference<M: HybridModel + ?Sized>(
+    m: &M,
+    up: Point<'_, M::N, M::P>,
+    dn: Point<'_, M::N, M::P>,
+    s: &OMatrix<f64, M::N, M::P>,
+    h2: f64,
+    out: &mut OMatrix<f64, M::N, M::P>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut f = up.x.clone_owned();
+    let mut minus = out.clone_owned();
+    m.rhs_sens(up, s, &mut f, out);
+    m.rhs_sens(dn, s, &mut f, &mut minus);
+    *out -= &minus;
+    *out /= h2;
+}
+
+/// out = (q̇_θ(up) − q̇_θ(dn))/h2 for q̇_θ = ℓ_x S + ℓ_θ; returns (ℓ(up) − ℓ(dn))/h2 (the
+/// difference quotients of the defaults; the points' modes are ignored).
+fn running_cost_sens_difference<M: HybridModel + ?Sized>(
+    m: &M,
+    up: Point<'_, M::N, M::P>,
+    dn: Point<'_, M::N, M::P>,
+    s: &OMatrix<f64, M::N, M::P>,
+    h2: f64,
+    out: &mut OVector<f64, M::P>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (mut lx, mut lx_dn, mut lp_dn) =
+        (up.x.clone_owned(), up.x.clone_owned(), out.clone_owned());
+    let l_up = m.running_cost_value_grad(up.sw, up.t, up.x, up.p, &mut lx, out);
+    let l_dn = m.running_cost_value_grad(dn.sw, dn.t, dn.x, dn.p, &mut lx_dn, &mut lp_dn);
+    lx -= &lx_dn;
+    *out -= &lp_dn;
+    out.gemv_tr(1.0, s, &lx, 1.0);
+    *out /= h2;
+    (l_up - l_dn) / h2
 }

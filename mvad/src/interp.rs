@@ -3,10 +3,11 @@
 //!
 //! Each trait method runs one tape into a scratch register file kept in a `RefCell`, so
 //! no call allocates. Matrices are written entry by entry from the tape's non-zero
-//! outputs after one zero fill. [`HybridModel::rhs_sens`] is overridden with the fused
+//! outputs after one zero fill. [`ModelSens::rhs_sens`] is overridden with the fused
 //! kernel: f, the non-zero entries of f_x and f_θ in one pass, then
 //! Ṡ = f_θ + Σ_{(i,k) ∈ nz(f_x)} (f_x)_{ik} S_{k·}, the same sums in the same order as the
-//! generated code.
+//! generated code. The capability products (`ModelAdjoint`, `ModelSecondOrder`) live in
+//! `interp/products.rs`.
 //!
 //! A model with qps keeps a [`QpBank`]: a tape that reads qp solutions first has the bank
 //! evaluate them at its point (the data tapes fill each qp's data and Jacobian), then runs
@@ -19,11 +20,12 @@ use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
 use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
-use mvad_runtime::{
-    EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
-    Switches,
-};
+use mvad_runtime::{EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Switches};
 use nalgebra::{DMatrix, DVector, Dyn};
+
+use products::SecondTapes;
+
+mod products;
 
 /// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
 #[derive(Clone, Debug)]
@@ -39,6 +41,9 @@ struct ModeTapes {
     jac_p: Tape,
     dt: Tape,
     sens: Tape,
+    /// The non-zero f_x entries, then the non-zero f_θ entries (as in `second`).
+    jac: Tape,
+    second: SecondTapes,
     sparsity: Vec<(usize, usize)>,
     depends_on_t: bool,
 }
@@ -55,6 +60,8 @@ struct EventTapes {
 struct Scratch {
     regs: Vec<f64>,
     out: Vec<f64>,
+    /// Σᵢ vᵢ ∂(G_x)ₑ/∂xᵢ per G_x entry, for the directional second-order products.
+    w: Vec<f64>,
 }
 
 /// A model loaded from `.hyb` text, evaluated by tapes (`N = P = Dyn`).
@@ -73,6 +80,7 @@ pub struct InterpretedModel {
     observe_jac: Tape,
     running_cost: Option<GradTapes>,
     final_cost: Option<GradTapes>,
+    running_cost_second: Option<SecondTapes>,
     scratch: RefCell<Scratch>,
     /// Per qp: its data tape and their Jacobian's.
     qp_tapes: Vec<(Tape, Tape)>,
@@ -126,6 +134,12 @@ impl InterpretedModel {
         let all = k.all_kernels();
         let nregs = all.iter().map(|k| k.nodes.len()).max().unwrap_or(0);
         let nout = all.iter().map(|k| k.len).max().unwrap_or(0);
+        let second = |so| SecondTapes::new(ar, so);
+        let nw = (k.modes.iter().map(|m| &m.second))
+            .chain(&k.running_cost_second)
+            .map(|so| so.x_entries.len())
+            .max()
+            .unwrap_or(0);
         let qp_info: Vec<QpLayerInfo> = k
             .qps
             .iter()
@@ -172,6 +186,8 @@ impl InterpretedModel {
                     jac_p: tape(&m.jac_p),
                     dt: tape(&m.dt),
                     sens: tape(&m.sens),
+                    jac: tape(&m.jac),
+                    second: second(&m.second),
                     sparsity: m.sparsity.clone(),
                     depends_on_t: m.depends_on_t,
                 })
@@ -191,9 +207,11 @@ impl InterpretedModel {
             observe_jac: tape(&k.observe_jac),
             running_cost: k.running_cost.as_ref().map(grad),
             final_cost: k.final_cost.as_ref().map(grad),
+            running_cost_second: k.running_cost_second.as_ref().map(second),
             scratch: RefCell::new(Scratch {
                 regs: vec![0.0; nregs],
                 out: vec![0.0; nout],
+                w: vec![0.0; nw],
             }),
             info,
         }
@@ -271,7 +289,7 @@ impl InterpretedModel {
         f: impl FnOnce(bool, &[f64], &mut [f64]) -> R,
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
+        let Scratch { regs, out, .. } = &mut *sc;
         let ok = self.run(tape, at, regs);
         f(ok, regs, out)
     }
@@ -317,7 +335,7 @@ impl InterpretedModel {
     fn grad(&self, g: &GradTapes, at: &At<'_>, gx: &mut X, gp: &mut X) -> f64 {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
+        let Scratch { regs, out, .. } = &mut *sc;
         self.eval(&g.grad, at, regs, out);
         copy_into(gx.as_mut_slice(), &out[..n]);
         copy_into(gp.as_mut_slice(), &out[n..n + p]);
@@ -656,7 +674,7 @@ impl ModelSens for InterpretedModel {
             return;
         }
         let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
+        let Scratch { regs, out, .. } = &mut *sc;
         let at = at_sw(t, x, p, sw);
         self.eval(&m.sens, &at, regs, out);
         copy_into(f.as_mut_slice(), &out[..n]);
@@ -674,6 +692,3 @@ impl ModelSens for InterpretedModel {
         }
     }
 }
-
-impl ModelAdjoint for InterpretedModel {}
-impl ModelSecondOrder for InterpretedModel {}

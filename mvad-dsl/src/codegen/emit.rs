@@ -10,7 +10,7 @@ use crate::schedule::{GradKernels, Kernel};
 
 /// Operator precedence of a rendered expression (higher binds tighter).
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-enum Prec {
+pub(super) enum Prec {
     If,
     Add,
     Mul,
@@ -31,8 +31,31 @@ pub(super) struct Body {
     pub(super) lets: TokenStream,
     /// Value tokens of each output, as (slot, value).
     pub(super) outputs: Vec<(usize, TokenStream)>,
-    /// Whether each output's tokens are an `if` expression (lowest precedence).
-    pub(super) is_if: Vec<bool>,
+    /// The precedence of each output's tokens (`If` the lowest).
+    pub(super) prec: Vec<Prec>,
+}
+
+impl Body {
+    /// Output `k` as an operand of `*` on either side: in parentheses unless it is an atom or
+    /// a unary minus, so a product keeps the association the tape evaluates.
+    pub(super) fn factor(&self, k: usize) -> TokenStream {
+        let t = &self.outputs[k].1;
+        if self.prec[k] >= Prec::Unary {
+            t.clone()
+        } else {
+            quote!((#t))
+        }
+    }
+
+    /// Output `k` as an operand of a sum (in parentheses only when it is an `if`).
+    pub(super) fn term(&self, k: usize) -> TokenStream {
+        let t = &self.outputs[k].1;
+        if self.prec[k] == Prec::If {
+            quote!((#t))
+        } else {
+            t.clone()
+        }
+    }
 }
 
 pub(super) struct Gen<'a> {
@@ -87,15 +110,15 @@ impl Gen<'_> {
             .iter()
             .map(|&(s, e)| (s, get(e).map_or_else(|| quote!(f64::NAN), |r| r.tokens)))
             .collect();
-        let is_if = kernel
+        let prec = kernel
             .outputs
             .iter()
-            .map(|&(_, e)| get(e).is_some_and(|r| r.prec == Prec::If))
+            .map(|&(_, e)| get(e).map_or(Prec::Atom, |r| r.prec))
             .collect();
         Body {
             lets,
             outputs,
-            is_if,
+            prec,
         }
     }
 

@@ -1,10 +1,11 @@
 //! The model trait's methods, each cut from its kernel by [`Gen`]: the static description
 //! (`ModelInfo`), the `HybridModel` core and the fused sparse `ModelSens::rhs_sens`.
 
-use proc_macro2::{Ident, Literal, TokenStream};
+use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
 use super::emit::Body;
+use super::products::{a_s_plus_b, Coef};
 use super::{lit, usize_lit, Gen};
 use crate::ir::Direction;
 use crate::schedule::{GradKernels, Kernel, ModelKernels};
@@ -390,33 +391,24 @@ impl Gen<'_> {
         let p = k.nparams();
         let mk = &k.modes[m];
         let nnz = mk.sparsity.len();
-        let Body {
-            lets,
-            outputs,
-            is_if,
-        } = self.body(&mk.sens);
+        let body = self.body(&mk.sens);
         let mut stores = TokenStream::new();
         // Per non-zero f_x entry: a constant, or the name it is bound to.
-        let mut fxv: Vec<Option<FxVal>> = vec![None; nnz];
+        let mut fxv: Vec<Option<Coef>> = vec![None; nnz];
         let mut fpv: Vec<Option<TokenStream>> = vec![None; n * p];
         let mut fwritten = vec![false; n];
-        for (((s, v), &(_, e)), wrap) in outputs.into_iter().zip(&mk.sens.outputs).zip(is_if) {
+        for (j, (s, v)) in body.outputs.iter().enumerate() {
+            let s = *s;
             if s < n {
                 let i = usize_lit(s);
                 stores.extend(quote!(f[#i] = #v;));
                 fwritten[s] = true;
             } else if s < n + nnz {
-                fxv[s - n] = Some(match self.ar.as_const(e) {
-                    Some(c) => FxVal::Const(c),
-                    None => {
-                        let id = format_ident!("fx{}", s - n);
-                        stores.extend(quote!(let #id: f64 = #v;));
-                        FxVal::Named(id)
-                    }
-                });
+                let id = format_ident!("fx{}", s - n);
+                fxv[s - n] = Some(self.coef(&mk.sens, &body, j, Some(id), &mut stores));
             } else {
                 // Each f_θ entry is used once: inlined (an `if` in parentheses).
-                fpv[s - n - nnz] = Some(if wrap { quote!((#v)) } else { v });
+                fpv[s - n - nnz] = Some(body.term(j));
             }
         }
         for (i, w) in fwritten.iter().enumerate() {
@@ -425,49 +417,12 @@ impl Gen<'_> {
                 stores.extend(quote!(f[#i] = 0.0;));
             }
         }
-        for r in 0..n {
-            let row: Vec<(usize, &FxVal)> = mk
-                .sparsity
-                .iter()
-                .enumerate()
-                .filter(|(_, &(rr, _))| rr == r)
-                .filter_map(|(e, &(_, c))| fxv[e].as_ref().map(|v| (c, v)))
-                .collect();
-            for c in 0..p {
-                // ds = f_θ + Σ f_x·S, summed left to right as the tape does.
-                let mut sum = fpv[r * p + c].clone();
-                let cl = usize_lit(c);
-                for (kk, v) in &row {
-                    let kl = usize_lit(*kk);
-                    let s_kc = quote!(s[(#kl, #cl)]);
-                    let (neg, term) = match v {
-                        FxVal::Const(a) if *a == 1.0 => (false, s_kc),
-                        FxVal::Const(a) if *a == -1.0 => (true, s_kc),
-                        FxVal::Const(a) => {
-                            let a = lit(*a);
-                            (false, quote!((#a) * #s_kc))
-                        }
-                        FxVal::Named(id) => (false, quote!(#id * #s_kc)),
-                    };
-                    sum = Some(match (sum, neg) {
-                        (None, false) => term,
-                        (None, true) => quote!(-#term),
-                        (Some(acc), false) => quote!(#acc + #term),
-                        (Some(acc), true) => quote!(#acc - #term),
-                    });
-                }
-                let rl = usize_lit(r);
-                let rhs = sum.unwrap_or_else(|| quote!(0.0));
-                stores.extend(quote!(ds[(#rl, #cl)] = #rhs;));
-            }
-        }
-        quote!(#lets #stores)
+        // ds = f_θ + Σ f_x·S, summed left to right as the tape does.
+        let ds = a_s_plus_b(&mk.sparsity, &fxv, &fpv, (n, p), None, |r, c| {
+            let (r, c) = (usize_lit(r), usize_lit(c));
+            quote!(ds[(#r, #c)])
+        });
+        let lets = &body.lets;
+        quote!(#lets #stores #ds)
     }
-}
-
-/// A non-zero ∂f/∂x entry in the fused sensitivity code.
-#[derive(Clone)]
-enum FxVal {
-    Const(f64),
-    Named(Ident),
 }

@@ -6,8 +6,9 @@
 //! - `pub struct NAME` with `new()`, `default_params()`, `NSTATES`, `NPARAMS`, and an
 //!   `impl ModelDims for NAME` with `type N = Const<n>; type P = Const<p>`, `impl HybridModel`
 //!   with the core methods, `impl ModelSens`
-//!   with the sparse sensitivity right-hand side, and the default adjoint and second-order
-//!   capabilities (so `NAME: HybridModel`);
+//!   with the sparse sensitivity right-hand side, `impl ModelAdjoint` with the sparse
+//!   vector–Jacobian products and `impl ModelSecondOrder` with the exact second-order products
+//!   (`products.rs`), so `NAME: HybridModel` with no default in use;
 //! - for a model with qps, a `QpBank` in the struct (`codegen/qp.rs`): methods whose
 //!   kernels read qp solutions first have it solve the qps at their point.
 //!
@@ -54,6 +55,8 @@ pub fn generate(k: &ModelKernels) -> TokenStream {
 
     let info = cg.info(k);
     let (methods, sens_methods) = cg.methods(k);
+    let adjoint_methods = cg.adjoint_methods(k);
+    let second_order_methods = cg.second_order_methods(k);
     let qp::QpItems {
         fields: qp_fields,
         init: qp_init,
@@ -144,8 +147,15 @@ pub fn generate(k: &ModelKernels) -> TokenStream {
             #sens_methods
         }
 
-        impl #pr::ModelAdjoint for #name {}
-        impl #pr::ModelSecondOrder for #name {}
+        #[allow(unused_variables, unused_parens, unused_braces, non_snake_case, clippy::all, clippy::pedantic, clippy::nursery)]
+        impl #pr::ModelAdjoint for #name {
+            #adjoint_methods
+        }
+
+        #[allow(unused_variables, unused_parens, unused_braces, non_snake_case, clippy::all, clippy::pedantic, clippy::nursery)]
+        impl #pr::ModelSecondOrder for #name {
+            #second_order_methods
+        }
     }
 }
 
@@ -205,6 +215,7 @@ fn usize_lit(i: usize) -> Literal {
 
 mod emit;
 mod methods;
+mod products;
 mod qp;
 
 use emit::Gen;
