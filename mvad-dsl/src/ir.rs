@@ -573,6 +573,8 @@ pub struct Qp {
     /// switching functions in [`Program::switches`]); bit set ⇔ the constraint is held
     /// active.
     pub switches: Option<usize>,
+    /// Whether a flow or ℓ reads its solution.
+    pub in_flow: bool,
 }
 
 impl Qp {

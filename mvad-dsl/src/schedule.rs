@@ -183,6 +183,8 @@ pub struct QpKernels {
     pub dynamic: bool,
     /// The switch index of its first switch bit, if a flow reads it ([`crate::ir::Qp::switches`]).
     pub switches: Option<usize>,
+    /// Whether a flow or ℓ reads its solution.
+    pub in_flow: bool,
     /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
     pub data: Kernel,
     /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
@@ -283,6 +285,13 @@ impl ModelKernels {
     pub fn nswitches(&self) -> usize {
         self.switches.len()
             + crate::ir::qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
+    }
+
+    /// Whether the second-order products must be difference quotients: a flow or ℓ reads
+    /// the solution of a qp of the state, whose second derivatives the kernels do not have
+    /// (the `QpDeriv` leaves are first derivatives; see `ir::Node::QpDeriv`).
+    pub fn second_order_by_differences(&self) -> bool {
+        self.qps.iter().any(|q| q.dynamic && q.in_flow)
     }
 
     /// Number of qp solution variables (all qps).
@@ -520,6 +529,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 offset: q.offset,
                 dynamic: q.dynamic,
                 switches: q.switches,
+                in_flow: q.in_flow,
                 data: Kernel::new(&ar, &data),
                 data_jac: Kernel::new(&ar, &dj),
             }

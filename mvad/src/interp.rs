@@ -88,6 +88,9 @@ pub struct InterpretedModel {
     qp_bank: RefCell<QpBank>,
     /// Registers for the data tapes (run while `scratch` is borrowed).
     qp_regs: RefCell<Vec<f64>>,
+    /// Whether the second-order products are difference quotients (a flow reads a qp of
+    /// the state; see `ModelKernels::second_order_by_differences`).
+    second_by_differences: bool,
 }
 
 type X = DVector<f64>;
@@ -172,6 +175,7 @@ impl InterpretedModel {
             )),
             qp_info,
             qp_regs: RefCell::new(vec![0.0; nregs]),
+            second_by_differences: k.second_order_by_differences(),
             n: k.nstates(),
             p: k.nparams(),
             x0: tape(&k.x0),

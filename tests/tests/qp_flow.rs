@@ -91,6 +91,40 @@ fn cart_with_a_saturating_qp_matches_min_max_and_fd() {
 }
 
 #[test]
+fn cart_under_the_implicit_method_matches_min_max() {
+    // Rodas5P uses the second-order products: the qp model's are difference quotients
+    // (its flow reads a qp of the state), min/max's are symbolic; both converge together.
+    let qp = InterpretedModel::from_source(&model_source("qp_cart.hyb")).expect("loads");
+    let mm = InterpretedModel::from_source(MINMAX_SOURCE).expect("loads");
+    let cc = QpCart::new();
+    let opts = Options {
+        method: mvad::Method::Rosenbrock,
+        ..tight()
+    };
+    let p = qp.default_params();
+    let sq = solve(&qp, &p, &opts).expect("solves");
+    let sm = solve(&mm, &p, &opts).expect("solves");
+    let sc = solve(&cc, &cc.default_params(), &opts).expect("solves");
+    assert_eq!(sq.stats.switch_crossings, 3);
+    for i in 0..p.len() {
+        let (a, b, c) = (sq.gradient[i], sm.gradient[i], sc.gradient[i]);
+        eprintln!(
+            "rosenbrock cart param {i}: |qp − min/max| {:.1e}, |compiled − loaded| {:.1e}",
+            (a - b).abs(),
+            (c - a).abs()
+        );
+        assert!(
+            (a - b).abs() <= 1e-8 * b.abs().max(1.0),
+            "param {i}: {a} vs {b}"
+        );
+        assert!(
+            (c - a).abs() <= 1e-10 * a.abs().max(1.0),
+            "param {i}: {c} vs {a}"
+        );
+    }
+}
+
+#[test]
 fn two_controls_with_a_coupled_constraint_against_fd() {
     let m = InterpretedModel::from_source(TWO_CONTROLS).expect("loads");
     let p = m.default_params();

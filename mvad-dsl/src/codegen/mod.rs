@@ -56,7 +56,13 @@ pub fn generate(k: &ModelKernels) -> TokenStream {
     let info = cg.info(k);
     let (methods, sens_methods) = cg.methods(k);
     let adjoint_methods = cg.adjoint_methods(k);
-    let second_order_methods = cg.second_order_methods(k);
+    // A flow reading a qp of the state has no symbolic second derivatives: the trait's
+    // difference-quotient defaults serve instead.
+    let second_order_methods = if k.second_order_by_differences() {
+        TokenStream::new()
+    } else {
+        cg.second_order_methods(k)
+    };
     let qp::QpItems {
         fields: qp_fields,
         init: qp_init,

@@ -122,6 +122,7 @@ impl<'a> Lowerer<'a> {
     pub(super) fn assign_qp_switches(&mut self, qps: &mut [Qp]) {
         let mut next = self.switches.len();
         for (q, qp) in qps.iter_mut().enumerate() {
+            qp.in_flow = self.qp_in_flow[q];
             let le = qp.kinds.iter().filter(|&&k| k == QpKind::Le).count();
             if self.qp_in_flow[q] && qp.dynamic && le > 0 {
                 qp.switches = Some(next);
@@ -226,6 +227,7 @@ impl<'a> Lowerer<'a> {
             b,
             dynamic,
             switches: None,
+            in_flow: false,
         }
     }
 
