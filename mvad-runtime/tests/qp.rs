@@ -130,6 +130,13 @@ fn u_at(kinds: &[ConstraintKind], data: &QpData, d: &QpData, h: f64) -> DVector<
     solved(kinds, &shifted(data, d, h)).u().clone()
 }
 
+/// u* at data + h·d, `None` if that problem does not solve (a large step can make nearly
+/// dependent constraints infeasible).
+fn try_u_at(kinds: &[ConstraintKind], data: &QpData, d: &QpData, h: f64) -> Option<DVector<f64>> {
+    let mut s = QpSolver::new(data.c.len(), kinds, QpOptions::default());
+    s.solve(&shifted(data, d, h)).ok().map(|()| s.u().clone())
+}
+
 /// One-sided derivative along d (`Right`) or the limit from −d (`Left`).
 fn derivative(s: &mut QpSolver, d: &QpData, side: Side) -> (DVector<f64>, Vec<f64>) {
     let mut du = DVector::zeros(s.nvars());
@@ -143,12 +150,13 @@ fn derivative(s: &mut QpSolver, d: &QpData, side: Side) -> (DVector<f64>, Vec<f6
 /// D(h) = (u(h) − u(−h))/2h extrapolated once, (4D(h/2) − D(h))/3 (error O(h⁴)), at steps
 /// h = 1e-2 … 1e-5.
 fn central_fd_error(kinds: &[ConstraintKind], data: &QpData, d: &QpData, du: &DVector<f64>) -> f64 {
-    let central = |h: f64| (u_at(kinds, data, d, h) - u_at(kinds, data, d, -h)) / (2.0 * h);
+    let central =
+        |h: f64| Some((try_u_at(kinds, data, d, h)? - try_u_at(kinds, data, d, -h)?) / (2.0 * h));
     [1e-2, 1e-3, 1e-4, 1e-5]
         .iter()
-        .map(|&h| {
-            let fd = (central(h / 2.0) * 4.0 - central(h)) / 3.0;
-            (fd - du).amax() / (1.0 + du.amax())
+        .filter_map(|&h| {
+            let fd = (central(h / 2.0)? * 4.0 - central(h)?) / 3.0;
+            Some((fd - du).amax() / (1.0 + du.amax()))
         })
         .fold(f64::INFINITY, f64::min)
 }
@@ -478,5 +486,70 @@ fn derivative_is_homogeneous_in_the_direction() {
         let (du, _) = derivative(&mut s, &d, side);
         let (dt, _) = derivative(&mut s, &tiny, side);
         assert!((dt * 1e200 - &du).amax() <= 1e-12 * du.amax());
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// A frozen active set (any independent subset of the inequalities, held as equalities,
+    /// the rest dropped): stationarity and the held constraints at rounding, statuses as
+    /// frozen, and the derivative of that smooth piece against central differences.
+    #[test]
+    fn frozen_active_sets_solve_and_differentiate(
+        seed in any::<u64>(), n in 2usize..=8, held_mask in any::<u8>(),
+    ) {
+        let mut rng = Rng(seed);
+        let c = constructed(&mut rng, n, n / 2, 0, 3, 1);
+        let m = c.kinds.len();
+        // The equality, and inequalities picked by the mask while fewer than n are held.
+        let mut count = 1;
+        let held: Vec<bool> = (0..m)
+            .map(|i| {
+                let pick = c.kinds[i] == ConstraintKind::Le
+                    && (held_mask >> (i % 8)) & 1 == 1
+                    && count < n;
+                count += usize::from(pick);
+                c.kinds[i] == ConstraintKind::Eq || pick
+            })
+            .collect();
+        let frozen = |data: &QpData| {
+            let mut s = QpSolver::new(n, &c.kinds, QpOptions::default());
+            s.solve_frozen(data, |i| held[i]).map(|()| s)
+        };
+        let mut s = frozen(&c.data).expect("random rows are independent");
+        let u = s.u().clone();
+        let mult = DVector::from_column_slice(s.multipliers());
+        // Random rows can make a frozen set nearly dependent (huge u and μ; the Gram matrix
+        // squares its condition number): only well-conditioned sets are compared at rounding
+        // and against central differences.
+        let stationarity = &c.data.h * &u + &c.data.c + c.data.a.transpose() * &mult;
+        let scale = 1.0 + (c.data.h.abs() * u.abs()).amax() + c.data.c.amax()
+            + (c.data.a.transpose().abs() * mult.abs()).amax();
+        prop_assert!(stationarity.amax() <= 1e-12 * scale, "{:e}", stationarity.amax() / scale);
+        for i in 0..m {
+            let slack = c.data.a.row(i).tr_dot(&u) - c.data.b[i];
+            let size = 1.0 + c.data.a.row(i).abs().tr_dot(&u.abs()) + c.data.b[i].abs();
+            prop_assert!((s.slacks()[i] - slack).abs() <= 1e-12 * size);
+            if held[i] {
+                prop_assert!(slack.abs() <= 1e-12 * size);
+                prop_assert_eq!(s.status()[i], ConstraintStatus::Active);
+            } else {
+                prop_assert_eq!(mult[i], 0.0);
+                prop_assert_eq!(s.status()[i], ConstraintStatus::Inactive);
+            }
+        }
+        let d = rng.direction(n, m);
+        let (du, _) = derivative(&mut s, &d, Side::Right);
+        // (and a piece that moves by 1e4 per unit of data is beyond central differences)
+        prop_assume!(du.amax() < 1e3);
+        let at = |h: f64| frozen(&shifted(&c.data, &d, h)).expect("solves").u().clone();
+        let central = |h: f64| (at(h) - at(-h)) / (2.0 * h);
+        let errs: Vec<f64> = [1e-2, 1e-3, 1e-4, 1e-5]
+            .iter()
+            .map(|&h| ((central(h / 2.0) * 4.0 - central(h)) / 3.0 - &du).amax() / (1.0 + du.amax()))
+            .collect();
+        let err = errs.iter().copied().fold(f64::INFINITY, f64::min);
+        prop_assert!(err <= 1e-8, "central FD errors {errs:?}, |du| {}", du.amax());
     }
 }

@@ -7,7 +7,7 @@ use models::qp_kink::{self, QpKink};
 use mvad::interp::InterpretedModel;
 use mvad::qp::ConstraintStatus;
 use mvad::{solve, DiagnosticKind, HybridModel, ModelAlloc, Options};
-use mvad_tests::model_source;
+use mvad_tests::{model_source, tight};
 use nalgebra::{DefaultAllocator, OVector};
 
 /// θ_i = (i − 50)/50, i = 0..=100: θ = 0 exactly at i = 50.
@@ -102,46 +102,13 @@ fn e3_du_dtheta_at_the_kink_is_one_sided() {
     assert_eq!(one_sided_at_zero(&loaded), (1.0, Some(0.0)));
 }
 
-/// A qp of the state read pointwise: in a guard, a reset, an observable and the final cost.
+/// A qp of the state read pointwise: in a guard, a reset, an observable and the final cost
+/// (`tests/projected.hyb`).
 mod projected {
-    mvad::hybrid! {
-        model Projected {
-            param a = 1.2; param b = 0.3; param c = 0.8; param k = 0.5;
-            state x = 0.2; state y = 1.0;
-            flow { der(x) = y; der(y) = -a * x; }
-            qp q(u, v) {
-                minimize 0.5*(u - x)^2 + 0.5*(v - y)^2 + 0.1*u*v + k*t*u;
-                subject to u + v <= c; u >= -b;
-            }
-            event hit when q.u + x >= 0.9 { y = -0.5 * y + q.v; }
-            observe pu = q.u;
-            cost = final(q.u^2 + 3*q.v) + integral(x^2);
-            horizon 2;
-        }
-    }
+    mvad::hybrid!(include "tests/projected.hyb");
 }
 
-const PROJECTED: &str = "model Projected {
-    param a = 1.2; param b = 0.3; param c = 0.8; param k = 0.5;
-    state x = 0.2; state y = 1.0;
-    flow { der(x) = y; der(y) = -a * x; }
-    qp q(u, v) {
-        minimize 0.5*(u - x)^2 + 0.5*(v - y)^2 + 0.1*u*v + k*t*u;
-        subject to u + v <= c; u >= -b;
-    }
-    event hit when q.u + x >= 0.9 { y = -0.5 * y + q.v; }
-    observe pu = q.u;
-    cost = final(q.u^2 + 3*q.v) + integral(x^2);
-    horizon 2;
-}";
-
-fn tight() -> Options {
-    Options {
-        rtol: 1e-12,
-        atol: 1e-14,
-        ..Options::default()
-    }
-}
+const PROJECTED: &str = include_str!("projected.hyb");
 
 #[test]
 fn pointwise_qps_of_the_state_against_finite_differences() {

@@ -10,7 +10,7 @@
 use models::qp_cart::{QpCart, MINMAX_SOURCE};
 use mvad::interp::InterpretedModel;
 use mvad::{fd_gradient, solve, HybridModel, ModelAlloc, Options, Solution};
-use mvad_tests::model_source;
+use mvad_tests::{model_source, tight};
 use nalgebra::DefaultAllocator;
 
 /// Two controls sharing a budget, one pinned by an equality: u₁ + u₂ ≤ b, u₁ − u₂ = d·x.
@@ -25,14 +25,6 @@ const TWO_CONTROLS: &str = "model TwoControls {
     cost = integral(x^2 + y^2) + final(ctl.u1);
     horizon 3;
 }";
-
-fn tight() -> Options {
-    Options {
-        rtol: 1e-12,
-        atol: 1e-14,
-        ..Options::default()
-    }
-}
 
 fn run<M: HybridModel>(m: &M, p: &nalgebra::OVector<f64, M::P>) -> Solution
 where

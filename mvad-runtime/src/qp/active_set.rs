@@ -51,6 +51,10 @@ pub(super) struct Tols {
 /// second round is rare and a third means the data are at the edge of what doubles resolve.
 const ROUNDS: usize = 3;
 
+/// Working sets whose Gram factor has a pivot ratio L_jj²/G_jj below this (an angle of sine
+/// 1e-2 between a normal and the others) get one step of iterative refinement.
+const REFINE_BELOW: f64 = 1e-4;
+
 /// The iteration's data and state; buffers sized once for n variables and m constraints.
 #[derive(Clone, Debug)]
 pub(super) struct Dual {
@@ -317,6 +321,30 @@ impl Dual {
             self.lam[a] = self.sign[a] * (self.dot(i, &self.v0) - self.beta[i]);
         }
         self.gram.solve_mut(&mut self.lam);
+        self.set_v_from_lam();
+        // One step of iterative refinement with the same factor when the working set is
+        // poorly conditioned: the working constraints' residual rₖ = σₖ(w_{iₖ}ᵀv − β_{iₖ})
+        // gives G δλ = r, λ += δλ, recovering what the Gram matrix's squared condition number
+        // costs (stationarity holds by construction of v).
+        let k = self.idx.len();
+        if k == 0 || self.gram.worst_pivot() > REFINE_BELOW {
+            return;
+        }
+        self.r.clear();
+        for a in 0..k {
+            let i = self.idx[a];
+            self.r
+                .push(self.sign[a] * (self.dot(i, &self.v) - self.beta[i]));
+        }
+        self.gram.solve_mut(&mut self.r);
+        for a in 0..k {
+            self.lam[a] += self.r[a];
+        }
+        self.set_v_from_lam();
+    }
+
+    /// v = v₀ − Σ λₖσₖw_{iₖ}.
+    fn set_v_from_lam(&mut self) {
         self.v.copy_from(&self.v0);
         for a in 0..self.idx.len() {
             self.v.axpy(

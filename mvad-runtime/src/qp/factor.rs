@@ -20,6 +20,9 @@ pub(super) struct SpdFactor {
     diag: Vec<f64>,
     /// Whether `chol` is a valid factor.
     valid: bool,
+    /// The smallest L_jj²/M_jj of the last factorisation (1 when k = 0): sin² of the worst
+    /// angle between a column and the earlier ones, a measure of conditioning.
+    worst: f64,
 }
 
 impl SpdFactor {
@@ -30,6 +33,7 @@ impl SpdFactor {
             spare: Vec::with_capacity(kmax * kmax),
             diag: Vec::with_capacity(kmax),
             valid: false,
+            worst: 1.0,
         }
     }
 
@@ -43,6 +47,7 @@ impl SpdFactor {
         mut entry: impl FnMut(usize, usize) -> f64,
     ) -> Result<(), usize> {
         self.valid = false;
+        self.worst = 1.0;
         if k == 0 {
             // Nothing to factor: keep the buffer where it is.
             self.diag.clear();
@@ -71,6 +76,7 @@ impl SpdFactor {
         let l = ch.l_dirty();
         let bad = (0..k).find(|&j| {
             let d = l[(j, j)];
+            self.worst = self.worst.min(d * d / self.diag[j]);
             !(d.is_finite() && d * d > tol2 * self.diag[j] && self.diag[j] > 0.0)
         });
         self.chol = Some(ch);
@@ -81,6 +87,12 @@ impl SpdFactor {
                 Ok(())
             }
         }
+    }
+
+    /// The smallest L_jj²/M_jj of the last factorisation: 1 for orthogonal columns, near 0
+    /// for nearly dependent ones.
+    pub fn worst_pivot(&self) -> f64 {
+        self.worst
     }
 
     /// b := M⁻¹ b for the last successful factorisation (b has k entries).

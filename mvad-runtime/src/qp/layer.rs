@@ -16,6 +16,7 @@ use super::{
     ConstraintKind, ConstraintStatus, QpData, QpError, QpLayerInfo, QpOptions, QpSolver, Side,
 };
 use crate::model::Switches;
+use nalgebra::{DMatrix, DVector};
 
 /// The point a cached result belongs to.
 #[derive(Clone, Debug)]
@@ -53,7 +54,7 @@ pub(super) struct Layer {
     /// The frozen active set of the current evaluation.
     bits: Vec<bool>,
     /// Scratch: u* while derivatives are taken.
-    u_star: nalgebra::DVector<f64>,
+    u_star: DVector<f64>,
     key: Key,
 }
 
@@ -79,7 +80,7 @@ impl Layer {
             du: vec![0.0; v],
             dm: vec![0.0; m],
             bits: vec![false; m],
-            u_star: nalgebra::DVector::zeros(v),
+            u_star: DVector::zeros(v),
             key: Key {
                 valid: false,
                 derivs: false,
@@ -191,16 +192,22 @@ impl Layer {
         }
     }
 
-    /// ∂u*/∂w into column w of the rows of `du`.
-    fn differentiate(&mut self, side: Side, nw: usize, du: &mut [f64]) -> Result<(), QpError> {
-        let mut d = Directions {
+    /// The parts that derivatives along the data columns need, and beside them A and the
+    /// u* scratch (borrowed apart).
+    fn directions(&mut self) -> (Directions<'_>, &DMatrix<f64>, &mut DVector<f64>) {
+        let d = Directions {
             solver: &mut self.solver,
             jac: &self.jac,
             dir: &mut self.dir,
             du: &mut self.du,
             dm: &mut self.dm,
         };
-        d.each(side, nw, |w, col| match col {
+        (d, &self.data.a, &mut self.u_star)
+    }
+
+    /// ∂u*/∂w into column w of the rows of `du`.
+    fn differentiate(&mut self, side: Side, nw: usize, du: &mut [f64]) -> Result<(), QpError> {
+        self.directions().0.each(side, nw, |w, col| match col {
             None => du.iter_mut().skip(w).step_by(nw).for_each(|v| *v = 0.0),
             Some((dw, _, _)) => {
                 for (k, &v) in dw.iter().enumerate() {
@@ -233,15 +240,8 @@ impl Layer {
         self.key.valid = false;
         fill(&mut self.flat, Some(&mut self.jac[..]));
         self.solve(true)?;
-        let (a, u_star) = (&self.data.a, &mut self.u_star);
-        u_star.copy_from(self.solver.u());
-        let mut d = Directions {
-            solver: &mut self.solver,
-            jac: &self.jac,
-            dir: &mut self.dir,
-            du: &mut self.du,
-            dm: &mut self.dm,
-        };
+        let (mut d, a, u_star) = self.directions();
+        u_star.copy_from(d.solver.u());
         d.each(Side::Right, grad.len(), |w, col| {
             grad[w] = match col {
                 None => 0.0,
