@@ -154,9 +154,10 @@ pub struct EventRecord {
     pub mode_before: usize,
     /// Mode after the event.
     pub mode_after: usize,
-    /// ∇ₓg · f⁻ at t_k⁻ (signed).
+    /// The total rate of the guard at t_k⁻, dg/dt = ∇ₓg · f⁻ + ∂ₜg (signed): what t_k' divides
+    /// by and what the grazing test measures (a pure time guard `t >= p` has slope 1).
     pub guard_slope: f64,
-    /// ∂ₜg at t_k (zero for time-independent guards); t_k' divides by guard_slope + guard_dt.
+    /// ∂ₜg at t_k (zero for time-independent guards), the part of `guard_slope` not along f.
     pub guard_dt: f64,
     /// Whether the crossing passed the transversality (cosine) test.
     pub transversal: bool,

@@ -24,6 +24,7 @@ pub mod output;
 pub mod plot;
 pub mod progress;
 pub mod qp_output;
+pub mod report;
 pub mod simulate;
 #[cfg(test)]
 pub mod spec_keys;
@@ -56,6 +57,8 @@ pub enum Command {
     Sweep(sweep::SweepArgs),
     /// Error against wall time over tolerances 1e-3 … 1e-12, for MV-AD and central FD.
     Workprec(workprec::WorkprecArgs),
+    /// Run a suite of cases across methods and tolerances: a markdown table and diagrams.
+    Report(report::ReportArgs),
 }
 
 /// Options every command takes.
@@ -156,7 +159,7 @@ where
             return ExitCode::from(status);
         }
     };
-    let json = cli.common().json;
+    let json = cli.common().is_some_and(|c| c.json);
     match dispatch(&cli, load) {
         Ok(out) => {
             if write_stdout(&out) {
@@ -183,16 +186,18 @@ where
 }
 
 impl Cli {
-    /// The common options of whichever command was given.
-    pub fn common(&self) -> &Common {
+    /// The common options of whichever command was given (`report` runs a suite, not one
+    /// model, and has none).
+    pub fn common(&self) -> Option<&Common> {
         match &self.command {
-            Command::Check(a) => &a.common,
-            Command::Simulate(a) => &a.common,
-            Command::Grad(a) => &a.common,
-            Command::Measure(a) => &a.common,
-            Command::Fdcheck(a) => &a.common,
-            Command::Sweep(a) => &a.common,
-            Command::Workprec(a) => &a.common,
+            Command::Check(a) => Some(&a.common),
+            Command::Simulate(a) => Some(&a.common),
+            Command::Grad(a) => Some(&a.common),
+            Command::Measure(a) => Some(&a.common),
+            Command::Fdcheck(a) => Some(&a.common),
+            Command::Sweep(a) => Some(&a.common),
+            Command::Workprec(a) => Some(&a.common),
+            Command::Report(_) => None,
         }
     }
 }
@@ -204,7 +209,12 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path) -> Result<M, String>,
 {
-    let common = cli.common();
+    let Some(common) = cli.common() else {
+        return match &cli.command {
+            Command::Report(a) => report::run(a),
+            _ => Err(CliError::Input("error: no model given".into())),
+        };
+    };
     let model = load(&common.model).map_err(CliError::Input)?;
     let file = common.model.display().to_string();
     match &cli.command {
@@ -215,6 +225,7 @@ where
         Command::Fdcheck(a) => fdcheck::run(&model, &file, a),
         Command::Sweep(a) => sweep::run(&model, &file, a),
         Command::Workprec(a) => workprec::run(&model, &file, a),
+        Command::Report(a) => report::run(a),
     }
 }
 
