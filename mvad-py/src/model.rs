@@ -230,7 +230,7 @@ impl Model {
         let value = py.detach(|| {
             self.run(&req, |m, s| {
                 let sol = solve(m, &s.params, &s.opts)?;
-                Ok(grad_json(info, &sol, &s.wrt, mode))
+                Ok(grad_json(info, m.qps(), &sol, &s.wrt, mode))
             })
         })?;
         json_to_py(py, &value)

@@ -9,6 +9,7 @@
 //! binary adds its hints (`--t-end`, `--method`) when it reports an error (`cli::solve_err`).
 
 use crate::integrate::StepError;
+use crate::qp::QpError;
 use crate::solution::{Diagnostic, DiagnosticKind};
 use std::fmt;
 
@@ -84,6 +85,15 @@ pub enum SolveError {
         index: usize,
         /// How many observables the model has.
         count: usize,
+    },
+    /// A qp of the model could not be solved (infeasible, not strictly convex, degenerate...).
+    Qp {
+        /// Time of the evaluation (0 for a static qp).
+        t: f64,
+        /// The qp's name.
+        qp: String,
+        /// Why.
+        error: QpError,
     },
     /// A parameter index is out of range (finite differences).
     NoSuchParam {
@@ -169,6 +179,7 @@ impl fmt::Display for SolveError {
             SolveError::NoSuchParam { index, count } => {
                 write!(f, "parameter {index} out of range (the model has {count})")
             }
+            SolveError::Qp { t, qp, error } => write!(f, "qp `{qp}` at t = {t}: {error}"),
         }
     }
 }

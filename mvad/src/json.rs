@@ -2,12 +2,20 @@
 //! prints [`grad_json`], and the Python package returns the same object as a dict.
 //! Non-finite numbers become `null` (JSON has no NaN or ∞).
 
+use mvad_runtime::qp::{QpLayerInfo, QpState};
 use mvad_runtime::solution::{Diagnostic, EventRecord, Solution, Stats};
 use mvad_runtime::ModelInfo;
 use serde_json::{Map, Value};
 
-/// The spec's JSON object for a solution, derivatives restricted to `wrt`.
-pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) -> Value {
+/// The spec's JSON object for a solution, derivatives restricted to `wrt` (with the qp keys
+/// when the model has qps).
+pub fn grad_json(
+    info: &ModelInfo,
+    qps: &[QpLayerInfo],
+    sol: &Solution,
+    wrt: &[usize],
+    mode: &str,
+) -> Value {
     let all: Vec<usize> = (0..info.params.len()).collect();
     let mut m = Map::new();
     m.insert("model".into(), Value::from(info.name.clone()));
@@ -27,6 +35,7 @@ pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) ->
     m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
     m.insert("stats".into(), stats_json(&sol.stats));
     m.insert("mode".into(), Value::from(mode));
+    add_qp_keys(&mut m, qps, &info.params, sol, wrt);
     Value::Object(m)
 }
 
@@ -145,4 +154,43 @@ mod tests {
         assert_eq!(num(f64::INFINITY), Value::Null);
         assert_eq!(num(1.5), serde_json::json!(1.5));
     }
+}
+
+/// `{NAME: {"value": {VAR: ..}, "active": [i, ..], "weakly_active": [i, ..],
+/// "multipliers": [..]}}`, constraints numbered from 0 in declaration order.
+pub fn qp_json(qps: &[QpLayerInfo], states: &[QpState]) -> Value {
+    let mut m = Map::new();
+    for (info, st) in qps.iter().zip(states) {
+        let all: Vec<usize> = (0..info.vars.len()).collect();
+        let mut q = Map::new();
+        q.insert("value".into(), by_name(&info.vars, &all, &st.u));
+        let list = |v: Vec<usize>| Value::Array(v.into_iter().map(Value::from).collect());
+        q.insert("active".into(), list(st.active()));
+        q.insert("weakly_active".into(), list(st.weakly_active()));
+        q.insert(
+            "multipliers".into(),
+            Value::Array(st.multipliers.iter().map(|&x| num(x)).collect()),
+        );
+        m.insert(info.name.clone(), Value::Object(q));
+    }
+    Value::Object(m)
+}
+
+/// Adds `"qp"`, `"gradient_left"` and `"gradient_right"` to a `grad` object when the model
+/// has qps: `gradient` stays the derivative from the right, the left one differs only at a
+/// kink.
+pub fn add_qp_keys(
+    m: &mut Map<String, Value>,
+    qps: &[QpLayerInfo],
+    params: &[String],
+    sol: &Solution,
+    wrt: &[usize],
+) {
+    if qps.is_empty() {
+        return;
+    }
+    m.insert("qp".into(), qp_json(qps, &sol.qp));
+    let left = sol.gradient_left.as_deref().unwrap_or(&sol.gradient);
+    m.insert("gradient_left".into(), by_name(params, wrt, left));
+    m.insert("gradient_right".into(), by_name(params, wrt, &sol.gradient));
 }

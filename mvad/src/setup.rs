@@ -305,6 +305,8 @@ where
     })?;
     if opts.t_end.is_none() {
         match model.horizon(&params) {
+            // A model without states has no time (its cost is static).
+            None if info.states.is_empty() => {}
             None => {
                 return Err(SetupError::NoHorizon {
                     model: info.name.clone(),

@@ -4,6 +4,7 @@
 
 use clap::Args;
 use mvad::json::grad_json;
+use mvad::qp::QpLayerInfo;
 use mvad::runtime::solution::Solution;
 use mvad::runtime::solve::solve;
 use mvad::setup::check_mode;
@@ -13,6 +14,7 @@ use nalgebra::DefaultAllocator;
 use super::output::{
     diagnostics_text, g, json_text, more_events, param_header, Table, MAX_EVENT_ROWS,
 };
+use super::qp_output::qp_text;
 use super::{setup, setup_err, solve_err, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
@@ -37,14 +39,26 @@ where
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let info = model.info();
     if args.common.json {
-        Ok(json_text(&grad_json(info, &sol, &s.wrt, &args.mode)))
+        Ok(json_text(&grad_json(
+            info,
+            model.qps(),
+            &sol,
+            &s.wrt,
+            &args.mode,
+        )))
     } else {
-        Ok(grad_text(info, file, &sol, &s.wrt))
+        Ok(grad_text(info, model.qps(), file, &sol, &s.wrt))
     }
 }
 
 /// The readable form: cost, gradient table, event table, atom table, warnings, stats.
-pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) -> String {
+pub fn grad_text(
+    info: &ModelInfo,
+    qps: &[QpLayerInfo],
+    file: &str,
+    sol: &Solution,
+    wrt: &[usize],
+) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "model {} ({file}), T = {}\n",
@@ -53,15 +67,26 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
     ));
     s.push_str(&format!("cost C = {}\n\n", g(sol.cost, 15)));
 
-    let mut t = Table::new(&["param", "value", "dC/dθ"]);
+    let left = sol.gradient_left.as_deref();
+    let header: &[&str] = if left.is_some() {
+        &["param", "value", "dC/dθ (right)", "dC/dθ (left)"]
+    } else {
+        &["param", "value", "dC/dθ"]
+    };
+    let mut t = Table::new(header);
     for &k in wrt {
-        t.row(vec![
+        let mut row = vec![
             info.params[k].clone(),
             g(sol.params.get(k).copied().unwrap_or(f64::NAN), 10),
             g(sol.gradient.get(k).copied().unwrap_or(f64::NAN), 15),
-        ]);
+        ];
+        if let Some(l) = left {
+            row.push(g(l.get(k).copied().unwrap_or(f64::NAN), 15));
+        }
+        t.row(row);
     }
     s.push_str(&t.render());
+    s.push_str(&qp_text(qps, &sol.qp));
 
     s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
     if !sol.events.is_empty() {

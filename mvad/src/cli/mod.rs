@@ -24,6 +24,7 @@ pub mod measure;
 pub mod output;
 pub mod plot;
 pub mod progress;
+pub mod qp_output;
 pub mod report;
 pub mod simulate;
 #[cfg(test)]

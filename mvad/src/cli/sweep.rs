@@ -13,12 +13,13 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::{Const, DefaultAllocator, OVector};
 use serde_json::{Map, Value};
 
-use super::output::{g, json_text, num, Table};
+use super::output::{diagnostics_json, g, json_text, num, Table};
 use super::progress::Progress;
 use super::{
     observable_index, param_index, parse_number, setup, solve_err, CliError, CmdResult, Common,
 };
 use mvad::json::grad_json;
+use mvad::json::qp_json;
 
 /// Arguments of `mvad sweep`.
 #[derive(Args, Debug)]
@@ -153,7 +154,14 @@ where
                     "event_time".into(),
                     first.map(|e| num(e.t)).unwrap_or(Value::Null),
                 );
-                m.insert("run".into(), grad_json(info, sol, &s.wrt, "forward"));
+                if !model.qps().is_empty() {
+                    m.insert("qp".into(), qp_json(model.qps(), &sol.qp));
+                }
+                m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
+                m.insert(
+                    "run".into(),
+                    grad_json(info, model.qps(), sol, &s.wrt, "forward"),
+                );
                 Value::Object(m)
             })
             .collect();
