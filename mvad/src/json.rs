@@ -144,18 +144,6 @@ pub fn stats_json(s: &Stats) -> Value {
     Value::Object(m)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn nonfinite_numbers_are_null() {
-        assert_eq!(num(f64::NAN), Value::Null);
-        assert_eq!(num(f64::INFINITY), Value::Null);
-        assert_eq!(num(1.5), serde_json::json!(1.5));
-    }
-}
-
 /// `{NAME: {"value": {VAR: ..}, "active": [i, ..], "weakly_active": [i, ..],
 /// "multipliers": [..]}}`, constraints numbered from 0 in declaration order.
 pub fn qp_json(qps: &[QpLayerInfo], states: &[QpState]) -> Value {
@@ -193,4 +181,16 @@ pub fn add_qp_keys(
     let left = sol.gradient_left.as_deref().unwrap_or(&sol.gradient);
     m.insert("gradient_left".into(), by_name(params, wrt, left));
     m.insert("gradient_right".into(), by_name(params, wrt, &sol.gradient));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nonfinite_numbers_are_null() {
+        assert_eq!(num(f64::NAN), Value::Null);
+        assert_eq!(num(f64::INFINITY), Value::Null);
+        assert_eq!(num(1.5), serde_json::json!(1.5));
+    }
 }
