@@ -11,6 +11,8 @@
 //! | [`stiff_relay`] | lag with τ = 1e-8 | stiffness (`--method auto`) |
 //! | [`zeno_ball`] | e = 0.5 to T = 3 | Zeno accumulation, tail of the series |
 //! | [`ceiling`] | near-grazing impact | t' ∝ 1/√(apex − c) |
+//! | [`qp_kink`] | the seed paper's E3 | a static qp, its kink at θ = 0, no states |
+//! | [`qp_cart`] | a saturating qp controller, a wall | a qp in the flow, its active-set changes as kinks |
 //!
 //! [`paper`] holds the numbers the seed paper printed (Tables 1 and 2), which the
 //! examples `table1` and `table2` print beside ours.
@@ -19,18 +21,22 @@ pub mod bouncing_ball;
 pub mod ceiling;
 pub mod e2_sweep;
 pub mod paper;
+pub mod qp_cart;
+pub mod qp_kink;
 pub mod stiff_relay;
 pub mod thermostat;
 pub mod zeno_ball;
 
 /// The `.hyb` sources, by file name (for tests that load them at run time).
-pub const SOURCES: [(&str, &str); 6] = [
+pub const SOURCES: [(&str, &str); 8] = [
     ("bouncing_ball.hyb", include_str!("../bouncing_ball.hyb")),
     ("e2_sweep.hyb", include_str!("../e2_sweep.hyb")),
     ("thermostat.hyb", include_str!("../thermostat.hyb")),
     ("stiff_relay.hyb", include_str!("../stiff_relay.hyb")),
     ("zeno_ball.hyb", include_str!("../zeno_ball.hyb")),
     ("ceiling.hyb", include_str!("../ceiling.hyb")),
+    ("qp_kink.hyb", include_str!("../qp_kink.hyb")),
+    ("qp_cart.hyb", include_str!("../qp_cart.hyb")),
 ];
 
 /// Default options but for the tolerances (rtol, atol): the reference runs of the tests,

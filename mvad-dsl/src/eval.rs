@@ -4,9 +4,10 @@
 //! topological order, instruction i writing register i from earlier registers. Evaluation
 //! reads `&[f64]` slices (no nalgebra) and writes into caller-provided scratch, so a call
 //! allocates nothing. Every instruction computes exactly what [`crate::ir::apply_node`]
-//! and the generated code compute, operation for operation.
+//! and the generated code compute, operation for operation; qp solutions and their
+//! derivatives are read from the [`QpValues`] of the run.
 
-use crate::ir::{Cmp, ExprArena, Func, Node, Point};
+use crate::ir::{Cmp, ExprArena, Func, Node, Point, QpValues, Wrt};
 use crate::schedule::Kernel;
 
 /// One tape instruction; operands are register indices.
@@ -25,6 +26,8 @@ enum Op {
     Call(Func, u32),
     Select(Cmp, u32, u32, u32),
     Switch(u32, u32, u32),
+    QpSol(u32),
+    QpDeriv(u32, Wrt),
 }
 
 /// A kernel compiled to register code.
@@ -33,6 +36,8 @@ pub struct Tape {
     ops: Vec<Op>,
     outputs: Vec<(u32, u32)>,
     len: usize,
+    reads_qp: bool,
+    reads_qp_derivs: bool,
 }
 
 impl Tape {
@@ -57,6 +62,8 @@ impl Tape {
                 Node::Call(f, a) => Op::Call(f, g(a)),
                 Node::Select(c, x, a, b) => Op::Select(c, g(x), g(a), g(b)),
                 Node::Switch(j, a, b) => Op::Switch(j, g(a), g(b)),
+                Node::QpSol(k) => Op::QpSol(k),
+                Node::QpDeriv(k, w) => Op::QpDeriv(k, w),
             };
             ops.push(op);
             reg.insert(id, r as u32);
@@ -66,11 +73,27 @@ impl Tape {
             .iter()
             .map(|&(s, e)| (s as u32, reg.get(&e).copied().unwrap_or(0)))
             .collect();
+        let reads_qp = ops
+            .iter()
+            .any(|o| matches!(o, Op::QpSol(_) | Op::QpDeriv(..)));
+        let reads_qp_derivs = ops.iter().any(|o| matches!(o, Op::QpDeriv(..)));
         Tape {
             ops,
             outputs,
             len: kernel.len,
+            reads_qp,
+            reads_qp_derivs,
         }
+    }
+
+    /// Whether the tape reads qp solutions (then they must be passed to [`Tape::run_qp`]).
+    pub fn reads_qp(&self) -> bool {
+        self.reads_qp
+    }
+
+    /// Whether the tape reads derivatives of qp solutions.
+    pub fn reads_qp_derivs(&self) -> bool {
+        self.reads_qp_derivs
     }
 
     /// Registers needed by [`Tape::run`].
@@ -102,6 +125,11 @@ impl Tape {
     /// [`Tape::run`] with switch bits beyond the first 64: `at.sw` holds bits 0..64 and
     /// `hi` the rest (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent).
     pub fn run_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> bool {
+        self.run_qp(at, hi, &QpValues::NONE, regs)
+    }
+
+    /// [`Tape::run_with`] reading qp solutions and their derivatives from `qp`.
+    pub fn run_qp(&self, at: &Point<'_>, hi: &[u64], qp: &QpValues<'_>, regs: &mut [f64]) -> bool {
         if regs.len() < self.ops.len() {
             return false;
         }
@@ -139,6 +167,8 @@ impl Tape {
                         r(b)
                     }
                 }
+                Op::QpSol(k) => qp.leaf(&Node::QpSol(k)),
+                Op::QpDeriv(k, w) => qp.leaf(&Node::QpDeriv(k, w)),
             };
             regs[i] = v;
         }
@@ -153,7 +183,19 @@ impl Tape {
 
     /// [`Tape::eval`] with switch bits beyond the first 64 in `hi` (see [`Tape::run_with`]).
     pub fn eval_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64], out: &mut [f64]) {
-        if !self.run_with(at, hi, regs) {
+        self.eval_qp(at, hi, &QpValues::NONE, regs, out);
+    }
+
+    /// [`Tape::eval_with`] reading qp solutions and their derivatives from `qp`.
+    pub fn eval_qp(
+        &self,
+        at: &Point<'_>,
+        hi: &[u64],
+        qp: &QpValues<'_>,
+        regs: &mut [f64],
+        out: &mut [f64],
+    ) {
+        if !self.run_qp(at, hi, qp, regs) {
             out.iter_mut().take(self.len).for_each(|o| *o = f64::NAN);
             return;
         }

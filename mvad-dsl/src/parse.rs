@@ -136,6 +136,11 @@ fn significant(pair: Pair<'_, Rule>) -> impl Iterator<Item = Pair<'_, Rule>> {
                 | Rule::kw_event
                 | Rule::kw_when
                 | Rule::kw_observe
+                | Rule::kw_qp
+                | Rule::kw_minimize
+                | Rule::kw_subject
+                | Rule::kw_to
+                | Rule::dot
                 | Rule::kw_cost
                 | Rule::kw_horizon
                 | Rule::kw_der
@@ -232,6 +237,7 @@ fn build_item(pair: Pair<'_, Rule>) -> Res<ast::Item> {
         }
         Rule::event_decl => ast::Item::Event(build_event(pair)?),
         Rule::cost_decl => ast::Item::Cost(build_cost(pair)?),
+        Rule::qp_decl => ast::Item::Qp(qp::build_qp(pair)?),
         Rule::horizon_decl => {
             let mut it = significant(pair);
             ast::Item::Horizon(ast::Horizon {
@@ -362,6 +368,7 @@ fn build_cost_term(pair: Pair<'_, Rule>) -> Res<ast::CostTerm> {
                 let value = build_expr(next(&mut it, s, "sum argument")?)?;
                 kind = Some(ast::CostKind::Sum { event, value });
             }
+            Rule::static_term => kind = Some(ast::CostKind::Static(build_expr(p)?)),
             _ => return Err(internal(span_of(&p), "unexpected part of a cost term")),
         }
     }
@@ -537,6 +544,18 @@ fn build_primary(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
             };
             Ok((Expr { kind, span }, 1))
         }
+        Rule::column => {
+            let mut it = significant(pair);
+            let table = ident(next(&mut it, span, "qp name")?);
+            let column = ident(next(&mut it, span, "qp variable")?);
+            Ok((
+                Expr {
+                    kind: ExprKind::Column { table, column },
+                    span,
+                },
+                1,
+            ))
+        }
         Rule::paren => {
             // The parentheses belong to the expression's span, so `-(g + v)` covers `)`.
             let mut it = significant(pair);
@@ -589,6 +608,8 @@ fn build_primary(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
         _ => Err(internal(span, "unexpected operand")),
     }
 }
+
+mod qp;
 
 #[cfg(test)]
 pub(crate) mod tests;

@@ -14,7 +14,7 @@
 //! method's ∂ₓ(G_x S + G_θ)·v and ∂ₜ(G_x S + G_θ)), all taken in the same arena.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, Node, Program};
+use crate::ir::{Direction, ExprArena, ExprId, Node, Program, QpKind, Wrt};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -167,6 +167,31 @@ pub struct EventMeta {
     pub has_cost: bool,
 }
 
+/// The kernels of one qp: its data and their derivatives, which the back ends hand to the
+/// runtime's qp solver.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QpKernels {
+    /// The qp's name.
+    pub name: String,
+    /// Its variables' names.
+    pub vars: Vec<String>,
+    /// Each constraint's kind.
+    pub kinds: Vec<QpKind>,
+    /// The [`Node::QpSol`] index of its first variable.
+    pub offset: usize,
+    /// Whether the data read states or t.
+    pub dynamic: bool,
+    /// The switch index of its first switch bit, if a flow reads it ([`crate::ir::Qp::switches`]).
+    pub switches: Option<usize>,
+    /// Whether a flow or ℓ reads its solution.
+    pub in_flow: bool,
+    /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
+    pub data: Kernel,
+    /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
+    /// ([`Wrt::column`]).
+    pub data_jac: Kernel,
+}
+
 /// Everything the back ends need: the arena, names and one kernel per model function.
 #[derive(Clone, Debug)]
 pub struct ModelKernels {
@@ -206,10 +231,12 @@ pub struct ModelKernels {
     pub observe_jac: Kernel,
     /// ℓ and (ℓ_x, ℓ_θ, ℓ), if the cost has `integral` terms.
     pub running_cost: Option<GradKernels>,
-    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` terms.
+    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` or static terms.
     pub final_cost: Option<GradKernels>,
     /// The second-order kernels of ℓ as one row (with ∂ₜℓ), if the cost has `integral` terms.
     pub running_cost_second: Option<SecondOrderKernels>,
+    /// Per qp, in declaration order.
+    pub qps: Vec<QpKernels>,
 }
 
 impl ModelKernels {
@@ -248,7 +275,28 @@ impl ModelKernels {
         if let Some(c) = &self.running_cost_second {
             v.extend([&c.dx, &c.dt]);
         }
+        for q in &self.qps {
+            v.extend([&q.data, &q.data_jac]);
+        }
         v
+    }
+
+    /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
+    pub fn nswitches(&self) -> usize {
+        self.switches.len()
+            + crate::ir::qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
+    }
+
+    /// Whether the second-order products must be difference quotients: a flow or ℓ reads
+    /// the solution of a qp of the state, whose second derivatives the kernels do not have
+    /// (the `QpDeriv` leaves are first derivatives; see `ir::Node::QpDeriv`).
+    pub fn second_order_by_differences(&self) -> bool {
+        self.qps.iter().any(|q| q.dynamic && q.in_flow)
+    }
+
+    /// Number of qp solution variables (all qps).
+    pub fn nqp_vars(&self) -> usize {
+        self.qps.iter().map(|q| q.vars.len()).sum()
     }
 }
 
@@ -401,7 +449,10 @@ pub fn kernels(program: &Program) -> ModelKernels {
             let depends_on_t = m
                 .flow
                 .iter()
-                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)));
+                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)))
+                || ft
+                    .iter()
+                    .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::QpDeriv(_, Wrt::Time))));
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
@@ -455,6 +506,36 @@ pub fn kernels(program: &Program) -> ModelKernels {
         second_order(&mut ar, &[c], &gx, &gp, n, p, true)
     });
 
+    let qps = program
+        .qps
+        .iter()
+        .map(|q| {
+            let data = q.data();
+            let jac = jacobian(&mut ar, &data, Var::State, n);
+            let dp = jacobian(&mut ar, &data, Var::Param, p);
+            let dt = jacobian(&mut ar, &data, |_| Var::Time, 1);
+            // Interleave to slot d·(n + p + 1) + w.
+            let w = n + p + 1;
+            let mut dj = Vec::with_capacity(data.len() * w);
+            for d in 0..data.len() {
+                dj.extend_from_slice(&jac[d * n..(d + 1) * n]);
+                dj.extend_from_slice(&dp[d * p..(d + 1) * p]);
+                dj.push(dt[d]);
+            }
+            QpKernels {
+                name: q.name.clone(),
+                vars: q.vars.clone(),
+                kinds: q.kinds.clone(),
+                offset: q.offset,
+                dynamic: q.dynamic,
+                switches: q.switches,
+                in_flow: q.in_flow,
+                data: Kernel::new(&ar, &data),
+                data_jac: Kernel::new(&ar, &dj),
+            }
+        })
+        .collect();
+
     ModelKernels {
         name: program.name.clone(),
         states: program.states.clone(),
@@ -486,6 +567,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
         running_cost,
         final_cost,
         running_cost_second,
+        qps,
         arena: ar,
     }
 }

@@ -23,16 +23,21 @@ pub mod event;
 pub mod fd;
 pub mod integrate;
 pub mod measure;
+pub mod qp;
 pub mod reduce;
+pub mod sample;
 pub mod sens;
 pub mod sink;
 pub mod solution;
 pub mod solve;
+pub mod vjp;
 
 pub use adjoint::{vjp, Cotangents, Vjp};
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
+pub use qp::{QpError, QpSolver};
+pub use sample::{sample, Samples};
 pub use sink::{EventCounts, EventSink, EventView, Stream};
 pub use solution::{
     Diagnostic, DiagnosticKind, EventRecord, GradientMode, Method, Options, Segment, Solution,

@@ -27,6 +27,9 @@
 //!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
 //! - Gradient methods *overwrite* every entry of their outputs (zeros included).
 
+use crate::qp::{QpError, QpLayerInfo, QpState, Side};
+
+pub mod differences;
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Bound alias for the allocators a model's dimensions need (one line in every where-clause).
@@ -454,6 +457,41 @@ where
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
+
+    // ---- optimisation layers (qp) ------------------------------------------------------
+    //
+    // A model's qps are solved inside its evaluation methods (see `crate::qp::QpBank`); the
+    // runtime only reports on them. A model without qps keeps these defaults.
+
+    /// The model's qp layers, in declaration order.
+    fn qps(&self) -> &[QpLayerInfo] {
+        &[]
+    }
+    /// Every qp solved at (t, x, θ): solutions, multipliers and constraint statuses, for
+    /// reports (it may allocate); the first failure as (qp index, error).
+    fn qp_states(
+        &self,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> Result<Vec<QpState>, (usize, QpError)> {
+        let _ = (t, x, p);
+        Ok(Vec::new())
+    }
+    /// Chooses the one-sided derivative the qps give at a kink from now on (right by
+    /// default).
+    fn set_qp_side(&self, side: Side) {
+        let _ = side;
+    }
+    /// The qp failure behind the non-finite values of the last evaluation, if any.
+    fn qp_failure(&self) -> Option<(usize, QpError)> {
+        None
+    }
+    /// The first weakly active constraint of the last evaluation, as (qp, constraint): the
+    /// point is a kink of the qp's solution map. Allocates nothing.
+    fn qp_kink(&self) -> Option<(usize, usize)> {
+        None
+    }
 }
 
 /// Capability: the forward-sensitivity right-hand side.
@@ -562,32 +600,7 @@ where
     ) where
         Self: HybridModel,
     {
-        let (eps, xu, xd) = flow_points(pt.t, pt.x, v);
-        let (mut vx_dn, mut vp_dn) = (vx.clone_owned(), vp.clone_owned());
-        self.rhs_vjp(
-            Point {
-                t: pt.t + eps,
-                x: &xu,
-                ..pt
-            },
-            lambda,
-            vx,
-            vp,
-        );
-        self.rhs_vjp(
-            Point {
-                t: pt.t - eps,
-                x: &xd,
-                ..pt
-            },
-            lambda,
-            &mut vx_dn,
-            &mut vp_dn,
-        );
-        *vx -= &vx_dn;
-        *vp -= &vp_dn;
-        *vx /= 2.0 * eps;
-        *vp /= 2.0 * eps;
+        differences::rhs_vjp_dir(self, pt, lambda, v, vx, vp);
     }
 
     /// The derivative of the running cost's gradient along (1, v) of (t, x), with the frozen
@@ -609,15 +622,7 @@ where
     where
         Self: HybridModel,
     {
-        let (eps, xu, xd) = flow_points(t, x, v);
-        let (mut lx_dn, mut lp_dn) = (lx.clone_owned(), lp.clone_owned());
-        let up = self.running_cost_value_grad(sw, t + eps, &xu, p, lx, lp);
-        let dn = self.running_cost_value_grad(sw, t - eps, &xd, p, &mut lx_dn, &mut lp_dn);
-        *lx -= &lx_dn;
-        *lp -= &lp_dn;
-        *lx /= 2.0 * eps;
-        *lp /= 2.0 * eps;
-        (up - dn) / (2.0 * eps)
+        differences::running_cost_grad_dir(self, sw, t, x, p, v, lx, lp)
     }
 
     /// μᵀ∂x₀/∂θ into `vp` (p), overwritten: the initial state's share of an adjoint
@@ -635,66 +640,6 @@ where
         self.initial_state_jac(p, &mut dx0);
         dx0.tr_mul_to(mu, vp);
     }
-}
-
-/// Relative size of the perturbation of x in the directional differences of the
-/// [`ModelSecondOrder`] defaults: h = `DIR_STEP`·max(1, ‖x‖₂)/‖v‖₂ (why 1e-4: see the trait).
-const DIR_STEP: f64 = 1e-4;
-
-/// The step h of the directional differences along v at x (see [`DIR_STEP`]) and the points
-/// x ± h v; `None` when v = 0 (the product is zero), h = NaN when v is not finite.
-#[allow(clippy::type_complexity)]
-fn dir_points<N: Dim>(
-    x: &OVector<f64, N>,
-    v: &OVector<f64, N>,
-) -> Option<(f64, OVector<f64, N>, OVector<f64, N>)>
-where
-    DefaultAllocator: Allocator<N>,
-{
-    let nv = v.norm();
-    if nv == 0.0 {
-        return None;
-    }
-    let h = if nv.is_finite() {
-        DIR_STEP * x.norm().max(1.0) / nv
-    } else {
-        f64::NAN
-    };
-    let (mut up, mut dn) = (x.clone_owned(), x.clone_owned());
-    up.axpy(h, v, 1.0);
-    dn.axpy(-h, v, 1.0);
-    Some((h, up, dn))
-}
-
-/// The step ε of the [`ModelAdjoint`] defaults along the direction (1, v) of (t, x) and the
-/// points x ± ε v: the smaller of the [`ModelSecondOrder`] defaults' steps along v and in t,
-/// so that a fast transient (‖v‖ large) is differenced on its own scale.
-fn flow_points<N: Dim>(
-    t: f64,
-    x: &OVector<f64, N>,
-    v: &OVector<f64, N>,
-) -> (f64, OVector<f64, N>, OVector<f64, N>)
-where
-    DefaultAllocator: Allocator<N>,
-{
-    let ht = time_step(t);
-    let nv = v.norm();
-    let hv = if nv > 0.0 && nv.is_finite() {
-        DIR_STEP * x.norm().max(1.0) / nv
-    } else {
-        ht
-    };
-    let h = hv.min(ht);
-    let (mut up, mut dn) = (x.clone_owned(), x.clone_owned());
-    up.axpy(h, v, 1.0);
-    dn.axpy(-h, v, 1.0);
-    (h, up, dn)
-}
-
-/// The step of the central differences in t of the [`ModelSecondOrder`] defaults:
-/// ε^{1/3}·max(1, |t|) (truncation and rounding errors balance at O(ε^{2/3})).
-fn time_step(t: f64) -> f64 {
-    f64::EPSILON.cbrt() * t.abs().max(1.0)
 }
 
 /// Capability: second-derivative products, for the implicit method's Jacobian of the
@@ -725,18 +670,7 @@ where
     ) where
         Self: HybridModel,
     {
-        let Some((h, xu, xd)) = dir_points(pt.x, v) else {
-            out.fill(0.0);
-            return;
-        };
-        rhs_sens_difference(
-            self,
-            Point { x: &xu, ..pt },
-            Point { x: &xd, ..pt },
-            s,
-            2.0 * h,
-            out,
-        );
+        differences::rhs_sens_dir_x(self, pt, s, v, out);
     }
 
     /// ∂ₜ(f_x S + f_θ) into `out` (n×p): the time derivative of the sensitivity right-hand
@@ -749,9 +683,7 @@ where
     ) where
         Self: HybridModel,
     {
-        let h = time_step(pt.t);
-        let (up, dn) = (Point { t: pt.t + h, ..pt }, Point { t: pt.t - h, ..pt });
-        rhs_sens_difference(self, up, dn, s, 2.0 * h, out);
+        differences::rhs_sens_dt(self, pt, s, out);
     }
 
     /// (∂/∂x (ℓ_x S + ℓ_θ)) · v into `out` (p): out = Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ, the
@@ -770,12 +702,7 @@ where
     ) where
         Self: HybridModel,
     {
-        let Some((h, xu, xd)) = dir_points(x, v) else {
-            out.fill(0.0);
-            return;
-        };
-        let (up, dn) = (Point::new(0, sw, t, &xu, p), Point::new(0, sw, t, &xd, p));
-        running_cost_sens_difference(self, up, dn, s, 2.0 * h, out);
+        differences::running_cost_sens_dir_x(self, sw, t, x, p, s, v, out);
     }
 
     /// ∂ₜ(ℓ_x S + ℓ_θ) into `out` (p), at fixed x and S, with the frozen branches `sw`;
@@ -793,54 +720,6 @@ where
     where
         Self: HybridModel,
     {
-        let h = time_step(t);
-        let (up, dn) = (
-            Point::new(0, sw, t + h, x, p),
-            Point::new(0, sw, t - h, x, p),
-        );
-        running_cost_sens_difference(self, up, dn, s, 2.0 * h, out)
+        differences::running_cost_sens_dt(self, sw, t, x, p, s, out)
     }
-}
-
-/// out = (Ṡ(up) − Ṡ(dn))/h2 for Ṡ = f_x S + f_θ (the difference quotient of the defaults).
-fn rhs_sens_difference<M: HybridModel + ?Sized>(
-    m: &M,
-    up: Point<'_, M::N, M::P>,
-    dn: Point<'_, M::N, M::P>,
-    s: &OMatrix<f64, M::N, M::P>,
-    h2: f64,
-    out: &mut OMatrix<f64, M::N, M::P>,
-) where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    let mut f = up.x.clone_owned();
-    let mut minus = out.clone_owned();
-    m.rhs_sens(up, s, &mut f, out);
-    m.rhs_sens(dn, s, &mut f, &mut minus);
-    *out -= &minus;
-    *out /= h2;
-}
-
-/// out = (q̇_θ(up) − q̇_θ(dn))/h2 for q̇_θ = ℓ_x S + ℓ_θ; returns (ℓ(up) − ℓ(dn))/h2 (the
-/// difference quotients of the defaults; the points' modes are ignored).
-fn running_cost_sens_difference<M: HybridModel + ?Sized>(
-    m: &M,
-    up: Point<'_, M::N, M::P>,
-    dn: Point<'_, M::N, M::P>,
-    s: &OMatrix<f64, M::N, M::P>,
-    h2: f64,
-    out: &mut OVector<f64, M::P>,
-) -> f64
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    let (mut lx, mut lx_dn, mut lp_dn) =
-        (up.x.clone_owned(), up.x.clone_owned(), out.clone_owned());
-    let l_up = m.running_cost_value_grad(up.sw, up.t, up.x, up.p, &mut lx, out);
-    let l_dn = m.running_cost_value_grad(dn.sw, dn.t, dn.x, dn.p, &mut lx_dn, &mut lp_dn);
-    lx -= &lx_dn;
-    *out -= &lp_dn;
-    out.gemv_tr(1.0, s, &lx, 1.0);
-    *out /= h2;
-    (l_up - l_dn) / h2
 }

@@ -166,6 +166,9 @@ pub enum DiagnosticKind {
     MaxSteps,
     /// Two or more events fired at the same time (within `Options::simultaneous_tol`).
     SimultaneousEvents,
+    /// A qp constraint is weakly active (slack and multiplier both zero): the solution map
+    /// has a kink, and the gradient is one-sided.
+    Kink,
 }
 
 impl DiagnosticKind {
@@ -179,6 +182,7 @@ impl DiagnosticKind {
             DiagnosticKind::Nonfinite => "nonfinite",
             DiagnosticKind::MaxSteps => "max_steps",
             DiagnosticKind::SimultaneousEvents => "simultaneous_events",
+            DiagnosticKind::Kink => "kink",
         }
     }
 }
@@ -267,8 +271,14 @@ pub struct Solution {
     pub params: Vec<f64>,
     /// C(θ) = ∫₀ᵀ ℓ dt + Σ_k φ_k + Φ(T, x(T)).
     pub cost: f64,
-    /// dC/dθ, one entry per parameter (empty when `Options::sensitivities` is false).
+    /// dC/dθ, one entry per parameter (empty when `Options::sensitivities` is false). At a
+    /// qp kink, the derivative from the right (θ → θ⁺ along each parameter).
     pub gradient: Vec<f64>,
+    /// The derivative from the left, when a qp of the model is at a kink (a `kink`
+    /// diagnostic); `gradient` is then the right one.
+    pub gradient_left: Option<Vec<f64>>,
+    /// Each qp of the model solved at (T, x(T), θ), in declaration order.
+    pub qp: Vec<crate::qp::QpState>,
     /// x(T) (after a Zeno accumulation: the limit state x*).
     pub x_final: Vec<f64>,
     /// ∂x(T)/∂θ, column-major n×p (empty without forward sensitivities).

@@ -8,13 +8,18 @@
 //! Ṡ = f_θ + Σ_{(i,k) ∈ nz(f_x)} (f_x)_{ik} S_{k·}, the same sums in the same order as the
 //! generated code. The capability products (`ModelAdjoint`, `ModelSecondOrder`) live in
 //! `interp/products.rs`.
+//!
+//! A model with qps keeps a [`QpBank`]: a tape that reads qp solutions first has the bank
+//! evaluate them at its point (the data tapes fill each qp's data and Jacobian), then runs
+//! with the bank's u* and ∂u*/∂(x, θ, t) as inputs.
 
 use std::cell::RefCell;
 
 use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
-use mvad_dsl::ir::{self, Point};
+use mvad_dsl::ir::{self, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
+use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
 use mvad_runtime::{EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Switches};
 use nalgebra::{DMatrix, DVector, Dyn};
 
@@ -77,6 +82,15 @@ pub struct InterpretedModel {
     final_cost: Option<GradTapes>,
     running_cost_second: Option<SecondTapes>,
     scratch: RefCell<Scratch>,
+    /// Per qp: its data tape and their Jacobian's.
+    qp_tapes: Vec<(Tape, Tape)>,
+    qp_info: Vec<QpLayerInfo>,
+    qp_bank: RefCell<QpBank>,
+    /// Registers for the data tapes (run while `scratch` is borrowed).
+    qp_regs: RefCell<Vec<f64>>,
+    /// Whether the second-order products are difference quotients (a flow reads a qp of
+    /// the state; see `ModelKernels::second_order_by_differences`).
+    second_by_differences: bool,
 }
 
 type X = DVector<f64>;
@@ -114,7 +128,7 @@ impl InterpretedModel {
                 })
                 .collect(),
             observables: k.observables.clone(),
-            switches: k.switches.len(),
+            switches: k.nswitches(),
             has_running_cost: k.running_cost.is_some(),
             has_final_cost: k.final_cost.is_some(),
             has_horizon: k.horizon.is_some(),
@@ -129,7 +143,39 @@ impl InterpretedModel {
             .map(|so| so.x_entries.len())
             .max()
             .unwrap_or(0);
+        let qp_info: Vec<QpLayerInfo> = k
+            .qps
+            .iter()
+            .map(|q| QpLayerInfo {
+                name: q.name.clone(),
+                vars: q.vars.clone(),
+                kinds: q
+                    .kinds
+                    .iter()
+                    .map(|kind| match kind {
+                        ir::QpKind::Eq => ConstraintKind::Eq,
+                        ir::QpKind::Le => ConstraintKind::Le,
+                    })
+                    .collect(),
+                dynamic: q.dynamic,
+                switches: q.switches,
+            })
+            .collect();
         InterpretedModel {
+            qp_tapes: k
+                .qps
+                .iter()
+                .map(|q| (tape(&q.data), tape(&q.data_jac)))
+                .collect(),
+            qp_bank: RefCell::new(QpBank::new(
+                qp_info.clone(),
+                k.nstates(),
+                k.nparams(),
+                QpOptions::default(),
+            )),
+            qp_info,
+            qp_regs: RefCell::new(vec![0.0; nregs]),
+            second_by_differences: k.second_order_by_differences(),
             n: k.nstates(),
             p: k.nparams(),
             x0: tape(&k.x0),
@@ -185,6 +231,60 @@ impl InterpretedModel {
         X::from_column_slice(&self.info.param_defaults)
     }
 
+    /// Has the qp bank solve every qp at the point of `at` (on the frozen active sets of a
+    /// flow's point; with derivatives if `derivs`).
+    fn evaluate_qps(&self, at: &At<'_>, derivs: bool) {
+        let Point { t, x, p, .. } = at.pt;
+        self.qp_bank
+            .borrow_mut()
+            .evaluate(t, x, p, at.frozen, derivs, self.qp_fill(at));
+    }
+
+    /// The closure that writes qp q's data (and Jacobian) at the point of `at`.
+    fn qp_fill<'s>(
+        &'s self,
+        at: &'s At<'_>,
+    ) -> impl FnMut(usize, &mut [f64], Option<&mut [f64]>) + 's {
+        move |q, data, jac| {
+            let mut regs = self.qp_regs.borrow_mut();
+            let (dt, jt) = &self.qp_tapes[q];
+            dt.eval_with(&at.pt, at.hi, &mut regs, data);
+            if let Some(jac) = jac {
+                jt.eval_with(&at.pt, at.hi, &mut regs, jac);
+            }
+        }
+    }
+
+    /// Runs `tape` into `regs`, first solving the qps it reads.
+    fn run(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64]) -> bool {
+        if !tape.reads_qp() {
+            return tape.run_with(&at.pt, at.hi, regs);
+        }
+        self.evaluate_qps(at, tape.reads_qp_derivs());
+        let bank = self.qp_bank.borrow();
+        let qp = QpValues {
+            u: bank.u(),
+            du: bank.du(),
+            n: self.n,
+            p: self.p,
+        };
+        tape.run_qp(&at.pt, at.hi, &qp, regs)
+    }
+
+    /// Runs `tape` and writes its dense output (zeros included) into `out`; NaN on failure.
+    fn eval(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64], out: &mut [f64]) {
+        let ok = self.run(tape, at, regs);
+        let fill = if ok { 0.0 } else { f64::NAN };
+        out.iter_mut().take(tape.len()).for_each(|o| *o = fill);
+        if ok {
+            for (s, r) in tape.outputs() {
+                if let Some(o) = out.get_mut(s) {
+                    *o = regs[r];
+                }
+            }
+        }
+    }
+
     /// Runs `tape` and hands the registers and the dense output buffer to `f`.
     fn with<R>(
         &self,
@@ -194,14 +294,14 @@ impl InterpretedModel {
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out, .. } = &mut *sc;
-        let ok = tape.run_with(&at.pt, at.hi, regs);
+        let ok = self.run(tape, at, regs);
         f(ok, regs, out)
     }
 
     /// Writes a vector kernel into `v` (dense, zeros included).
     fn vec_out(&self, tape: &Tape, at: &At<'_>, v: &mut X) {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_with(&at.pt, at.hi, &mut sc.regs, v.as_mut_slice());
+        self.eval(tape, at, &mut sc.regs, v.as_mut_slice());
     }
 
     /// Writes a row-major matrix block of a kernel (slots `off..off + rows·cols`) into `m`.
@@ -230,7 +330,9 @@ impl InterpretedModel {
 
     fn scalar(&self, tape: &Tape, at: &At<'_>) -> f64 {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_scalar_with(&at.pt, at.hi, &mut sc.regs)
+        let mut out = [0.0];
+        self.eval(tape, at, &mut sc.regs, &mut out);
+        out[0]
     }
 
     /// Gradient kernel into `gx`, `gp`; returns the last slot.
@@ -238,7 +340,7 @@ impl InterpretedModel {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out, .. } = &mut *sc;
-        g.grad.eval_with(&at.pt, at.hi, regs, out);
+        self.eval(&g.grad, at, regs, out);
         copy_into(gx.as_mut_slice(), &out[..n]);
         copy_into(gp.as_mut_slice(), &out[n..n + p]);
         out[n + p]
@@ -254,10 +356,12 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
     dst[..k].copy_from_slice(&src[..k]);
 }
 
-/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest.
+/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest;
+/// `frozen` is the whole switch set at a flow's point (qps are then solved on it).
 struct At<'a> {
     pt: Point<'a>,
     hi: &'a [u64],
+    frozen: Option<&'a Switches>,
 }
 
 /// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
@@ -270,6 +374,7 @@ fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
             sw: sw.low_word(),
         },
         hi: sw.high_words(),
+        frozen: Some(sw),
     }
 }
 
@@ -283,6 +388,7 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
             sw: 0,
         },
         hi: &[],
+        frozen: None,
     }
 }
 
@@ -296,6 +402,7 @@ fn pt_theta(p: &X) -> At<'_> {
             sw: 0,
         },
         hi: &[],
+        frozen: None,
     }
 }
 
@@ -415,18 +522,29 @@ impl HybridModel for InterpretedModel {
     }
 
     fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
+        let at = pt0(t, x, p);
         match self.switches.get(j) {
-            Some(s) => self.scalar(&s.value, &pt0(t, x, p)),
-            None => f64::NAN,
+            Some(s) => self.scalar(&s.value, &at),
+            // Past the kinks' switching functions: the qps' constraints.
+            None => self.qp_bank.borrow_mut().switch_value(
+                j,
+                t,
+                x.as_slice(),
+                p.as_slice(),
+                self.qp_fill(&at),
+            ),
         }
     }
     fn switch_grad(&self, j: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
+        let at = pt0(t, x, p);
         match self.switches.get(j) {
-            Some(s) => self.grad(s, &pt0(t, x, p), gx, gp),
+            Some(s) => self.grad(s, &at, gx, gp),
             None => {
-                gx.fill(f64::NAN);
-                gp.fill(f64::NAN);
-                f64::NAN
+                let fill = self.qp_fill(&at);
+                let (gx, gp) = (gx.as_mut_slice(), gp.as_mut_slice());
+                let mut bank = self.qp_bank.borrow_mut();
+                bank.switch_grad(j, t, x.as_slice(), p.as_slice(), fill, gx, gp)
+                    .1
             }
         }
     }
@@ -437,7 +555,7 @@ impl HybridModel for InterpretedModel {
         }
         let mut sc = self.scratch.borrow_mut();
         let at = pt0(t, x, p);
-        self.observe.eval_with(&at.pt, at.hi, &mut sc.regs, y);
+        self.eval(&self.observe, &at, &mut sc.regs, y);
     }
     fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
         let nobs = self.info.observables.len();
@@ -522,6 +640,20 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
+
+    fn qps(&self) -> &[QpLayerInfo] {
+        &self.qp_info
+    }
+    fn qp_states(&self, t: f64, x: &X, p: &X) -> Result<Vec<QpState>, (usize, QpError)> {
+        self.evaluate_qps(&pt0(t, x, p), false);
+        self.qp_bank.borrow().states()
+    }
+    fn set_qp_side(&self, side: Side) {
+        self.qp_bank.borrow_mut().set_side(side);
+    }
+    fn qp_failure(&self) -> Option<(usize, QpError)> {
+        self.qp_bank.borrow().failure().map(|(q, e)| (q, e.clone()))
+    }
 }
 
 impl ModelSens for InterpretedModel {
@@ -548,7 +680,7 @@ impl ModelSens for InterpretedModel {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out, .. } = &mut *sc;
         let at = at_sw(t, x, p, sw);
-        m.sens.eval_with(&at.pt, at.hi, regs, out);
+        self.eval(&m.sens, &at, regs, out);
         copy_into(f.as_mut_slice(), &out[..n]);
         let fp = &out[n + nnz..n + nnz + n * np];
         for r in 0..n {

@@ -29,6 +29,15 @@ pub fn model_files() -> Vec<(String, String)> {
     out
 }
 
+/// Integration tolerances for comparisons at the level of rounding: rtol 1e-12, atol 1e-14.
+pub fn tight() -> mvad::Options {
+    mvad::Options {
+        rtol: 1e-12,
+        atol: 1e-14,
+        ..mvad::Options::default()
+    }
+}
+
 /// The source of `models/FILE`.
 pub fn model_source(file: &str) -> String {
     std::fs::read_to_string(format!("{}/../models/{file}", env!("CARGO_MANIFEST_DIR"))).expect(file)

@@ -468,6 +468,27 @@ where
         .fold(0, |w, j| w | (1 << j))
 }
 
+/// The switch bits (0..64) of the model's qp constraints.
+fn qp_switch_mask<M: HybridModel>(m: &M) -> u64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut mask = 0u64;
+    for q in m.qps() {
+        if let Some(first) = q.switches {
+            let le = q
+                .kinds
+                .iter()
+                .filter(|k| **k == mvad::qp::ConstraintKind::Le)
+                .count();
+            for j in first..(first + le).min(64) {
+                mask |= 1 << j;
+            }
+        }
+    }
+    mask
+}
+
 fn check_all<M: HybridModel>(m: &M, seed: u64, npoints: usize)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -480,8 +501,12 @@ where
         let sw = consistent_switches(m, &pt);
         check_model(m, &pt, sw, &mut rng);
         check_products(m, &pt, sw, &mut rng_products);
-        // Any frozen word (the branches need not be the active ones).
+        // Any frozen word (the branches need not be the active ones) — except for the bits
+        // of qp constraints, which must hold a consistent active set (|u| ≤ 1 held active on
+        // both sides at once has no solution): those keep the point's own bits.
+        let qp_bits = qp_switch_mask(m);
         let random_word = (rng_products.uniform() * 2f64.powi(nsw as i32)) as u64;
+        let random_word = (random_word & !qp_bits) | (sw & qp_bits);
         check_products(m, &pt, random_word, &mut rng_products);
     }
 }
@@ -507,5 +532,7 @@ fn compiled_models_match_finite_differences() {
     check_all(&models::stiff_relay::StiffRelay::new(), 4, 20);
     check_all(&models::thermostat::Thermostat::new(), 5, 20);
     check_all(&models::zeno_ball::ZenoBall::new(), 6, 20);
+    check_all(&models::qp_kink::QpKink::new(), 13, 20);
+    check_all(&models::qp_cart::QpCart::new(), 14, 20);
     check_all(&Sink::new(), 12, 60);
 }

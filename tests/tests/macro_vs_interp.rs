@@ -268,6 +268,8 @@ fn compiled_and_interpreted_models_agree() {
         5,
     );
     agree(&models::zeno_ball::ZenoBall::new(), &m("zeno_ball.hyb"), 6);
+    agree(&models::qp_kink::QpKink::new(), &m("qp_kink.hyb"), 9);
+    agree(&models::qp_cart::QpCart::new(), &m("qp_cart.hyb"), 10);
     agree(&Sink::new(), SINK, 7);
     agree(
         &compiled::Tiny::new(),

@@ -4,6 +4,7 @@
 
 use std::collections::{HashMap, HashSet};
 
+use super::qp::{check_column, qps_with_var};
 use super::{all_exprs, function_arity, sites, suggest, symbols, walk_expr, Kind, Site};
 use crate::ast::{Condition, Expr, ExprKind, Ident, Model, MAX_DEPTH};
 use crate::diag::Diagnostic;
@@ -25,10 +26,22 @@ pub fn check_names(model: &Model) -> Vec<Diagnostic> {
                     ));
                 }
             }
+            ExprKind::Column { table, column } => {
+                if let Some(d) = check_column(model, &syms, site, e, table, column) {
+                    if reported.insert(format!("{}@{}", d.message, d.span.start)) {
+                        out.push(d);
+                    }
+                }
+            }
             ExprKind::Name(id) => {
                 let name = id.name.as_str();
+                if let Site::Qp(q) = site {
+                    if q.vars.iter().any(|v| v.name == id.name) {
+                        continue;
+                    }
+                }
                 match syms.get(name) {
-                    None => out.push(undefined(id, &syms)),
+                    None => out.push(undefined(id, &syms, &qps_with_var(model, name))),
                     Some(&(kind, decl)) => {
                         if let Some(d) = scope_error(site, id, kind, decl) {
                             if reported.insert(d.message.clone()) {
@@ -45,21 +58,27 @@ pub fn check_names(model: &Model) -> Vec<Diagnostic> {
 }
 
 /// How a non-dynamic site is named in messages (`None` for dynamic sites).
-fn static_site(site: Site<'_>) -> Option<String> {
+pub(super) fn static_site(site: Site<'_>) -> Option<String> {
     match site {
         Site::ConstValue(_, c) => Some(format!("const `{}`", c.name)),
         Site::ParamDefault(p) => Some(format!("the default value of param `{}`", p.name)),
         Site::StateInit(s) => Some(format!("the initial value of state `{}`", s.name)),
         Site::Horizon => Some("the horizon".to_string()),
-        Site::Dynamic => None,
+        Site::StaticTerm => Some("a static cost term".to_string()),
+        Site::Dynamic | Site::Qp(_) => None,
     }
 }
 
-fn undefined(id: &Ident, syms: &HashMap<&str, (Kind, Span)>) -> Diagnostic {
+fn undefined(id: &Ident, syms: &HashMap<&str, (Kind, Span)>, qps: &[&str]) -> Diagnostic {
     let name = id.name.as_str();
     let d = Diagnostic::new(id.span, format!("undefined name `{name}`"));
     if function_arity(name).is_some() {
         return d.with_help(format!("`{name}` is a function: call it as `{name}(...)`"));
+    }
+    if let Some(q) = qps.first() {
+        return d.with_help(format!(
+            "`{name}` is a variable of qp `{q}`: write `{q}.{name}` for its solution"
+        ));
     }
     match suggest(name, syms.keys().copied()) {
         Some(s) => d.with_help(format!("did you mean `{s}`?")),
@@ -70,8 +89,32 @@ fn undefined(id: &Ident, syms: &HashMap<&str, (Kind, Span)>) -> Diagnostic {
 fn scope_error(site: Site<'_>, id: &Ident, kind: Kind, decl: Span) -> Option<Diagnostic> {
     let name = id.name.as_str();
     let noun = kind.noun();
+    if kind == Kind::Qp {
+        return Some(
+            Diagnostic::new(id.span, format!("qp `{name}` is not a value"))
+                .with_label(decl, "declared here")
+                .with_help(format!("write `{name}.VAR` for a variable of its solution")),
+        );
+    }
     let (ok, help) = match site {
         Site::Dynamic => (true, ""),
+        Site::Qp(q) => {
+            if matches!(kind, Kind::Param | Kind::Const(_) | Kind::State) {
+                return None;
+            }
+            return Some(
+                Diagnostic::new(
+                    id.span,
+                    format!("the data of qp `{}` cannot depend on {noun} `{name}`", q.name.name),
+                )
+                .with_label(decl, "declared here")
+                .with_help("a qp's objective and constraints may use its variables, consts, params, states and `t`"),
+            );
+        }
+        Site::StaticTerm => (
+            matches!(kind, Kind::Const(_) | Kind::Param),
+            "a static term may use only numbers, consts, params and static qp solutions; wrap it in `final(..)` or `integral(..)`",
+        ),
         Site::ConstValue(order, c) => match kind {
             Kind::Const(k) if k < order => (true, ""),
             Kind::Const(_) => {
@@ -184,7 +227,7 @@ pub fn check_observables(model: &Model) -> Vec<Diagnostic> {
 fn substituted_depth(e: &Expr, obs: &HashMap<&str, usize>) -> usize {
     let sub = |x: &Expr| substituted_depth(x, obs);
     match &e.kind {
-        ExprKind::Number(_) | ExprKind::Time => 1,
+        ExprKind::Number(_) | ExprKind::Time | ExprKind::Column { .. } => 1,
         ExprKind::Name(id) => obs.get(id.name.as_str()).copied().unwrap_or(1),
         ExprKind::Neg(x) => 1 + sub(x),
         ExprKind::Binary { lhs, rhs, .. } => 1 + sub(lhs).max(sub(rhs)),

@@ -60,6 +60,12 @@ impl Body {
 
 pub(super) struct Gen<'a> {
     pub(super) ar: &'a ExprArena,
+    /// Whether the bodies being generated evaluate under frozen switch bits `sw` (flows
+    /// and ℓ), so that qps read there are solved on their frozen active sets.
+    pub(super) frozen: std::cell::Cell<bool>,
+    /// Number of states and params: the row length n + p + 1 of the qp derivatives `qd`.
+    pub(super) n: usize,
+    pub(super) p: usize,
 }
 
 impl Gen<'_> {
@@ -78,7 +84,7 @@ impl Gen<'_> {
         }
         let mut rendered: Vec<Option<Rendered>> = vec![None; top];
         let mut depth = vec![0u32; top];
-        let mut lets = TokenStream::new();
+        let mut lets = self.qp_prelude(kernel);
         for &id in &kernel.nodes {
             let node = ar.node(id);
             let r = self.render(node, &rendered);
@@ -159,6 +165,16 @@ impl Gen<'_> {
             Node::Param(i) => {
                 let i = usize_lit(i as usize);
                 atom(quote!(p[#i]))
+            }
+            // qp solutions and their derivatives: slices the method binds first (see
+            // `methods::qp_prelude`).
+            Node::QpSol(k) => {
+                let k = usize_lit(k as usize);
+                atom(quote!(qu[#k]))
+            }
+            Node::QpDeriv(k, w) => {
+                let i = usize_lit(k as usize * (self.n + self.p + 1) + w.column(self.n, self.p));
+                atom(quote!(qd[#i]))
             }
             Node::Add(a, b) => {
                 // a + (−c) is printed a − c (the same IEEE operation).

@@ -45,7 +45,7 @@ impl Gen<'_> {
             })
         });
         let obs = strs(&k.observables);
-        let nsw = usize_lit(k.switches.len());
+        let nsw = usize_lit(k.nswitches());
         let (hrc, hfc, hh) = (
             k.running_cost.is_some(),
             k.final_cost.is_some(),
@@ -117,7 +117,8 @@ impl Gen<'_> {
             None => (quote!(::core::option::Option::None), quote!(dt.fill(0.0);)),
         };
 
-        // Flow.
+        // Flow (qps read under the frozen bits `sw`).
+        self.frozen.set(true);
         let per_mode = |f: &dyn Fn(usize) -> TokenStream, buf: TokenStream| {
             let arms: Vec<(usize, TokenStream)> = (0..nm).map(|m| (m, f(m))).collect();
             self.dispatch(quote!(mode), arms, nan_fill(buf), nm)
@@ -156,6 +157,7 @@ impl Gen<'_> {
             quote!(matches!(mode, #(#dep_t)|*))
         };
         let sens = per_mode(&|m| self.sens_body(k, m), quote!(f));
+        self.frozen.set(false);
 
         // Events.
         let ne = k.events.len();
@@ -215,17 +217,36 @@ impl Gen<'_> {
                 .map(|(j, g)| (j, f(g)))
                 .collect()
         };
+        // Past the kinks' switching functions come the qps' constraints (`codegen/qp.rs`).
+        let (swv_default, swg_default) = if k.nswitches() > ns {
+            (
+                quote!(self.__qp_switch_value(j, t, x.as_slice(), p.as_slice())),
+                quote!(self.__qp_switch_grad(
+                    j,
+                    t,
+                    x.as_slice(),
+                    p.as_slice(),
+                    gx.as_mut_slice(),
+                    gp.as_mut_slice()
+                )),
+            )
+        } else {
+            (
+                quote!(f64::NAN),
+                quote!(gx.fill(f64::NAN); gp.fill(f64::NAN); f64::NAN),
+            )
+        };
         let swv = self.dispatch(
             quote!(j),
             sw_arms(&|g| self.scalar(&g.value)),
-            quote!(f64::NAN),
-            ns,
+            swv_default,
+            k.nswitches(),
         );
         let swg = self.dispatch(
             quote!(j),
             sw_arms(&|g| self.grad_body(g, n, p, quote!(gx), quote!(gp))),
-            quote!(gx.fill(f64::NAN); gp.fill(f64::NAN); f64::NAN),
-            ns,
+            swg_default,
+            k.nswitches(),
         );
 
         // Observables.
@@ -269,7 +290,8 @@ impl Gen<'_> {
             (obs, jac)
         };
 
-        // Cost.
+        // Cost (ℓ reads qps under the frozen bits, as the flow does).
+        self.frozen.set(true);
         let (rc, rcg) = match &k.running_cost {
             Some(c) => (
                 self.scalar(&c.value),
@@ -277,6 +299,7 @@ impl Gen<'_> {
             ),
             None => (quote!(0.0), quote!(lx.fill(0.0); lp.fill(0.0); 0.0)),
         };
+        self.frozen.set(false);
         let (fc, fcg) = match &k.final_cost {
             Some(c) => (
                 self.scalar(&c.value),

@@ -171,6 +171,8 @@ impl Gen<'_> {
         let lam = quote!(lambda);
         let mu = quote!(mu);
 
+        // λᵀf_x, λᵀf_θ read qps under the frozen bits, as the flow does.
+        self.frozen.set(true);
         let rhs_arms = (0..k.modes.len())
             .map(|m| {
                 let mk = &k.modes[m];
@@ -199,6 +201,7 @@ impl Gen<'_> {
                 (m, quote!(#lets #vx #vp))
             })
             .collect();
+        self.frozen.set(false);
         let rhs = self.dispatch(
             quote!(mode),
             rhs_arms,
@@ -352,6 +355,8 @@ impl Gen<'_> {
         let sw_t = quote!(#pr::Switches);
         let nan = quote!(out.fill(f64::NAN););
 
+        // Flows and ℓ read (static) qps under the frozen bits.
+        self.frozen.set(true);
         let dir_arms = (0..nm)
             .map(|m| {
                 (
@@ -381,6 +386,7 @@ impl Gen<'_> {
             ),
             None => (quote!(out.fill(0.0);), quote!(out.fill(0.0); 0.0)),
         };
+        self.frozen.set(false);
         quote! {
             fn rhs_sens_dir_x(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, v: &#xv, out: &mut #mnp) {
                 let #pr::Point { mode, sw, t, x, p } = pt; #dir }

@@ -8,17 +8,19 @@
 //! top-level `mode`) say which mode ran.
 
 use clap::Args;
-use mvad::runtime::solution::{GradientMode, Solution};
+use mvad::json::grad_json;
+use mvad::qp::QpLayerInfo;
+use mvad::runtime::solution::Solution;
 use mvad::runtime::solve::solve;
+use mvad::setup::check_mode;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::DefaultAllocator;
-use serde_json::{Map, Value};
 
 use super::output::{
-    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, more_events, num,
-    param_header, stats_json, Table, MAX_EVENT_ROWS,
+    diagnostics_text, g, json_text, more_events, param_header, Table, MAX_EVENT_ROWS,
 };
-use super::{setup, solve_err, CliError, CmdResult, Common};
+use super::qp_output::qp_text;
+use super::{setup, setup_err, solve_err, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
 #[derive(Args, Debug)]
@@ -39,48 +41,24 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let mut s = setup(model, &args.common)?;
-    s.opts.gradient_mode = GradientMode::from_name(&args.mode).ok_or_else(|| {
-        CliError::Input(format!(
-            "error: unknown --mode `{}`; use forward, adjoint or auto",
-            args.mode
-        ))
-    })?;
+    s.opts.gradient_mode = check_mode(&args.mode).map_err(setup_err)?;
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let info = model.info();
     if args.common.json {
-        Ok(json_text(&grad_json(info, &sol, &s.wrt)))
+        Ok(json_text(&grad_json(info, model.qps(), &sol, &s.wrt)))
     } else {
-        Ok(grad_text(info, file, &sol, &s.wrt))
+        Ok(grad_text(info, model.qps(), file, &sol, &s.wrt))
     }
 }
 
-/// The spec's JSON object for a solution, derivatives restricted to `wrt`; `mode` is the
-/// gradient mode that ran (as `stats.mode`).
-pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize]) -> Value {
-    let all: Vec<usize> = (0..info.params.len()).collect();
-    let mut m = Map::new();
-    m.insert("model".into(), Value::from(info.name.clone()));
-    m.insert("t_end".into(), num(sol.t_end));
-    m.insert("params".into(), by_name(&info.params, &all, &sol.params));
-    m.insert("cost".into(), num(sol.cost));
-    m.insert("gradient".into(), by_name(&info.params, wrt, &sol.gradient));
-    m.insert(
-        "events".into(),
-        Value::Array(
-            sol.events
-                .iter()
-                .map(|e| event_json(info, e, wrt))
-                .collect(),
-        ),
-    );
-    m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
-    m.insert("stats".into(), stats_json(&sol.stats));
-    m.insert("mode".into(), Value::from(sol.stats.mode.name()));
-    Value::Object(m)
-}
-
 /// The readable form: cost, gradient table, event table, atom table, warnings, stats.
-pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) -> String {
+pub fn grad_text(
+    info: &ModelInfo,
+    qps: &[QpLayerInfo],
+    file: &str,
+    sol: &Solution,
+    wrt: &[usize],
+) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "model {} ({file}), T = {}\n",
@@ -90,15 +68,26 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
     s.push_str(&format!("cost C = {}\n", g(sol.cost, 15)));
     s.push_str(&format!("gradient by {} mode\n\n", sol.stats.mode.name()));
 
-    let mut t = Table::new(&["param", "value", "dC/dθ"]);
+    let left = sol.gradient_left.as_deref();
+    let header: &[&str] = if left.is_some() {
+        &["param", "value", "dC/dθ (right)", "dC/dθ (left)"]
+    } else {
+        &["param", "value", "dC/dθ"]
+    };
+    let mut t = Table::new(header);
     for &k in wrt {
-        t.row(vec![
+        let mut row = vec![
             info.params[k].clone(),
             g(sol.params.get(k).copied().unwrap_or(f64::NAN), 10),
             g(sol.gradient.get(k).copied().unwrap_or(f64::NAN), 15),
-        ]);
+        ];
+        if let Some(l) = left {
+            row.push(g(l.get(k).copied().unwrap_or(f64::NAN), 15));
+        }
+        t.row(row);
     }
     s.push_str(&t.render());
+    s.push_str(&qp_text(qps, &sol.qp));
 
     s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
     if !sol.events.is_empty() {
@@ -198,6 +187,7 @@ mod tests {
     use crate::cli::spec_keys::missing_spec_keys;
     use crate::cli::test_support::{json, on_ball, tight};
     use approx::assert_relative_eq;
+    use serde_json::Value;
 
     #[test]
     fn json_has_every_key_of_the_spec_and_the_e1_values() {

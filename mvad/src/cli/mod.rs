@@ -12,7 +12,8 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
-use mvad::runtime::solution::{Method, Options};
+use mvad::runtime::solution::{GradientMode, Method};
+use mvad::setup::{params_with, resolve, Request, Setup, SetupError, Spelling};
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
@@ -23,6 +24,7 @@ pub mod measure;
 pub mod output;
 pub mod plot;
 pub mod progress;
+pub mod qp_output;
 pub mod report;
 pub mod simulate;
 #[cfg(test)]
@@ -136,7 +138,7 @@ pub type CmdResult = Result<String, CliError>;
 pub fn run<I, M, L>(args: I, load: L) -> ExitCode
 where
     I: IntoIterator<Item = OsString>,
-    M: HybridModel,
+    M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path) -> Result<M, String>,
 {
@@ -204,7 +206,7 @@ impl Cli {
 /// Runs the parsed command on the model `load` returns for the model path.
 fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
 where
-    M: HybridModel,
+    M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path) -> Result<M, String>,
 {
@@ -243,20 +245,6 @@ pub fn write_stderr(text: &str) {
     let _ = err.flush();
 }
 
-/// Everything a run needs, resolved from the common options: the parameter vector
-/// (declared values with `--set` applied), the solver options, the `--wrt` selection.
-pub struct Setup<M: HybridModel>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    /// θ.
-    pub params: OVector<f64, M::P>,
-    /// Solver options (tolerances, method, horizon override, grazing τ).
-    pub opts: Options,
-    /// Indices of the parameters to report derivatives for (`--wrt`, default all).
-    pub wrt: Vec<usize>,
-}
-
 /// Parses a finite number.
 pub fn parse_number(text: &str, what: &str) -> Result<f64, CliError> {
     match text.trim().parse::<f64>() {
@@ -268,89 +256,71 @@ pub fn parse_number(text: &str, what: &str) -> Result<f64, CliError> {
     }
 }
 
-/// The list of parameter names, for error messages.
-pub fn known_params(names: &[String]) -> String {
-    if names.is_empty() {
-        "the model has no parameters".to_string()
-    } else {
-        format!("known parameters: {}", names.join(", "))
+/// How the command line spells an option: `--t-end`, `--t-end T`; an option given already
+/// spelled (`--over`) is kept as it is.
+pub struct Flags;
+
+impl Spelling for Flags {
+    fn option(&self, name: &str) -> String {
+        if name.starts_with("--") {
+            name.to_string()
+        } else {
+            format!("--{}", name.replace('_', "-"))
+        }
+    }
+    fn assign(&self, name: &str, value: &str) -> String {
+        format!("{} {value}", self.option(name))
     }
 }
 
-/// Index of parameter `name`, or a bad-input error listing the known ones.
-pub fn param_index(names: &[String], name: &str, option: &str) -> Result<usize, CliError> {
-    names.iter().position(|p| p == name).ok_or_else(|| {
-        CliError::Input(format!(
-            "error: unknown parameter `{name}` in {option}; {}",
-            known_params(names)
-        ))
-    })
+/// A request that cannot run, as bad input (exit status 2) in the command line's words.
+pub fn setup_err(e: SetupError) -> CliError {
+    CliError::Input(format!("error: {}", e.message(&Flags)))
 }
 
-/// Resolves the common options against a model.
+/// Index of parameter `name`, or a bad-input error listing the known ones.
+pub fn param_index(names: &[String], name: &str, option: &'static str) -> Result<usize, CliError> {
+    mvad::setup::param_index(names, name, option).map_err(setup_err)
+}
+
+/// Resolves the common options against a model (`mvad::setup::resolve`).
 pub fn setup<M: HybridModel>(model: &M, common: &Common) -> Result<Setup<M>, CliError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let info = model.info();
-    let params = setup_params_only(model, common)?;
-    let wrt = parse_wrt(&info.params, common.wrt.as_deref())?;
-
-    let mut opts = Options {
+    let req = Request {
+        set: parse_set(common)?,
+        wrt: common
+            .wrt
+            .as_deref()
+            .map(|list| list.split(',').map(String::from).collect()),
+        t_end: common.t_end,
+        rtol: common.rtol,
+        atol: common.atol,
         method: Method::from_name(&common.method).unwrap_or_default(),
-        ..Options::default()
+        grazing_tol: common.grazing_tol,
+        // `grad` sets its own `--mode`; every other command is forward mode's.
+        mode: GradientMode::Forward,
     };
-    if let Some(r) = common.rtol {
-        if !(r.is_finite() && r > 0.0 && r < 1.0) {
-            return Err(CliError::Input(format!(
-                "error: --rtol must be in (0, 1), got {r}"
-            )));
-        }
-        opts.rtol = r;
-    }
-    if let Some(a) = common.atol {
-        if !(a.is_finite() && a > 0.0) {
-            return Err(CliError::Input(format!(
-                "error: --atol must be positive and finite, got {a}"
-            )));
-        }
-        opts.atol = a;
-    }
-    if let Some(tau) = common.grazing_tol {
-        if !(tau.is_finite() && (0.0..1.0).contains(&tau)) {
-            return Err(CliError::Input(format!(
-                "error: --grazing-tol must be in [0, 1), got {tau}"
-            )));
-        }
-        opts.grazing_tol = tau;
-    }
-    match common.t_end {
-        Some(t) => {
-            if !(t.is_finite() && t > 0.0) {
+    resolve(model, &req).map_err(setup_err)
+}
+
+/// The `--set NAME=VALUE` items as (name, value) pairs.
+fn parse_set(common: &Common) -> Result<Vec<(String, f64)>, CliError> {
+    common
+        .set
+        .iter()
+        .map(|item| {
+            let Some((name, value)) = item.split_once('=') else {
                 return Err(CliError::Input(format!(
-                    "error: --t-end must be positive and finite, got {t}"
+                    "error: --set expects NAME=VALUE, got `{item}`"
                 )));
-            }
-            opts.t_end = Some(t);
-        }
-        None => match model.horizon(&params) {
-            None => {
-                return Err(CliError::Input(format!(
-                    "error: model `{}` declares no horizon; give one with --t-end T",
-                    info.name
-                )))
-            }
-            Some(t) if !(t.is_finite() && t > 0.0) => {
-                return Err(CliError::Input(format!(
-                    "error: the horizon of model `{}` evaluates to {t} at these parameters; \
-                     it must be positive and finite (or pass --t-end T)",
-                    info.name
-                )))
-            }
-            Some(_) => {}
-        },
-    }
-    Ok(Setup { params, opts, wrt })
+            };
+            let name = name.trim();
+            let value = parse_number(value, &format!("error: --set {name}"))?;
+            Ok((name.to_string(), value))
+        })
+        .collect()
 }
 
 /// θ: the declared parameter values with every `--set NAME=VALUE` applied.
@@ -361,22 +331,7 @@ pub fn setup_params_only<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let info = model.info();
-    let mut values = info.param_defaults.clone();
-    for item in &common.set {
-        let Some((name, value)) = item.split_once('=') else {
-            return Err(CliError::Input(format!(
-                "error: --set expects NAME=VALUE, got `{item}`"
-            )));
-        };
-        let k = param_index(&info.params, name.trim(), "--set")?;
-        values[k] = parse_number(value, &format!("error: --set {}", name.trim()))?;
-    }
-    Ok(OVector::<f64, M::P>::from_iterator_generic(
-        model.nparams(),
-        Const::<1>,
-        values.iter().copied(),
-    ))
+    params_with(model, &parse_set(common)?).map_err(setup_err)
 }
 
 /// Index of observable `name`, or a bad-input error listing the known ones.
@@ -414,15 +369,10 @@ pub fn solve_err(e: SolveError) -> CliError {
         SolveError::MaxSteps { .. } => " (--method auto or --method rosenbrock)",
         _ => "",
     };
-    match e {
-        SolveError::NoHorizon
-        | SolveError::BadHorizon { .. }
-        | SolveError::ParamCount { .. }
-        | SolveError::BadParam { .. }
-        | SolveError::BadOption { .. }
-        | SolveError::NoSuchObservable { .. }
-        | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}{hint}")),
-        _ => CliError::Run(format!("error: the run failed: {e}{hint}")),
+    if e.is_bad_input() {
+        CliError::Input(format!("error: {e}{hint}"))
+    } else {
+        CliError::Run(format!("error: the run failed: {e}{hint}"))
     }
 }
 
@@ -432,30 +382,6 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     OVector::<f64, M::N>::from_iterator_generic(model.nstates(), Const::<1>, values.iter().copied())
-}
-
-/// Parses `--wrt a,b`: known names, duplicates dropped, declaration order kept as given.
-pub fn parse_wrt(names: &[String], wrt: Option<&str>) -> Result<Vec<usize>, CliError> {
-    let Some(list) = wrt else {
-        return Ok((0..names.len()).collect());
-    };
-    let mut out = Vec::new();
-    for name in list.split(',').map(str::trim) {
-        if name.is_empty() {
-            continue;
-        }
-        let k = param_index(names, name, "--wrt")?;
-        if !out.contains(&k) {
-            out.push(k);
-        }
-    }
-    if out.is_empty() {
-        return Err(CliError::Input(format!(
-            "error: --wrt names no parameter; {}",
-            known_params(names)
-        )));
-    }
-    Ok(out)
 }
 
 /// Helpers the commands' unit tests share.

@@ -12,6 +12,7 @@
 use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::ExprArena;
 use mvad_dsl::schedule::SecondOrderKernels;
+use mvad_runtime::model::differences;
 use mvad_runtime::{ModelAdjoint, ModelSecondOrder, Point, Switches};
 
 use super::{at_sw, pt0, pt_theta, At, InterpretedModel, Scratch, M, X};
@@ -63,16 +64,17 @@ impl SecondTapes {
     #[allow(clippy::too_many_arguments)]
     fn dir_x(
         &self,
+        model: &InterpretedModel,
         at: &At<'_>,
         sc: &mut Scratch,
         s: &[f64],
-        n: usize,
         v: &[f64],
         out: &mut [f64],
     ) {
+        let n = model.n;
         let Scratch { regs, w, .. } = sc;
         let nx = self.x_entries.len();
-        if !self.dx.run_with(&at.pt, at.hi, regs) || w.len() < nx {
+        if !model.run(&self.dx, at, regs) || w.len() < nx {
             out.fill(f64::NAN);
             return;
         }
@@ -94,8 +96,16 @@ impl SecondTapes {
 
     /// out = ∂ₜ(G_x S + G_θ) (`rows`×p, column-major); returns ∂ₜG₀ when the kernel has it
     /// (ℓ), else 0. NaN when the tape cannot run.
-    fn dt(&self, at: &At<'_>, regs: &mut [f64], s: &[f64], n: usize, out: &mut [f64]) -> f64 {
-        if !self.dt.run_with(&at.pt, at.hi, regs) {
+    fn dt(
+        &self,
+        model: &InterpretedModel,
+        at: &At<'_>,
+        regs: &mut [f64],
+        s: &[f64],
+        out: &mut [f64],
+    ) -> f64 {
+        let n = model.n;
+        if !model.run(&self.dt, at, regs) {
             out.fill(f64::NAN);
             return f64::NAN;
         }
@@ -141,7 +151,7 @@ impl ModelAdjoint for InterpretedModel {
         let mut sc = self.scratch.borrow_mut();
         let at = at_sw(t, x, p, sw);
         let m = self.mode(mode).filter(|_| sizes);
-        let Some(m) = m.filter(|m| m.jac.run_with(&at.pt, at.hi, &mut sc.regs)) else {
+        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
             vx.fill(f64::NAN);
             vp.fill(f64::NAN);
             return;
@@ -173,7 +183,7 @@ impl ModelAdjoint for InterpretedModel {
         let mut sc = self.scratch.borrow_mut();
         let at = pt0(t, x, p);
         let e = self.events.get(event).filter(|_| sizes);
-        let Some(e) = e.filter(|e| e.reset_jac.run_with(&at.pt, at.hi, &mut sc.regs)) else {
+        let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
             vx.fill(f64::NAN);
             vp.fill(f64::NAN);
             return f64::NAN;
@@ -205,7 +215,7 @@ impl ModelAdjoint for InterpretedModel {
         let (n, np) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let at = pt_theta(p);
-        if mu.len() != n || vp.len() != np || !self.x0_jac.run_with(&at.pt, at.hi, &mut sc.regs) {
+        if mu.len() != n || vp.len() != np || !self.run(&self.x0_jac, &at, &mut sc.regs) {
             vp.fill(f64::NAN);
             return;
         }
@@ -219,8 +229,14 @@ impl ModelAdjoint for InterpretedModel {
     }
 }
 
+/// A flow or ℓ that reads a qp of the state has no symbolic second derivatives (the qp's
+/// KKT derivatives are first derivatives): its products are the defaults' difference
+/// quotients, `mvad_runtime::model::differences`.
 impl ModelSecondOrder for InterpretedModel {
     fn rhs_sens_dir_x(&self, pt: Point<'_, Self::N, Self::P>, s: &M, v: &X, out: &mut M) {
+        if self.second_by_differences {
+            return differences::rhs_sens_dir_x(self, pt, s, v, out);
+        }
         let Point { mode, sw, t, x, p } = pt;
         let ok = v.len() == self.n && self.sens_shapes(s, out.len(), self.n);
         match self.mode(mode).filter(|_| ok) {
@@ -228,14 +244,16 @@ impl ModelSecondOrder for InterpretedModel {
                 let mut sc = self.scratch.borrow_mut();
                 let at = at_sw(t, x, p, sw);
                 let (s, v) = (s.as_slice(), v.as_slice());
-                m.second
-                    .dir_x(&at, &mut sc, s, self.n, v, out.as_mut_slice());
+                m.second.dir_x(self, &at, &mut sc, s, v, out.as_mut_slice());
             }
             None => out.fill(f64::NAN),
         }
     }
 
     fn rhs_sens_dt(&self, pt: Point<'_, Self::N, Self::P>, s: &M, out: &mut M) {
+        if self.second_by_differences {
+            return differences::rhs_sens_dt(self, pt, s, out);
+        }
         let Point { mode, sw, t, x, p } = pt;
         let ok = self.sens_shapes(s, out.len(), self.n);
         match self.mode(mode).filter(|_| ok) {
@@ -243,7 +261,7 @@ impl ModelSecondOrder for InterpretedModel {
                 let mut sc = self.scratch.borrow_mut();
                 let at = at_sw(t, x, p, sw);
                 let o = out.as_mut_slice();
-                m.second.dt(&at, &mut sc.regs, s.as_slice(), self.n, o);
+                m.second.dt(self, &at, &mut sc.regs, s.as_slice(), o);
             }
             Some(_) => out.fill(0.0),
             None => out.fill(f64::NAN),
@@ -261,6 +279,9 @@ impl ModelSecondOrder for InterpretedModel {
         v: &X,
         out: &mut X,
     ) {
+        if self.second_by_differences {
+            return differences::running_cost_sens_dir_x(self, sw, t, x, p, s, v, out);
+        }
         if v.len() != self.n || !self.sens_shapes(s, out.len(), 1) {
             out.fill(f64::NAN);
             return;
@@ -270,13 +291,16 @@ impl ModelSecondOrder for InterpretedModel {
                 let mut sc = self.scratch.borrow_mut();
                 let at = at_sw(t, x, p, sw);
                 let (s, v) = (s.as_slice(), v.as_slice());
-                so.dir_x(&at, &mut sc, s, self.n, v, out.as_mut_slice());
+                so.dir_x(self, &at, &mut sc, s, v, out.as_mut_slice());
             }
             None => out.fill(0.0),
         }
     }
 
     fn running_cost_sens_dt(&self, sw: &Switches, t: f64, x: &X, p: &X, s: &M, out: &mut X) -> f64 {
+        if self.second_by_differences {
+            return differences::running_cost_sens_dt(self, sw, t, x, p, s, out);
+        }
         if !self.sens_shapes(s, out.len(), 1) {
             out.fill(f64::NAN);
             return f64::NAN;
@@ -285,7 +309,7 @@ impl ModelSecondOrder for InterpretedModel {
             Some(so) => {
                 let mut sc = self.scratch.borrow_mut();
                 let at = at_sw(t, x, p, sw);
-                so.dt(&at, &mut sc.regs, s.as_slice(), self.n, out.as_mut_slice())
+                so.dt(self, &at, &mut sc.regs, s.as_slice(), out.as_mut_slice())
             }
             None => {
                 out.fill(0.0);
