@@ -32,7 +32,6 @@ pub mod solution;
 pub mod solve;
 pub mod vjp;
 
-pub use adjoint::{vjp, Cotangents, Vjp};
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
@@ -44,3 +43,4 @@ pub use solution::{
     Stats, Trajectory,
 };
 pub use solve::{solve, solve_with};
+pub use vjp::{vjp, Cotangents, Vjp};

@@ -23,29 +23,37 @@
 //! so in its `zeno` diagnostic and in `Stats::mode`. Errors (a tangential crossing, too many
 //! events) are those of forward mode.
 //!
-//! [`vjp`] is the entry point for reverse-mode callers (a JAX `custom_vjp`, a torch
-//! `autograd.Function`): cotangents of C and of observables at sample times in, dθ out.
+//! [`crate::vjp::vjp`] is the entry point for reverse-mode callers (a JAX `custom_vjp`, a
+//! torch `autograd.Function`): cotangents of C and of observables at sample times in, dθ out;
+//! in adjoint mode it calls [`pull_back`].
+//!
+//! ## qp layers
+//! A qp read by a flow is solved on the active set its switch bits freeze, so on a segment the
+//! flow is smooth and its products λᵀf_x, λᵀf_θ carry the qp's KKT derivative; the switch
+//! flips are transposed like any other. At a qp kink at T (a weakly active constraint, a
+//! `kink` diagnostic) `gradient` is the derivative from the right and `gradient_left` comes
+//! from a second sweep over the same record with every qp on its left side.
 
 pub mod record;
 mod sweep;
 mod transpose;
-mod vjp;
-
-pub use vjp::{vjp, Cotangents, Vjp};
 
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc};
+use crate::qp::Side;
+use crate::sample::check_times;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind, GradientMode, Options, Solution, Stats};
 use crate::solve::run_loop;
+use crate::vjp::Cotangents;
 use nalgebra::{Const, DefaultAllocator, OVector};
 use record::{Item, JumpKind, Tape};
 use std::time::Instant;
+use sweep::{sweep, Sample};
 use transpose::JumpWork;
 
-/// [`crate::solve::solve_with`] in adjoint mode: the primal run with the tape, its events
-/// handed to `sink` (without t'), then the sweep; or forward mode where the adjoint does not
-/// apply (see the module doc).
+/// [`crate::solve::solve_with`] in adjoint mode: [`pull_back`] with w_C = 1 and no samples,
+/// or forward mode where the adjoint does not apply (see the module doc).
 pub(crate) fn solve_with<M: HybridModel, K: EventSink>(
     model: &M,
     params: &OVector<f64, M::P>,
@@ -56,15 +64,113 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let start = Instant::now();
-    let Some((mut sol, tape)) = primal(model, params, opts)? else {
-        return forward_instead(model, params, opts, sink, start);
+    let cost_only = Cotangents {
+        cost: 1.0,
+        times: &[],
+        observables: &[],
     };
+    match pull_back(model, params, opts, sink, &cost_only)? {
+        Ok((sol, _)) => Ok(sol),
+        Err(handover) => {
+            let fwd = Options {
+                gradient_mode: GradientMode::Forward,
+                ..opts.clone()
+            };
+            let (mut sol, _) = run_loop(model, params, &fwd, sink, false)?;
+            note_fallback(&mut sol, handover);
+            sol.stats.wall_seconds = start.elapsed().as_secs_f64();
+            Ok(sol)
+        }
+    }
+}
+
+/// Why the adjoint hands a run over to forward mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Handover {
+    /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
+    /// with a state stuck on its guard: reported in the `zeno` diagnostic.
+    Accumulation,
+}
+
+impl Handover {
+    /// The diagnostic that carries the note, and the note.
+    fn note(self) -> (DiagnosticKind, &'static str) {
+        match self {
+            Handover::Accumulation => (
+                DiagnosticKind::Zeno,
+                "adjoint mode does not sweep back through an accumulation: \
+                 the gradient was computed in forward mode",
+            ),
+        }
+    }
+}
+
+/// The primal run with the tape, its user events to `sink` (without t'), the observables at
+/// `cot.times` read from the tape, and the backward sweep with the cotangents: the solution
+/// (its `gradient` is w_C dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ, its `gradient_left` at a qp kink
+/// w_C dC/dθ from the left) and y(t_s) row-major. `Err(handover)` when the adjoint does not
+/// apply and forward mode has to take over.
+#[allow(clippy::type_complexity)]
+pub(crate) fn pull_back<M: HybridModel, K: EventSink>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sink: &mut K,
+    cot: &Cotangents<'_>,
+) -> Result<Result<(Solution, Vec<f64>), Handover>, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let start = Instant::now();
+    let (mut sol, tape) = match primal(model, params, opts)? {
+        Ok(run) => run,
+        Err(handover) => return Ok(Err(handover)),
+    };
+    check_times(cot.times, sol.t_end)?;
     replay_events(model, params, &tape, opts, sink);
+    let nobs = model.info().nobservables();
+    let mut observables = vec![0.0; cot.times.len() * nobs];
+    let mut x = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
+    for (i, &t) in cot.times.iter().enumerate() {
+        tape.sample(t, x.as_mut_slice());
+        model.observe(t, &x, params, &mut observables[i * nobs..(i + 1) * nobs]);
+    }
+    let samples = sorted_samples(cot, nobs);
     let dt_end = horizon_grad(model, params, opts);
-    let out = sweep::sweep(model, params, &tape, opts, &dt_end, 1.0, &[])?;
+    let out = sweep(model, params, &tape, opts, &dt_end, cot.cost, &samples)?;
     sol.gradient = out.gradient;
-    add_sweep_stats(&mut sol.stats, &out.stats, &tape, start);
-    Ok(sol)
+    add_sweep_stats(&mut sol.stats, &out.stats);
+    if sol
+        .diagnostics
+        .iter()
+        .any(|d| d.kind == DiagnosticKind::Kink)
+    {
+        model.set_qp_side(Side::Left);
+        let left = sweep(model, params, &tape, opts, &dt_end, cot.cost, &[]);
+        model.set_qp_side(Side::Right);
+        let left = left?;
+        sol.gradient_left = Some(left.gradient);
+        add_sweep_stats(&mut sol.stats, &left.stats);
+    }
+    sol.stats.record_bytes = tape.bytes();
+    sol.stats.mode = GradientMode::Adjoint;
+    sol.stats.wall_seconds = start.elapsed().as_secs_f64();
+    Ok(Ok((sol, observables)))
+}
+
+/// The samples with their cotangent rows, sorted by time.
+fn sorted_samples<'a>(cot: &Cotangents<'a>, nobs: usize) -> Vec<Sample<'a>> {
+    let mut s: Vec<Sample<'a>> = cot
+        .times
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| Sample {
+            t,
+            w: &cot.observables[i * nobs..(i + 1) * nobs],
+        })
+        .collect();
+    s.sort_by(|a, b| a.t.total_cmp(&b.t));
+    s
 }
 
 /// The primal run's tolerances relative to the requested ones. Forward mode's error norm
@@ -78,13 +184,13 @@ where
 /// about 2.5× the primal steps of a 5th-order method, each O(n).
 pub const PRIMAL_TOL_FACTOR: f64 = 0.01;
 
-/// The primal run with the tape; `None` when it did not reach T normally (an accumulation
-/// or a stuck state ended it), so forward mode has to take over.
+/// The primal run with the tape; a [`Handover`] when it did not reach T normally (an
+/// accumulation or a stuck state ended it), so forward mode has to take over.
 fn primal<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
     opts: &Options,
-) -> Result<Option<(Solution, Tape)>, SolveError>
+) -> Result<Result<(Solution, Tape), Handover>, SolveError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
@@ -95,9 +201,10 @@ where
         ..opts.clone()
     };
     let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;
-    Ok(tape
-        .filter(|t| t.final_state().is_some())
-        .map(|tape| (sol, tape)))
+    Ok(match tape.filter(|t| t.final_state().is_some()) {
+        Some(tape) => Ok((sol, tape)),
+        None => Err(Handover::Accumulation),
+    })
 }
 
 /// dT/dθ: the horizon's gradient, or zero when `Options::t_end` overrides it.
@@ -116,62 +223,30 @@ where
     dt
 }
 
-/// The primal run's counters plus the sweep's, the mode, the record's size and the wall time
-/// since `start`.
-fn add_sweep_stats(stats: &mut Stats, sweep: &Stats, tape: &Tape, start: Instant) {
-    stats.record_bytes = tape.bytes();
+/// Adds the sweep's counters to the primal run's.
+fn add_sweep_stats(stats: &mut Stats, sweep: &Stats) {
     stats.steps += sweep.steps;
     stats.rejected_steps += sweep.rejected_steps;
     stats.rhs_evals += sweep.rhs_evals;
     stats.jac_evals += sweep.jac_evals;
     stats.factorizations += sweep.factorizations;
-    stats.mode = GradientMode::Adjoint;
-    stats.wall_seconds = start.elapsed().as_secs_f64();
 }
 
-/// The message forward mode's `zeno` diagnostic gains when it stands in for the adjoint.
-const FALLBACK_NOTE: &str = "adjoint mode does not sweep back through an accumulation: \
-    the gradient was computed in forward mode";
-
-/// Solves in forward mode instead (the adjoint's primal run ended at an accumulation or a
-/// stuck state) and says so: `Stats::mode` is forward and the `zeno` diagnostic carries
-/// [`FALLBACK_NOTE`].
-fn forward_instead<M: HybridModel, K: EventSink>(
-    model: &M,
-    params: &OVector<f64, M::P>,
-    opts: &Options,
-    sink: &mut K,
-    start: Instant,
-) -> Result<Solution, SolveError>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    let fwd = Options {
-        gradient_mode: GradientMode::Forward,
-        ..opts.clone()
-    };
-    let (mut sol, _) = run_loop(model, params, &fwd, sink, false)?;
-    note_fallback(&mut sol);
-    sol.stats.wall_seconds = start.elapsed().as_secs_f64();
-    Ok(sol)
-}
-
-/// Marks a forward solution that stands in for an adjoint one (see [`forward_instead`]).
-fn note_fallback(sol: &mut Solution) {
+/// Marks a forward solution that stands in for an adjoint one: `Stats::mode` is forward and
+/// the diagnostic of the [`Handover`]'s kind (the last one, or a new one at T) carries its
+/// note.
+pub(crate) fn note_fallback(sol: &mut Solution, handover: Handover) {
+    let (kind, note) = handover.note();
     sol.stats.mode = GradientMode::Forward;
-    match sol
-        .diagnostics
-        .iter_mut()
-        .rfind(|d| d.kind == DiagnosticKind::Zeno)
-    {
+    match sol.diagnostics.iter_mut().rfind(|d| d.kind == kind) {
         Some(d) => {
             d.message.push_str("; ");
-            d.message.push_str(FALLBACK_NOTE);
+            d.message.push_str(note);
         }
         None => sol.diagnostics.push(Diagnostic {
-            kind: DiagnosticKind::Zeno,
+            kind,
             t: sol.t_end,
-            message: FALLBACK_NOTE.into(),
+            message: note.into(),
         }),
     }
 }
