@@ -9,7 +9,7 @@ mod common;
 
 use common::ball::{BallCost, BallSpec};
 use common::cases::{cases, run_matrix};
-use common::check::close;
+use common::check::{assert_close, assert_grad, close};
 use common::models::{relay_closed, Dip, Kink, Relay, Thermostat, Twin};
 use common::{ev, info, AdModel, Sc, Spec, D};
 use mvad_runtime::model::{Direction, ModelInfo};
@@ -139,7 +139,10 @@ fn adjoint_matches_forward() {
         }
         check(&format!("kink {method:?}"), both(Kink, &[1.5, 0.5], &o));
         check(&format!("dip {method:?}"), both(Dip, &[0.5, 1e-3], &o));
-        check(&format!("twin {method:?}"), both(Twin, &[0.4], &o));
+        check(
+            &format!("twin {method:?}"),
+            both(Twin, &[0.4, 1.0, 1.0, 2.0], &o),
+        );
         let wall = Wild::default();
         let p = wall.defaults.to_vec();
         check(&format!("every construct {method:?}"), both(wall, &p, &o));
@@ -174,19 +177,14 @@ fn stiff_relay_adjoint_at_rtol_1e9() {
         let sol = solve(&AdModel::new(Relay), &DVector::from_column_slice(&p), &o).unwrap();
         assert_eq!(sol.stats.mode, GradientMode::Adjoint);
         assert_eq!(sol.events.len(), nev);
-        assert!(
-            close(sol.cost, c.v, 1e-6, 0.0),
-            "{method:?}: cost {}",
-            sol.cost
+        assert_close(&format!("{method:?}: cost"), sol.cost, c.v, 1e-6, 0.0);
+        assert_grad(
+            &format!("{method:?}"),
+            &sol.gradient[..3],
+            &c.g[..3],
+            1e-6,
+            1e-9,
         );
-        for j in 0..3 {
-            assert!(
-                close(sol.gradient[j], c.g[j], 1e-6, 1e-9),
-                "{method:?} param {j}: {} vs {}",
-                sol.gradient[j],
-                c.g[j]
-            );
-        }
         // A stiff sweep in few steps: the implicit method took over backwards as well.
         assert!(
             sol.stats.steps < 10_000,
@@ -197,58 +195,8 @@ fn stiff_relay_adjoint_at_rtol_1e9() {
     }
 }
 
-/// Two events on one guard at the same instant, applied in declaration order (a: y += u,
-/// then b: y ×= v) and undone in reverse: x = t, y(0) = y0, C = ∫₀¹ y dt + y(1)², so
-/// y = y0 before c and (y0 + u) v after, C = y0 c + (y0 + u) v (1 − c) + ((y0 + u) v)².
-#[derive(Clone)]
-struct Pair;
-
-impl Spec for Pair {
-    fn info(&self) -> ModelInfo {
-        let mut i = info(
-            "Pair",
-            &["x", "y"],
-            &[("c", 0.4), ("y0", 1.5), ("u", 0.7), ("v", 2.0)],
-            &["main"],
-            vec![
-                ev("a", Direction::Up, None, None, false),
-                ev("b", Direction::Up, None, None, false),
-            ],
-            &["y"],
-            0,
-        );
-        i.has_final_cost = true;
-        i
-    }
-    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-        x[1] = p[1];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
-    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
-        f[0] = S::cst(1.0);
-        f[1] = S::cst(0.0);
-    }
-    fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
-        x[0] - p[0]
-    }
-    fn reset<S: Sc>(&self, k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
-        xp[0] = x[0];
-        xp[1] = if k == 0 { x[1] + p[2] } else { x[1] * p[3] };
-    }
-    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
-        y[0] = x[1];
-    }
-    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
-        x[1]
-    }
-    fn final_cost<S: Sc>(&self, _t: S, x: &[S], _p: &[S]) -> S {
-        x[1] * x[1]
-    }
-}
-
+/// [`Twin`]'s two events at one instant, undone in reverse order by the sweep, against the
+/// closed form by dual numbers.
 #[test]
 fn simultaneous_events_undone_in_reverse_order() {
     let p = [0.4, 1.5, 0.7, 2.0];
@@ -261,25 +209,20 @@ fn simultaneous_events_undone_in_reverse_order() {
             method,
             ..fine(GradientMode::Adjoint)
         };
-        let sol = solve(&AdModel::new(Pair), &DVector::from_column_slice(&p), &o).unwrap();
+        let sol = solve(&AdModel::new(Twin), &DVector::from_column_slice(&p), &o).unwrap();
         assert!(sol
             .diagnostics
             .iter()
             .any(|d| d.kind == DiagnosticKind::SimultaneousEvents));
         assert_eq!(sol.events.len(), 2);
-        assert!(
-            close(sol.cost, want.v, 1e-13, 0.0),
-            "{method:?}: {}",
-            sol.cost
+        assert_close(&format!("{method:?}: cost"), sol.cost, want.v, 1e-13, 0.0);
+        assert_grad(
+            &format!("{method:?}"),
+            &sol.gradient[..4],
+            &want.g[..4],
+            1e-12,
+            1e-13,
         );
-        for j in 0..4 {
-            assert!(
-                close(sol.gradient[j], want.g[j], 1e-12, 1e-13),
-                "{method:?} param {j}: {} vs {}",
-                sol.gradient[j],
-                want.g[j]
-            );
-        }
     }
 }
 
@@ -648,12 +591,8 @@ fn vjp_at_an_event_time_is_right_continuous() {
             "param {j}: vjp {} fd {fd}",
             adj.gradient[j]
         );
-        assert!(
-            close(adj.gradient[j], by_fwd.gradient[j], 1e-9, 1e-10),
-            "param {j}: adjoint {} forward {}",
-            adj.gradient[j],
-            by_fwd.gradient[j]
-        );
+        let what = format!("param {j}: adjoint vs forward");
+        assert_close(&what, adj.gradient[j], by_fwd.gradient[j], 1e-9, 1e-10);
     }
 }
 

@@ -41,6 +41,16 @@ const E1_DCDE: f64 = 2.8314408141470055;
 const E1_T1: f64 = 0.638_550_856_814_101;
 const E1_T2: f64 = 1.6602322277166624;
 
+/// The first diagnostic of `kind` in a `grad --json` object.
+fn diagnostic<'a>(v: &'a Value, kind: &str) -> &'a Value {
+    v["diagnostics"]
+        .as_array()
+        .expect("array")
+        .iter()
+        .find(|d| d["kind"] == kind)
+        .unwrap_or_else(|| panic!("no {kind} diagnostic in {v}"))
+}
+
 /// C and dC/de of E1 to 1e-9 and its two events; returns the events.
 fn assert_e1_values(v: &Value) -> &Vec<Value> {
     assert_relative_eq!(
@@ -196,12 +206,7 @@ fn grad_adjoint_of_an_accumulation_falls_back_to_forward() {
     let v = json(&o);
     assert_eq!(v["stats"]["mode"], "forward");
     assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
-    let zeno = v["diagnostics"]
-        .as_array()
-        .expect("array")
-        .iter()
-        .find(|d| d["kind"] == "zeno")
-        .expect("zeno");
+    let zeno = diagnostic(&v, "zeno");
     let message = zeno["message"].as_str().expect("message");
     assert!(message.contains("forward mode"), "{message}");
 }
@@ -219,12 +224,7 @@ fn zeno_ball_reports_a_zeno_diagnostic_and_finishes() {
     assert!(kinds.contains(&"zeno"), "{kinds:?}");
     assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
     // e = 0.5, h0 = 2: the bounces accumulate at t* = t₁ (1 + 2e/(1 − e)) = 3 t₁.
-    let zeno = v["diagnostics"]
-        .as_array()
-        .expect("array")
-        .iter()
-        .find(|d| d["kind"] == "zeno")
-        .expect("zeno");
+    let zeno = diagnostic(&v, "zeno");
     assert_relative_eq!(
         zeno["t"].as_f64().expect("t"),
         3.0 * E1_T1,

@@ -557,11 +557,12 @@ fn twin() -> Case {
         r.check(has(sol, DiagnosticKind::SimultaneousEvents), || {
             format!("{:?}", sol.diagnostics)
         });
-        // C = 0.4·1 + 0.6·4 = 2.8, dC/dc = 1 − 4 = −3.
-        r.close("cost", sol.cost, 2.8, 0.0, 1e-12 * tol.x);
+        // At (c, y0, u, v) = (0.4, 1, 1, 2): C = 0.4·1 + 0.6·4 + 4² = 18.8, dC/dc = 1 − 4 = −3.
+        r.close("cost", sol.cost, 18.8, 0.0, 1e-12 * tol.x);
         r.close("dC/dc", sol.gradient[0], -3.0, 0.0, 1e-9 * tol.x);
     });
-    ad_case("twin".into(), Twin, &[0.4], tight(), &Method::ALL, check)
+    let p = [0.4, 1.0, 1.0, 2.0];
+    ad_case("twin".into(), Twin, &p, tight(), &Method::ALL, check)
 }
 
 /// No parameters: x = e^{−t} until ln 2, then 0.25 e^{−(t − ln 2)}.
