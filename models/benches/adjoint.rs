@@ -43,9 +43,12 @@
 //!   p = 1000. Where the adjoint's p = 1000 time goes (perf): up to ~45 % the sweep's O(p) work
 //!   per stage (the quadrature g is p long in every stage vector, combination, error norm and
 //!   finiteness check, though f_θ has one non-zero), ~30 % the model's own O(p) work at the
-//!   four impacts (the reset's p-term law evaluated forwards and transposed), the rest the
-//!   O(1) primal and λ. Flat to 3× needs the quadrature accumulated sparsely outside the
-//!   integrator's vectors (a product that adds into g instead of overwriting a p vector).
+//!   four impacts (the reset's p-term law evaluated forwards and its Jacobian transposed:
+//!   ~0.24 ms at p = 1000 by perf's shares, more than twice the whole p = 10 run), the rest
+//!   the O(1) primal and λ. So on this model 3× is out of reach even for an adjoint with no
+//!   O(p) work of its own ((0.088 + 0.24)/0.088 ≈ 3.7); what the adjoint can still remove is
+//!   its per-stage O(p), by accumulating the quadrature sparsely outside the integrator's
+//!   vectors (a product that adds into g instead of overwriting a p vector).
 //! - chain: f has p terms, so every evaluation is O(p) in both modes; the adjoint takes 1592
 //!   steps (primal at 1/100 of the tolerances, then the sweep) to forward's 249, and is not
 //!   faster up to p = 1000 (1.1× slower there). Adjoint 1000/10 = 36, forward 63.
