@@ -56,7 +56,7 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
         let node = ar.node(e);
         let dv = |id: ExprId| d[id.index()];
         let r = match node {
-            Node::Const(_) => zero,
+            Node::Const(_) | Node::Column(_) => zero,
             Node::Time | Node::State(_) | Node::Param(_) => {
                 if var.matches(&node) {
                     ar.constant(1.0)

@@ -16,6 +16,7 @@ enum Op {
     Time,
     X(u32),
     P(u32),
+    Col(u32),
     Add(u32, u32),
     Mul(u32, u32),
     Neg(u32),
@@ -48,6 +49,7 @@ impl Tape {
                 Node::Time => Op::Time,
                 Node::State(i) => Op::X(i),
                 Node::Param(i) => Op::P(i),
+                Node::Column(c) => Op::Col(c),
                 Node::Add(a, b) => Op::Add(g(a), g(b)),
                 Node::Mul(a, b) => Op::Mul(g(a), g(b)),
                 Node::Neg(a) => Op::Neg(g(a)),
@@ -102,6 +104,12 @@ impl Tape {
     /// [`Tape::run`] with switch bits beyond the first 64: `at.sw` holds bits 0..64 and
     /// `hi` the rest (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent).
     pub fn run_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> bool {
+        self.run_row(at, hi, &[], regs)
+    }
+
+    /// [`Tape::run_with`] at a table row: column c ([`Node::Column`]) reads `row[c]` (NaN when
+    /// absent).
+    pub fn run_row(&self, at: &Point<'_>, hi: &[u64], row: &[f64], regs: &mut [f64]) -> bool {
         if regs.len() < self.ops.len() {
             return false;
         }
@@ -112,6 +120,7 @@ impl Tape {
                 Op::Time => at.t,
                 Op::X(k) => at.x.get(k as usize).copied().unwrap_or(f64::NAN),
                 Op::P(k) => at.p.get(k as usize).copied().unwrap_or(f64::NAN),
+                Op::Col(c) => row.get(c as usize).copied().unwrap_or(f64::NAN),
                 Op::Add(a, b) => r(a) + r(b),
                 Op::Mul(a, b) => r(a) * r(b),
                 Op::Neg(a) => -r(a),
@@ -153,7 +162,19 @@ impl Tape {
 
     /// [`Tape::eval`] with switch bits beyond the first 64 in `hi` (see [`Tape::run_with`]).
     pub fn eval_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64], out: &mut [f64]) {
-        if !self.run_with(at, hi, regs) {
+        self.eval_row(at, hi, &[], regs, out);
+    }
+
+    /// [`Tape::eval_with`] at a table row (see [`Tape::run_row`]).
+    pub fn eval_row(
+        &self,
+        at: &Point<'_>,
+        hi: &[u64],
+        row: &[f64],
+        regs: &mut [f64],
+        out: &mut [f64],
+    ) {
+        if !self.run_row(at, hi, row, regs) {
             out.iter_mut().take(self.len).for_each(|o| *o = f64::NAN);
             return;
         }

@@ -185,6 +185,9 @@ pub enum Node {
     State(u32),
     /// Parameter θ_i.
     Param(u32),
+    /// Column c of the program's [`Program::columns`] at the current row of its table (a
+    /// datum, never differentiated; read only by `at each` events).
+    Column(u32),
     /// a + b (operands sorted by id).
     Add(ExprId, ExprId),
     /// a · b (operands sorted by id).
@@ -209,7 +212,9 @@ impl Node {
     /// The children of the node, in order (at most three).
     pub fn children(&self) -> impl Iterator<Item = ExprId> {
         let (a, b, c) = match *self {
-            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) => (None, None, None),
+            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) | Node::Column(_) => {
+                (None, None, None)
+            }
             Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => (Some(a), None, None),
             Node::Add(a, b)
             | Node::Mul(a, b)
@@ -221,11 +226,11 @@ impl Node {
         a.into_iter().chain(b).chain(c)
     }
 
-    /// Whether the node is a leaf (constant, time, state or parameter).
+    /// Whether the node is a leaf (constant, time, state, parameter or table column).
     pub fn is_leaf(&self) -> bool {
         matches!(
             self,
-            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_)
+            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) | Node::Column(_)
         )
     }
 }
@@ -252,6 +257,8 @@ pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
         Node::Time => at.t,
         Node::State(i) => at.x.get(i as usize).copied().unwrap_or(f64::NAN),
         Node::Param(i) => at.p.get(i as usize).copied().unwrap_or(f64::NAN),
+        // The reference evaluator has no row: a column is undefined there.
+        Node::Column(_) => f64::NAN,
         Node::Add(a, b) => g(a) + g(b),
         Node::Mul(a, b) => g(a) * g(b),
         Node::Neg(a) => -g(a),
@@ -399,7 +406,28 @@ pub struct Mode {
     pub flow: Vec<ExprId>,
 }
 
-/// One event: guard, reset, target and its event cost.
+/// When a time event fires (expressions of θ, and for `at each` of the columns of its table).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Schedule {
+    /// `at τ`: once at t = τ(θ).
+    At(ExprId),
+    /// `every period from start`: at t = start(θ) + j·period(θ), j = 0, 1, ...
+    Every {
+        /// The period.
+        period: ExprId,
+        /// The first time.
+        start: ExprId,
+    },
+    /// `at each τ`: at t = τ(θ, row j) for every row j of table `table`.
+    Each {
+        /// Index into [`Program::tables`].
+        table: usize,
+        /// τ, reading [`Node::Column`]s of that table.
+        time: ExprId,
+    },
+}
+
+/// One event: guard (or schedule), reset, target and its event cost.
 #[derive(Clone, Debug)]
 pub struct Event {
     /// Declared name or `event_K`.
@@ -410,8 +438,10 @@ pub struct Event {
     pub mode: Option<usize>,
     /// Mode switched to after the reset.
     pub target: Option<usize>,
-    /// g = LHS − RHS.
+    /// g = LHS − RHS of a state event; NaN for a time event (which has no guard).
     pub guard: ExprId,
+    /// `Some` for a time event: when it fires.
+    pub schedule: Option<Schedule>,
     /// x⁺ = R(t, x⁻, θ), one expression per state (x_i itself when not assigned).
     pub reset: Vec<ExprId>,
     /// Whether the event has a reset block.
@@ -431,6 +461,11 @@ pub struct Program {
     pub states: Vec<String>,
     /// Parameter names.
     pub params: Vec<String>,
+    /// Data tables: (name, file as written in the model).
+    pub tables: Vec<(String, String)>,
+    /// The table columns the model reads: (index into `tables`, column name); column c is
+    /// [`Node::Column`]`(c)`.
+    pub columns: Vec<(usize, String)>,
     /// Declared parameter values (consts folded).
     pub param_defaults: Vec<f64>,
     /// x₀(θ), one expression per state.

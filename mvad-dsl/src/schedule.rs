@@ -9,7 +9,7 @@
 //! the same kernels.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, Node, Program};
+use crate::ir::{Direction, ExprArena, ExprId, Node, Program, Schedule};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -102,6 +102,34 @@ pub struct EventKernels {
     pub reset_jac: Kernel,
     /// φ_k and (φ_x, φ_θ, φ_t), if the cost has `sum` terms for this event.
     pub cost: Option<GradKernels>,
+    /// The times of a time event.
+    pub time: Option<TimeKernels>,
+}
+
+/// The times of a time event: τ(θ) (or τ(θ, row) for `at each`, or the start of `every`) and
+/// ∂τ/∂θ; for `every` also the period and its gradient. Time j of `every` is start + j·period.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimeKernels {
+    /// τ, or the start of `every` (1 slot).
+    pub time: Kernel,
+    /// ∂τ/∂θ (p slots).
+    pub time_grad: Kernel,
+    /// `every`: the period (1 slot) and its gradient (p slots).
+    pub period: Option<(Kernel, Kernel)>,
+}
+
+/// What kind of time event an event is (mirrors the runtime's `Trigger`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimeKind {
+    /// `at EXPR`.
+    At,
+    /// `every PERIOD from START`.
+    Every,
+    /// `at each EXPR` over the rows of table `table` (index into [`ModelKernels::tables`]).
+    Each {
+        /// The table.
+        table: usize,
+    },
 }
 
 /// Static description of an event (mirrors the runtime's `EventInfo`).
@@ -119,6 +147,8 @@ pub struct EventMeta {
     pub has_reset: bool,
     /// Whether the cost has `sum` terms for it.
     pub has_cost: bool,
+    /// `Some` for a time event.
+    pub time: Option<TimeKind>,
 }
 
 /// Everything the back ends need: the arena, names and one kernel per model function.
@@ -132,6 +162,10 @@ pub struct ModelKernels {
     pub states: Vec<String>,
     /// Parameter names.
     pub params: Vec<String>,
+    /// Data tables: (name, file as written).
+    pub tables: Vec<(String, String)>,
+    /// The columns read: (table index, column name); column c is `row[c]` in the kernels.
+    pub columns: Vec<(usize, String)>,
     /// Declared parameter values.
     pub param_defaults: Vec<f64>,
     /// Mode names.
@@ -173,6 +207,23 @@ impl ModelKernels {
     pub fn nparams(&self) -> usize {
         self.params.len()
     }
+    /// The `at each` events whose times are a bare column `TABLE.COL` (so the column itself
+    /// must not decrease, which can be checked where the table is read): (column, event).
+    pub fn bare_time_columns(&self) -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        for (e, (ev, meta)) in self.events.iter().zip(&self.event_meta).enumerate() {
+            let (Some(tk), Some(TimeKind::Each { .. })) = (&ev.time, meta.time) else {
+                continue;
+            };
+            if let [(_, id)] = tk.time.outputs[..] {
+                if let Node::Column(c) = self.arena.node(id) {
+                    out.push((c as usize, e));
+                }
+            }
+        }
+        out
+    }
+
     /// Every kernel, for the back ends' scratch sizing and tests.
     pub fn all_kernels(&self) -> Vec<&Kernel> {
         let mut v = vec![&self.x0, &self.x0_jac, &self.observe, &self.observe_jac];
@@ -188,6 +239,12 @@ impl ModelKernels {
             v.extend([&e.reset, &e.reset_jac]);
             if let Some(c) = &e.cost {
                 v.extend([&c.value, &c.grad]);
+            }
+            if let Some(tk) = &e.time {
+                v.extend([&tk.time, &tk.time_grad]);
+                if let Some((a, b)) = &tk.period {
+                    v.extend([a, b]);
+                }
             }
         }
         for s in &self.switches {
@@ -306,11 +363,28 @@ pub fn kernels(program: &Program) -> ModelKernels {
             let mut rj = jacobian(&mut ar, &ev.reset, Var::State, n);
             rj.extend(jacobian(&mut ar, &ev.reset, Var::Param, p));
             rj.extend(jacobian(&mut ar, &ev.reset, |_| Var::Time, 1));
+            let mut theta_kernels = |e: ExprId| {
+                let g: Vec<ExprId> = (0..p).map(|i| diff(&mut ar, e, Var::Param(i))).collect();
+                (Kernel::new(&ar, &[e]), Kernel::new(&ar, &g))
+            };
+            let time = ev.schedule.map(|s| {
+                let (first, period) = match s {
+                    Schedule::At(tau) | Schedule::Each { time: tau, .. } => (tau, None),
+                    Schedule::Every { period, start } => (start, Some(period)),
+                };
+                let (time, time_grad) = theta_kernels(first);
+                TimeKernels {
+                    time,
+                    time_grad,
+                    period: period.map(&mut theta_kernels),
+                }
+            });
             EventKernels {
                 guard,
                 reset: Kernel::new(&ar, &ev.reset),
                 reset_jac: Kernel::new(&ar, &rj),
                 cost: ev.cost.map(|c| grad_kernels(&mut ar, c, n, p, false)),
+                time,
             }
         })
         .collect();
@@ -336,6 +410,8 @@ pub fn kernels(program: &Program) -> ModelKernels {
         name: program.name.clone(),
         states: program.states.clone(),
         params: program.params.clone(),
+        tables: program.tables.clone(),
+        columns: program.columns.clone(),
         param_defaults: program.param_defaults.clone(),
         mode_names: program.modes.iter().map(|m| m.name.clone()).collect(),
         initial_mode: program.initial_mode,
@@ -349,6 +425,11 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 target: e.target,
                 has_reset: e.has_reset,
                 has_cost: e.cost.is_some(),
+                time: e.schedule.map(|s| match s {
+                    Schedule::At(_) => TimeKind::At,
+                    Schedule::Every { .. } => TimeKind::Every,
+                    Schedule::Each { table, .. } => TimeKind::Each { table },
+                }),
             })
             .collect(),
         observables: program.observables.iter().map(|(n, _)| n.clone()).collect(),

@@ -13,7 +13,7 @@ pub mod model;
 
 pub use model::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
-    ModelSecondOrder, ModelSens, Point, Switches,
+    ModelSecondOrder, ModelSens, Point, Switches, Trigger,
 };
 
 pub mod error;
@@ -30,7 +30,7 @@ pub mod solve;
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
-pub use sink::{EventCounts, EventSink, EventView, Stream};
+pub use sink::{EventCounts, EventSink, EventView, FirstEvents, Stream};
 pub use solution::{
     Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,
 };

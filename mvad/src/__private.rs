@@ -5,8 +5,9 @@
 pub use mvad_dsl::ir::sign;
 pub use mvad_runtime::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
-    ModelSens, Point, Switches,
+    ModelSens, Point, Switches, Trigger,
 };
+pub use crate::table::{bind_columns, Table, TableError, TableNeeds};
 pub use nalgebra::{Const, OMatrix, OVector};
 
 /// Owned names from string literals (builds `ModelInfo` lists).

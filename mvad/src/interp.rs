@@ -13,11 +13,13 @@ use std::cell::RefCell;
 use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Point};
-use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
+use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
 use mvad_runtime::{
     EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
-    Switches,
+    Switches, Trigger,
 };
+
+use crate::table::{bind_columns, Table, TableError, TableNeeds};
 use nalgebra::{DMatrix, DVector, Dyn};
 
 /// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
@@ -44,6 +46,23 @@ struct EventTapes {
     reset: Tape,
     reset_jac: Tape,
     cost: Option<GradTapes>,
+    /// A time event's τ (or start) and ∂τ/∂θ, and for `every` the period and its gradient.
+    time: Option<(Tape, Tape, Option<(Tape, Tape)>)>,
+    /// The table an `at each` event runs over.
+    table: Option<usize>,
+}
+
+/// The data tables of a model: its declarations and the columns it reads, bound to data.
+#[derive(Clone, Debug, Default)]
+struct Tables {
+    /// Declared (name, file).
+    decls: Vec<(String, String)>,
+    /// Columns read: (table, column name).
+    names: Vec<(usize, String)>,
+    /// Columns used bare as the times of an `at each` event: (column, event name).
+    times: Vec<(usize, String)>,
+    /// The bound values of each column (empty until [`InterpretedModel::bind_tables`]).
+    values: Vec<Vec<f64>>,
 }
 
 #[derive(Clone, Debug)]
@@ -68,7 +87,10 @@ pub struct InterpretedModel {
     observe_jac: Tape,
     running_cost: Option<GradTapes>,
     final_cost: Option<GradTapes>,
+    tables: Tables,
     scratch: RefCell<Scratch>,
+    /// The current row's values of every column (scratch of the event methods).
+    row: RefCell<Vec<f64>>,
 }
 
 type X = DVector<f64>;
@@ -103,6 +125,12 @@ impl InterpretedModel {
                     target: e.target,
                     has_reset: e.has_reset,
                     has_cost: e.has_cost,
+                    trigger: match e.time {
+                        None => Trigger::Guard,
+                        Some(TimeKind::At) => Trigger::At,
+                        Some(TimeKind::Every) => Trigger::Every,
+                        Some(TimeKind::Each { .. }) => Trigger::Each { rows: 0 },
+                    },
                 })
                 .collect(),
             observables: k.observables.clone(),
@@ -115,7 +143,7 @@ impl InterpretedModel {
         let all = k.all_kernels();
         let nregs = all.iter().map(|k| k.nodes.len()).max().unwrap_or(0);
         let nout = all.iter().map(|k| k.len).max().unwrap_or(0);
-        InterpretedModel {
+        let mut model = InterpretedModel {
             n: k.nstates(),
             p: k.nparams(),
             x0: tape(&k.x0),
@@ -142,6 +170,11 @@ impl InterpretedModel {
                     reset: tape(&e.reset),
                     reset_jac: tape(&e.reset_jac),
                     cost: e.cost.as_ref().map(grad),
+                    time: e.time.as_ref().map(|tk| {
+                        let period = tk.period.as_ref().map(|(a, b)| (tape(a), tape(b)));
+                        (tape(&tk.time), tape(&tk.time_grad), period)
+                    }),
+                    table: None,
                 })
                 .collect(),
             switches: k.switches.iter().map(grad).collect(),
@@ -149,11 +182,69 @@ impl InterpretedModel {
             observe_jac: tape(&k.observe_jac),
             running_cost: k.running_cost.as_ref().map(grad),
             final_cost: k.final_cost.as_ref().map(grad),
+            tables: Tables {
+                decls: k.tables.clone(),
+                names: k.columns.clone(),
+                times: k
+                    .bare_time_columns()
+                    .into_iter()
+                    .map(|(c, e)| (c, k.event_meta[e].name.clone()))
+                    .collect(),
+                values: Vec::new(),
+            },
             scratch: RefCell::new(Scratch {
                 regs: vec![0.0; nregs],
                 out: vec![0.0; nout],
             }),
+            row: RefCell::new(vec![f64::NAN; k.columns.len()]),
             info,
+        };
+        for (e, meta) in model.events.iter_mut().zip(&k.event_meta) {
+            if let Some(TimeKind::Each { table }) = meta.time {
+                e.table = Some(table);
+            }
+        }
+        model
+    }
+
+    /// The declared tables: (name, file as written in the model).
+    pub fn table_decls(&self) -> &[(String, String)] {
+        &self.tables.decls
+    }
+
+    /// Binds the model's data: one table per declaration, in declaration order. Checks that
+    /// the columns the model reads exist and that bare `at each` times do not decrease (errors
+    /// located in the table's file), and sets the row counts of the `at each` events.
+    pub fn bind_tables(&mut self, tables: &[&Table]) -> Result<(), TableError> {
+        let t = &self.tables;
+        let needs = TableNeeds {
+            tables: t.decls.iter().map(|(n, _)| n.as_str()).collect(),
+            columns: t.names.iter().map(|(i, c)| (*i, c.as_str())).collect(),
+            times: t.times.iter().map(|(c, e)| (*c, e.as_str())).collect(),
+        };
+        let (values, rows) = bind_columns(&needs, tables)?;
+        for (info, e) in self.info.events.iter_mut().zip(&self.events) {
+            if let Some(table) = e.table {
+                info.trigger = Trigger::Each {
+                    rows: rows.get(table).copied().unwrap_or(0),
+                };
+            }
+        }
+        self.tables.values = values;
+        Ok(())
+    }
+
+    /// Fills the row scratch with row `j` of the table of event `event` (NaN elsewhere).
+    fn fill_row(&self, event: usize, j: usize) {
+        let mut row = self.row.borrow_mut();
+        let table = self.events.get(event).and_then(|e| e.table);
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = match (table, self.tables.names.get(c), self.tables.values.get(c)) {
+                (Some(t), Some((ct, _)), Some(col)) if *ct == t => {
+                    col.get(j).copied().unwrap_or(f64::NAN)
+                }
+                _ => f64::NAN,
+            };
         }
     }
 
@@ -176,14 +267,14 @@ impl InterpretedModel {
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        let ok = tape.run_with(&at.pt, at.hi, regs);
+        let ok = tape.run_row(&at.pt, at.hi, at.row, regs);
         f(ok, regs, out)
     }
 
     /// Writes a vector kernel into `v` (dense, zeros included).
     fn vec_out(&self, tape: &Tape, at: &At<'_>, v: &mut X) {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_with(&at.pt, at.hi, &mut sc.regs, v.as_mut_slice());
+        tape.eval_row(&at.pt, at.hi, at.row, &mut sc.regs, v.as_mut_slice());
     }
 
     /// Writes a row-major matrix block of a kernel (slots `off..off + rows·cols`) into `m`.
@@ -212,7 +303,9 @@ impl InterpretedModel {
 
     fn scalar(&self, tape: &Tape, at: &At<'_>) -> f64 {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_scalar_with(&at.pt, at.hi, &mut sc.regs)
+        let mut out = [0.0];
+        tape.eval_row(&at.pt, at.hi, at.row, &mut sc.regs, &mut out);
+        out[0]
     }
 
     /// Gradient kernel into `gx`, `gp`; returns the last slot.
@@ -220,7 +313,7 @@ impl InterpretedModel {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out } = &mut *sc;
-        g.grad.eval_with(&at.pt, at.hi, regs, out);
+        g.grad.eval_row(&at.pt, at.hi, at.row, regs, out);
         copy_into(gx.as_mut_slice(), &out[..n]);
         copy_into(gp.as_mut_slice(), &out[n..n + p]);
         out[n + p]
@@ -236,10 +329,12 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
     dst[..k].copy_from_slice(&src[..k]);
 }
 
-/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest.
+/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest,
+/// `row` the current row's column values (event methods of `at each` events).
 struct At<'a> {
     pt: Point<'a>,
     hi: &'a [u64],
+    row: &'a [f64],
 }
 
 /// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
@@ -252,6 +347,7 @@ fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
             sw: sw.low_word(),
         },
         hi: sw.high_words(),
+        row: &[],
     }
 }
 
@@ -265,7 +361,13 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
             sw: 0,
         },
         hi: &[],
+        row: &[],
     }
+}
+
+/// The point (t, x, θ) at a table row, for the reset and event cost of an event.
+fn pt_row<'a>(t: f64, x: &'a X, p: &'a X, row: &'a [f64]) -> At<'a> {
+    At { row, ..pt0(t, x, p) }
 }
 
 /// The point for functions of θ alone (x₀, T).
@@ -278,6 +380,7 @@ fn pt_theta(p: &X) -> At<'_> {
             sw: 0,
         },
         hi: &[],
+        row: &[],
     }
 }
 
@@ -366,13 +469,26 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn reset(&self, event: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
+    fn reset(&self, event: usize, j: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
+        self.fill_row(event, j);
+        let row = self.row.borrow();
         match self.events.get(event) {
-            Some(e) => self.vec_out(&e.reset, &pt0(t, x, p), xplus),
+            Some(e) => self.vec_out(&e.reset, &pt_row(t, x, p, &row), xplus),
             None => xplus.fill(f64::NAN),
         }
     }
-    fn reset_jac(&self, event: usize, t: f64, x: &X, p: &X, rx: &mut M, rp: &mut M, rt: &mut X) {
+    #[allow(clippy::too_many_arguments)]
+    fn reset_jac(
+        &self,
+        event: usize,
+        j: usize,
+        t: f64,
+        x: &X,
+        p: &X,
+        rx: &mut M,
+        rp: &mut M,
+        rt: &mut X,
+    ) {
         let Some(e) = self.events.get(event) else {
             rx.fill(f64::NAN);
             rp.fill(f64::NAN);
@@ -381,7 +497,9 @@ impl HybridModel for InterpretedModel {
         };
         let (n, np) = (self.n, self.p);
         let tape = &e.reset_jac;
-        self.with(tape, &pt0(t, x, p), |ok, regs, out| {
+        self.fill_row(event, j);
+        let row = self.row.borrow();
+        self.with(tape, &pt_row(t, x, p, &row), |ok, regs, out| {
             Self::mat_out(tape, ok, regs, rx, n, 0);
             Self::mat_out(tape, ok, regs, rp, np, n * n);
             out[..n].fill(if ok { 0.0 } else { f64::NAN });
@@ -394,6 +512,44 @@ impl HybridModel for InterpretedModel {
             }
             copy_into(rt.as_mut_slice(), &out[..n]);
         });
+    }
+
+    fn event_time(&self, event: usize, j: usize, p: &X) -> f64 {
+        let Some((tau, _, period)) = self.events.get(event).and_then(|e| e.time.as_ref()) else {
+            return f64::NAN;
+        };
+        self.fill_row(event, j);
+        let row = self.row.borrow();
+        let at = At {
+            row: &row,
+            ..pt_theta(p)
+        };
+        let first = self.scalar(tau, &at);
+        match period {
+            Some((per, _)) => first + j as f64 * self.scalar(per, &at),
+            None => first,
+        }
+    }
+    fn event_time_grad(&self, event: usize, j: usize, p: &X, dtau: &mut X) {
+        let Some((_, grad, period)) = self.events.get(event).and_then(|e| e.time.as_ref()) else {
+            dtau.fill(f64::NAN);
+            return;
+        };
+        self.fill_row(event, j);
+        let row = self.row.borrow();
+        let at = At {
+            row: &row,
+            ..pt_theta(p)
+        };
+        self.vec_out(grad, &at, dtau);
+        if let Some((_, per_grad)) = period {
+            let mut sc = self.scratch.borrow_mut();
+            let Scratch { regs, out } = &mut *sc;
+            per_grad.eval_row(&at.pt, at.hi, at.row, regs, out);
+            for (d, g) in dtau.iter_mut().zip(out.iter()) {
+                *d += j as f64 * g;
+            }
+        }
     }
 
     fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
@@ -472,15 +628,29 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn event_cost(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
+    fn event_cost(&self, event: usize, j: usize, t: f64, x: &X, p: &X) -> f64 {
+        self.fill_row(event, j);
+        let row = self.row.borrow();
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.scalar(&c.value, &pt0(t, x, p)),
+            Some(c) => self.scalar(&c.value, &pt_row(t, x, p, &row)),
             None => 0.0,
         }
     }
-    fn event_cost_grad(&self, event: usize, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
+    #[allow(clippy::too_many_arguments)]
+    fn event_cost_grad(
+        &self,
+        event: usize,
+        j: usize,
+        t: f64,
+        x: &X,
+        p: &X,
+        cx: &mut X,
+        cp: &mut X,
+    ) -> f64 {
+        self.fill_row(event, j);
+        let row = self.row.borrow();
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.grad(c, &pt0(t, x, p), cx, cp),
+            Some(c) => self.grad(c, &pt_row(t, x, p, &row), cx, cp),
             None => {
                 cx.fill(0.0);
                 cp.fill(0.0);

@@ -11,6 +11,7 @@ pub use mvad_runtime::*;
 
 pub mod interp;
 pub mod load;
+pub mod table;
 
 #[doc(hidden)]
 pub mod __private;

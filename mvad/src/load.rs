@@ -13,12 +13,13 @@
 
 use std::fmt;
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use mvad_dsl::diag::{render, Diagnostic};
 use mvad_dsl::Span;
 
 use crate::interp::InterpretedModel;
+use crate::table::{Table, TableError};
 
 /// The largest model file [`load`] reads (16 MiB).
 pub const MAX_FILE_BYTES: u64 = 16 << 20;
@@ -32,6 +33,15 @@ pub enum LoadError {
         path: String,
         /// The operating system's reason.
         reason: String,
+    },
+    /// A data table could not be read or does not fit the model: located in its file.
+    Table(TableError),
+    /// `--table NAME=FILE` names a table the model does not declare.
+    UnknownTable {
+        /// The name given.
+        name: String,
+        /// The declared tables.
+        known: Vec<String>,
     },
     /// The text is not a valid model: located errors.
     Model {
@@ -48,8 +58,8 @@ impl LoadError {
     /// The located errors (empty for an I/O failure).
     pub fn diagnostics(&self) -> &[Diagnostic] {
         match self {
-            LoadError::Io { .. } => &[],
             LoadError::Model { diagnostics, .. } => diagnostics,
+            _ => &[],
         }
     }
 }
@@ -61,15 +71,72 @@ impl fmt::Display for LoadError {
                 write!(f, "{path}: error: cannot read file: {reason}")
             }
             LoadError::Model { rendered, .. } => f.write_str(rendered.trim_end()),
+            LoadError::Table(e) => write!(f, "{e}"),
+            LoadError::UnknownTable { name, known } => {
+                let known = if known.is_empty() {
+                    "the model declares no tables".to_string()
+                } else {
+                    format!("its tables are {}", known.join(", "))
+                };
+                write!(f, "error: the model has no table `{name}`; {known}")
+            }
         }
     }
 }
 
 impl std::error::Error for LoadError {}
 
-/// Reads and compiles the `.hyb` file at `path`; errors are rendered with `path` as the
-/// file name.
+/// Reads and compiles the `.hyb` file at `path` and reads the tables it declares (paths
+/// relative to the model file); errors are rendered with the file's name.
 pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
+    load_with_tables(path, &[])
+}
+
+/// [`load`], with the files of some tables replaced: `(NAME, FILE)` reads table NAME from
+/// FILE (relative to the working directory) instead of the file the model names.
+pub fn load_with_tables(
+    path: &Path,
+    tables: &[(String, PathBuf)],
+) -> Result<InterpretedModel, LoadError> {
+    let mut model = read_model(path)?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    bind_tables(&mut model, dir, tables)?;
+    Ok(model)
+}
+
+/// Reads the tables `model` declares (files relative to `dir`, or those of `overrides`)
+/// and binds them.
+pub fn bind_tables(
+    model: &mut InterpretedModel,
+    dir: &Path,
+    overrides: &[(String, PathBuf)],
+) -> Result<(), LoadError> {
+    let decls = model.table_decls().to_vec();
+    if let Some((name, _)) = overrides
+        .iter()
+        .find(|(n, _)| !decls.iter().any(|(d, _)| d == n))
+    {
+        return Err(LoadError::UnknownTable {
+            name: name.clone(),
+            known: decls.into_iter().map(|(n, _)| n).collect(),
+        });
+    }
+    if decls.is_empty() {
+        return Ok(());
+    }
+    let mut tables = Vec::with_capacity(decls.len());
+    for (name, file) in &decls {
+        let path = match overrides.iter().rev().find(|(n, _)| n == name) {
+            Some((_, p)) => p.clone(),
+            None => dir.join(file),
+        };
+        tables.push(Table::read_csv(&path).map_err(LoadError::Table)?);
+    }
+    let refs: Vec<&Table> = tables.iter().collect();
+    model.bind_tables(&refs).map_err(LoadError::Table)
+}
+
+fn read_model(path: &Path) -> Result<InterpretedModel, LoadError> {
     let name = path.display().to_string();
     if path.is_dir() {
         return Err(LoadError::Io {
@@ -95,7 +162,8 @@ pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
     load_bytes(&name, &bytes)
 }
 
-/// Compiles model text held in memory; `name` is the file name used in error messages.
+/// Compiles model text held in memory; `name` is the file name used in error messages. The
+/// tables the model declares are not read: bind them with [`bind_tables`].
 pub fn load_str(name: &str, src: &str) -> Result<InterpretedModel, LoadError> {
     if let Some(d) = precheck(src) {
         return Err(clipped_error(name, src, d));

@@ -213,18 +213,18 @@ where
 
         let r = |q: &Pt| {
             let mut xp = zn();
-            m.reset(k, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut xp);
+            m.reset(k, 0, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut xp);
             xp.as_slice().to_vec()
         };
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
         fd_check(&format!("{what} reset"), pt, Wrt::X, &rows(&rx), &r);
         fd_check(&format!("{what} reset"), pt, Wrt::P, &rows(&rp), &r);
         fd_check(&format!("{what} reset"), pt, Wrt::T, rt.as_slice(), &r);
 
-        let c = |q: &Pt| vec![m.event_cost(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+        let c = |q: &Pt| vec![m.event_cost(k, 0, q.t, &vn(m, &q.x), &vp(m, &q.p))];
         let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(k, t, &x, &pv, &mut cx, &mut cp);
+        let ct = m.event_cost_grad(k, 0, t, &x, &pv, &mut cx, &mut cp);
         fd_check(&format!("{what} cost"), pt, Wrt::X, cx.as_slice(), &c);
         fd_check(&format!("{what} cost"), pt, Wrt::P, cp.as_slice(), &c);
         fd_check(&format!("{what} cost"), pt, Wrt::T, &[ct], &c);

@@ -17,7 +17,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use crate::ast::{Condition, CostKind, Event, Expr, ExprKind, Ident, Item, Model};
+use crate::ast::{Condition, CostKind, Event, Expr, ExprKind, Ident, Item, Model, Trigger};
 use crate::diag::Diagnostic;
 use crate::span::Span;
 
@@ -83,6 +83,7 @@ pub fn check(model: &Model) -> Vec<Diagnostic> {
     out.extend(check_conditions(model));
     out.extend(check_names(model));
     out.extend(check_observables(model));
+    out.extend(check_time_events(model));
     out.sort_by_key(|d| (d.span.start, d.span.end));
     out.dedup();
     out
@@ -142,6 +143,8 @@ enum Site<'a> {
     StateInit(&'a Ident),
     /// The horizon.
     Horizon,
+    /// The time, times or period of a time event (`at`, `at each`, `every`), with its name.
+    EventTime(Option<&'a Ident>),
     /// Flows, guards, resets, observables, cost terms.
     Dynamic,
 }
@@ -151,12 +154,18 @@ fn sites(model: &Model) -> Vec<(Site<'_>, &Expr)> {
     let mut out = Vec::new();
     let mut nconst = 0;
     fn event_exprs<'a>(out: &mut Vec<(Site<'a>, &'a Expr)>, e: &'a Event) {
-        match &e.guard {
-            Condition::Compare(c) => {
+        let time = Site::EventTime(e.name.as_ref());
+        match &e.trigger {
+            Trigger::When(Condition::Compare(c)) => {
                 out.push((Site::Dynamic, &c.lhs));
                 out.push((Site::Dynamic, &c.rhs));
             }
-            Condition::NotComparison(x) => out.push((Site::Dynamic, x)),
+            Trigger::When(Condition::NotComparison(x)) => out.push((Site::Dynamic, x)),
+            Trigger::At(x) | Trigger::Each(x) => out.push((time, x)),
+            Trigger::Every { period, start } => {
+                out.push((time, period));
+                out.extend(start.iter().map(|s| (time, s)));
+            }
         }
         for r in e.resets.iter().flatten() {
             out.push((Site::Dynamic, &r.value));
@@ -177,7 +186,7 @@ fn sites(model: &Model) -> Vec<(Site<'_>, &Expr)> {
                     event_exprs(&mut out, e);
                 }
             }
-            Item::InitialMode(_) => {}
+            Item::InitialMode(_) | Item::Table(_) => {}
             Item::Event(e) => event_exprs(&mut out, e),
             Item::Observe(o) => out.push((Site::Dynamic, &o.value)),
             Item::Cost(c) => {
@@ -200,7 +209,7 @@ fn sites(model: &Model) -> Vec<(Site<'_>, &Expr)> {
 pub fn walk_expr<'a>(e: &'a Expr, f: &mut dyn FnMut(&'a Expr)) {
     f(e);
     match &e.kind {
-        ExprKind::Number(_) | ExprKind::Name(_) | ExprKind::Time => {}
+        ExprKind::Number(_) | ExprKind::Name(_) | ExprKind::Time | ExprKind::Column { .. } => {}
         ExprKind::Neg(x) => walk_expr(x, f),
         ExprKind::Binary { lhs, rhs, .. } => {
             walk_expr(lhs, f);
@@ -294,6 +303,7 @@ pub fn check_reserved_names(model: &Model) -> Vec<Diagnostic> {
             Item::State(s) => names.push(&s.name),
             Item::Observe(o) => names.push(&o.name),
             Item::Mode(m) => names.push(&m.name),
+            Item::Table(t) => names.push(&t.name),
             _ => {}
         }
     }
@@ -337,6 +347,7 @@ pub fn check_duplicates(model: &Model) -> Vec<Diagnostic> {
     let mut values = HashMap::new();
     let mut modes = HashMap::new();
     let mut events = HashMap::new();
+    let mut tables = HashMap::new();
     for item in &model.items {
         match item {
             Item::Param(p) => dup(&mut values, &p.name, "declaration of"),
@@ -344,6 +355,7 @@ pub fn check_duplicates(model: &Model) -> Vec<Diagnostic> {
             Item::State(s) => dup(&mut values, &s.name, "declaration of"),
             Item::Observe(o) => dup(&mut values, &o.name, "declaration of"),
             Item::Mode(m) => dup(&mut modes, &m.name, "mode"),
+            Item::Table(t) => dup(&mut tables, &t.name, "table"),
             _ => {}
         }
     }
@@ -634,7 +646,7 @@ pub fn check_conditions(model: &Model) -> Vec<Diagnostic> {
     const HELP: &str = "write a comparison: `LHS <= RHS`, `LHS < RHS`, `LHS >= RHS` or `LHS > RHS`";
     let mut out = Vec::new();
     for (_, e) in model.all_events() {
-        if let Condition::NotComparison(x) = &e.guard {
+        if let Trigger::When(Condition::NotComparison(x)) = &e.trigger {
             out.push(
                 Diagnostic::new(
                     x.span,
@@ -658,7 +670,9 @@ pub fn check_conditions(model: &Model) -> Vec<Diagnostic> {
 }
 
 mod names;
+mod time_events;
 pub use names::{check_names, check_observables};
+pub use time_events::check_time_events;
 
 #[cfg(test)]
 mod tests;

@@ -51,6 +51,8 @@ fn static_site(site: Site<'_>) -> Option<String> {
         Site::ParamDefault(p) => Some(format!("the default value of param `{}`", p.name)),
         Site::StateInit(s) => Some(format!("the initial value of state `{}`", s.name)),
         Site::Horizon => Some("the horizon".to_string()),
+        Site::EventTime(Some(e)) => Some(format!("the time of event `{}`", e.name)),
+        Site::EventTime(None) => Some("the time of an event".to_string()),
         Site::Dynamic => None,
     }
 }
@@ -94,7 +96,7 @@ fn scope_error(site: Site<'_>, id: &Ident, kind: Kind, decl: Span) -> Option<Dia
             matches!(kind, Kind::Const(_)),
             "a param's default value may use only numbers and consts",
         ),
-        Site::StateInit(_) | Site::Horizon => (
+        Site::StateInit(_) | Site::Horizon | Site::EventTime(_) => (
             matches!(kind, Kind::Const(_) | Kind::Param),
             "it may use only numbers, consts and params",
         ),
@@ -184,7 +186,7 @@ pub fn check_observables(model: &Model) -> Vec<Diagnostic> {
 fn substituted_depth(e: &Expr, obs: &HashMap<&str, usize>) -> usize {
     let sub = |x: &Expr| substituted_depth(x, obs);
     match &e.kind {
-        ExprKind::Number(_) | ExprKind::Time => 1,
+        ExprKind::Number(_) | ExprKind::Time | ExprKind::Column { .. } => 1,
         ExprKind::Name(id) => obs.get(id.name.as_str()).copied().unwrap_or(1),
         ExprKind::Neg(x) => 1 + sub(x),
         ExprKind::Binary { lhs, rhs, .. } => 1 + sub(lhs).max(sub(rhs)),

@@ -137,6 +137,11 @@ impl Gen<'_> {
                 let i = usize_lit(i as usize);
                 atom(quote!(p[#i]))
             }
+            // The event method binds `row`, the current row's values of the model's columns.
+            Node::Column(c) => {
+                let c = usize_lit(c as usize);
+                atom(quote!(row[#c]))
+            }
             Node::Add(a, b) => {
                 // a + (−c) is printed a − c (the same IEEE operation).
                 let (l, r, minus) = match (self.ar.node(b), self.ar.node(a)) {

@@ -7,7 +7,7 @@ use quote::{format_ident, quote};
 use super::emit::Body;
 use super::{lit, usize_lit, Gen};
 use crate::ir::Direction;
-use crate::schedule::{GradKernels, Kernel, ModelKernels};
+use crate::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
 
 impl Gen<'_> {
     pub(super) fn info(&self, k: &ModelKernels) -> TokenStream {
@@ -34,6 +34,16 @@ impl Gen<'_> {
             };
             let (mode, target) = (opt(e.mode), opt(e.target));
             let (hr, hc) = (e.has_reset, e.has_cost);
+            // `rows` is bound by the constructor of a model with tables.
+            let trigger = match e.time {
+                None => quote!(#pr::Trigger::Guard),
+                Some(TimeKind::At) => quote!(#pr::Trigger::At),
+                Some(TimeKind::Every) => quote!(#pr::Trigger::Every),
+                Some(TimeKind::Each { table }) => {
+                    let t = usize_lit(table);
+                    quote!(#pr::Trigger::Each { rows: rows[#t] })
+                }
+            };
             quote!(#pr::EventInfo {
                 name: ::core::convert::From::from(#name),
                 direction: #dir,
@@ -41,6 +51,7 @@ impl Gen<'_> {
                 target: #target,
                 has_reset: #hr,
                 has_cost: #hc,
+                trigger: #trigger,
             })
         });
         let obs = strs(&k.observables);
@@ -205,6 +216,48 @@ impl Gen<'_> {
             ne,
         );
 
+        // Times of time events: τ_j = τ (at), τ(row j) (at each), start + j·period (every).
+        let etime = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| {
+                let tk = k.events[e].time.as_ref()?;
+                let first = self.scalar(&tk.time);
+                Some(match &tk.period {
+                    Some((per, _)) => {
+                        let per = self.scalar(per);
+                        quote!(#first + (j as f64) * #per)
+                    }
+                    None => first,
+                })
+            }),
+            quote!(f64::NAN),
+            ne,
+        );
+        let etime_grad = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| {
+                let tk = k.events[e].time.as_ref()?;
+                let mut body = self.fill_body(&tk.time_grad, quote!(dtau), vecd(quote!(dtau)));
+                if let Some((_, per_grad)) = &tk.period {
+                    let Body { lets, outputs, .. } = self.body(per_grad);
+                    let adds = outputs.iter().map(|(s, v)| {
+                        let i = usize_lit(*s);
+                        quote!(dtau[#i] += (j as f64) * #v;)
+                    });
+                    body.extend(quote!({ #lets #(#adds)* }));
+                }
+                Some(body)
+            }),
+            quote!(dtau.fill(f64::NAN);),
+            ne,
+        );
+        // The current row's column values, for the methods of `at each` events.
+        let row = if k.columns.is_empty() {
+            quote!()
+        } else {
+            quote!(let row = self.row(j);)
+        };
+
         // Switching functions.
         let ns = k.switches.len();
         let sw_arms = |f: &dyn Fn(&GradKernels) -> TokenStream| -> Vec<(usize, TokenStream)> {
@@ -309,16 +362,18 @@ impl Gen<'_> {
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
             fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
-            fn reset(&self, event: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #reset }
-            fn reset_jac(&self, event: usize, t: f64, x: &#xv, p: &#pv, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #reset_jac }
+            fn reset(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #row #reset }
+            fn reset_jac(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #row #reset_jac }
+            fn event_time(&self, event: usize, j: usize, p: &#pv) -> f64 { #row #etime }
+            fn event_time_grad(&self, event: usize, j: usize, p: &#pv, dtau: &mut #pv) { #row #etime_grad }
             fn switch_value(&self, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #swv }
             fn switch_grad(&self, j: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #swg }
             fn observe(&self, t: f64, x: &#xv, p: &#pv, y: &mut [f64]) { #obs }
             fn observe_jac(&self, t: f64, x: &#xv, p: &#pv, yx: &mut [f64], yp: &mut [f64]) { #obs_jac }
             fn running_cost(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv) -> f64 { #rc }
             fn running_cost_value_grad(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, lx: &mut #xv, lp: &mut #pv) -> f64 { #rcg }
-            fn event_cost(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #ecost }
-            fn event_cost_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #ecost_grad }
+            fn event_cost(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #row #ecost }
+            fn event_cost_grad(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #row #ecost_grad }
             fn final_cost(&self, t: f64, x: &#xv, p: &#pv) -> f64 { #fc }
             fn final_cost_grad(&self, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #fcg }
         };

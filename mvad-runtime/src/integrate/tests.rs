@@ -125,12 +125,13 @@ impl HybridModel for Decay {
         gp.fill(0.0);
         0.0
     }
-    fn reset(&self, _k: usize, _t: f64, x: &X, _p: &Th, xplus: &mut X) {
+    fn reset(&self, _k: usize, _j: usize, _t: f64, x: &X, _p: &Th, xplus: &mut X) {
         xplus.copy_from(x);
     }
     fn reset_jac(
         &self,
         _k: usize,
+        _j: usize,
         _t: f64,
         _x: &X,
         _p: &Th,
@@ -168,10 +169,10 @@ impl HybridModel for Decay {
         lp.fill(0.0);
         x[0]
     }
-    fn event_cost(&self, _k: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
+    fn event_cost(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
         0.0
     }
-    fn event_cost_grad(&self, _k: usize, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
+    fn event_cost_grad(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
         cx.fill(0.0);
         cp.fill(0.0);
         0.0

@@ -34,16 +34,29 @@ where
         t: f64,
         sink: &mut impl EventSink,
     ) -> Result<bool, SolveError> {
-        let approach = self.event_approach(k, t)?;
+        let info = self.model.info();
+        let timed = info.events[k].is_time_event();
+        let j = self.schedule.occurrence(k);
+        let approach = self.event_approach(k, j, t)?;
         let mode_before = self.mode;
-        self.event_reset(k, t)?;
-        let l_plus = self.event_costs(k, t)?;
-        let zeno_stop = self.zeno_verdict(t, l_plus, approach.grazing, approach.slope);
+        self.event_reset(k, j, t)?;
+        let l_plus = self.event_costs(k, j, t)?;
+        // Time events neither accumulate nor get stuck: their times are given.
+        let zeno_stop = if timed {
+            None
+        } else {
+            self.zeno_verdict(t, l_plus, approach.grazing, approach.slope)
+        };
         self.emit_event(k, t, mode_before, approach, sink);
+        if matches!(info.events[k].trigger, crate::model::Trigger::Each { .. }) {
+            self.table_events += 1;
+        }
+        self.schedule.advance(self.model, self.p, k)?;
         let graze_scale = self.opts.grazing_tol * self.gx.norm() * self.f_minus.norm();
         let mode_after = self.mode;
         let stuck = zeno_stop.is_none()
-            && self.model.info().events[k].armed_in(mode_after)
+            && !timed
+            && info.events[k].armed_in(mode_after)
             && t < self.t_end
             && self.stuck_after_reset(k, t, mode_after, approach.slope + approach.gt);
         if approach.grazing && zeno_stop.is_none() && !stuck {
@@ -66,8 +79,10 @@ where
     }
 
     /// f⁻, ∇g and ∂g/∂t at (t, x⁻), whether the crossing grazes and, with sensitivities, the
-    /// event-time sensitivity t' = −(∇g·S⁻ + ∂g/∂θ)/(∇g·f⁻ + ∂g/∂t) into `self.dt`.
-    fn event_approach(&mut self, k: usize, t: f64) -> Result<Approach, SolveError> {
+    /// event-time sensitivity t' = −(∇g·S⁻ + ∂g/∂θ)/(∇g·f⁻ + ∂g/∂t) into `self.dt`. A time
+    /// event (occurrence j) has g = t − τ_kj(θ): ∇g = 0, ∂g/∂θ = −∂τ/∂θ, ∂g/∂t = 1, so
+    /// t' = ∂τ/∂θ by the same formula.
+    fn event_approach(&mut self, k: usize, j: usize, t: f64) -> Result<Approach, SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
         let name = &info.events[k].name;
@@ -79,11 +94,19 @@ where
         self.nonfinite_x(t, &self.f_minus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
-        let gt = model.guard_grad(k, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        let timed = info.events[k].is_time_event();
+        let gt = if timed {
+            self.gx.fill(0.0);
+            model.event_time_grad(k, j, p, &mut self.gp);
+            self.gp.neg_mut();
+            1.0
+        } else {
+            model.guard_grad(k, t, &self.y.x, p, &mut self.gx, &mut self.gp)
+        };
         if !(gt.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
             && self.gp.iter().all(|v| v.is_finite())
-            && model.guard(k, t, &self.y.x, p).is_finite())
+            && (timed || model.guard(k, t, &self.y.x, p).is_finite()))
         {
             return Err(SolveError::NonFinite {
                 t,
@@ -124,11 +147,11 @@ where
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
     /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ and, with sensitivities, S⁺ by the saltation
     /// jump (see [`sens::jump`]) into `self.s_plus`.
-    fn event_reset(&mut self, k: usize, t: f64) -> Result<(), SolveError> {
+    fn event_reset(&mut self, k: usize, j: usize, t: f64) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
         let ev = &info.events[k];
-        model.reset(k, t, &self.y.x, p, &mut self.x_plus);
+        model.reset(k, j, t, &self.y.x, p, &mut self.x_plus);
         self.nonfinite_x(t, &self.x_plus, || format!("reset of event `{}`", ev.name))?;
         let mode_after = ev.target.unwrap_or(self.mode);
         self.mode = mode_after;
@@ -141,7 +164,16 @@ where
             format!("flow of mode `{}`", info.modes[mode_after])
         })?;
         if self.sens {
-            model.reset_jac(k, t, &self.y.x, p, &mut self.rx, &mut self.rp, &mut self.rt);
+            model.reset_jac(
+                k,
+                j,
+                t,
+                &self.y.x,
+                p,
+                &mut self.rx,
+                &mut self.rp,
+                &mut self.rt,
+            );
             sens::jump(
                 &self.rx,
                 &self.rp,
@@ -166,7 +198,7 @@ where
     /// The cost terms event k moves: the running-cost jump (ℓ⁻ − ℓ⁺)·t' into q_θ, the total
     /// derivative S⁺ + f⁺t' of the post-event state into `self.dtot`, and the event cost φ_k
     /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ. Returns ℓ⁺ (0 without a running cost).
-    fn event_costs(&mut self, k: usize, t: f64) -> Result<f64, SolveError> {
+    fn event_costs(&mut self, k: usize, j: usize, t: f64) -> Result<f64, SolveError> {
         let (model, p, sens) = (self.model, self.p, self.sens);
         let info = model.info();
         let mut l_plus = 0.0;
@@ -188,7 +220,7 @@ where
         }
         let ev = &info.events[k];
         if ev.has_cost {
-            let phi = model.event_cost(k, t, &self.x_plus, p);
+            let phi = model.event_cost(k, j, t, &self.x_plus, p);
             if !phi.is_finite() {
                 return Err(SolveError::NonFinite {
                     t,
@@ -198,7 +230,7 @@ where
             self.c_ev += phi;
             if sens {
                 let phi_t =
-                    model.event_cost_grad(k, t, &self.x_plus, p, &mut self.cx, &mut self.cp);
+                    model.event_cost_grad(k, j, t, &self.x_plus, p, &mut self.cx, &mut self.cp);
                 self.g_ev.gemv_tr(1.0, &self.dtot, &self.cx, 1.0);
                 self.g_ev += &self.cp;
                 self.g_ev.axpy(phi_t, &self.dt, 1.0);

@@ -4,7 +4,6 @@
 
 use clap::Args;
 use mvad::runtime::solution::Solution;
-use mvad::runtime::solve::solve;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
@@ -13,7 +12,7 @@ use super::output::{
     by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, more_events, num,
     param_header, stats_json, Table, MAX_EVENT_ROWS,
 };
-use super::{setup, solve_err, CliError, CmdResult, Common};
+use super::{setup, solve_listing, CliError, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
 #[derive(Args, Debug)]
@@ -38,7 +37,7 @@ where
             "error: --mode adjoint is not yet supported; use --mode forward (the default)".into(),
         ));
     }
-    let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
+    let sol = solve_listing(model, &s, &args.common)?;
     let info = model.info();
     if args.common.json {
         Ok(json_text(&grad_json(info, &sol, &s.wrt, &args.mode)))
@@ -91,7 +90,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
     }
     s.push_str(&t.render());
 
-    s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
+    s.push_str(&format!("\nevents ({}):\n", sol.stats.events));
     if !sol.events.is_empty() {
         let mode = |m: usize| info.modes.get(m).cloned().unwrap_or_default();
         let mut t = Table::new(&param_header(
@@ -126,7 +125,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
             t.row(row);
         }
         s.push_str(&t.render());
-        s.push_str(&more_events(sol.events.len()));
+        s.push_str(&more_events(sol.stats.events));
 
         // Jumps and atoms of the observables that jump.
         let mut t = Table::new(&param_header(
@@ -155,7 +154,7 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
         } else {
             s.push_str("\natoms α = −J t' of the observables that jump:\n");
             s.push_str(&t.render());
-            s.push_str(&more_events(sol.events.len()));
+            s.push_str(&more_events(sol.stats.events));
         }
     }
     let diags = diagnostics_text(&sol.diagnostics);

@@ -12,7 +12,9 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
-use mvad::runtime::solution::{Method, Options};
+use mvad::runtime::solution::{Method, Options, Solution};
+use mvad::runtime::solve::solve_with;
+use mvad::FirstEvents;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
@@ -90,6 +92,39 @@ pub struct Common {
     /// Print one JSON object instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// Read data table NAME from FILE instead of the file the model names (repeatable).
+    #[arg(long = "table", value_name = "NAME=FILE")]
+    pub table: Vec<String>,
+    /// List every event in the JSON output (by default the first 1000; `stats.events`
+    /// always counts all of them).
+    #[arg(long = "all-events")]
+    pub all_events: bool,
+}
+
+impl Common {
+    /// The `--table NAME=FILE` replacements.
+    pub fn tables(&self) -> Result<Vec<(String, PathBuf)>, CliError> {
+        self.table
+            .iter()
+            .map(|item| match item.split_once('=') {
+                Some((name, file)) if !name.trim().is_empty() && !file.trim().is_empty() => {
+                    Ok((name.trim().to_string(), PathBuf::from(file.trim())))
+                }
+                _ => Err(CliError::Input(format!(
+                    "error: --table expects NAME=FILE, got `{item}`"
+                ))),
+            })
+            .collect()
+    }
+
+    /// How many events the JSON output lists.
+    pub fn event_limit(&self) -> usize {
+        if self.all_events {
+            usize::MAX
+        } else {
+            output::MAX_JSON_EVENTS
+        }
+    }
 }
 
 /// Why a command did not succeed, with the exit status it maps to.
@@ -129,13 +164,14 @@ pub type CmdResult = Result<String, CliError>;
 
 /// Parses `args` and runs the command; never panics on any input.
 ///
-/// `load` turns the model path into a model, or into the rendered error (exit 2).
+/// `load` turns the model path and the `--table` replacements into a model, or into the
+/// rendered error (exit 2).
 pub fn run<I, M, L>(args: I, load: L) -> ExitCode
 where
     I: IntoIterator<Item = OsString>,
     M: HybridModel,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
-    L: FnOnce(&Path) -> Result<M, String>,
+    L: FnOnce(&Path, &[(String, PathBuf)]) -> Result<M, String>,
 {
     let cli = match Cli::try_parse_from(args) {
         Ok(cli) => cli,
@@ -201,10 +237,11 @@ fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
 where
     M: HybridModel,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
-    L: FnOnce(&Path) -> Result<M, String>,
+    L: FnOnce(&Path, &[(String, PathBuf)]) -> Result<M, String>,
 {
     let common = cli.common();
-    let model = load(&common.model).map_err(CliError::Input)?;
+    let tables = common.tables()?;
+    let model = load(&common.model, &tables).map_err(CliError::Input)?;
     let file = common.model.display().to_string();
     match &cli.command {
         Command::Check(a) => check::run(&model, &file, a),
@@ -393,6 +430,22 @@ pub fn check_step(step: f64) -> Result<(), CliError> {
     }
 }
 
+/// Solves at the setup's parameters, keeping the first `common.event_limit()` events only
+/// (a large run streams: `stats.events` counts all of them).
+pub fn solve_listing<M: HybridModel>(
+    model: &M,
+    s: &Setup<M>,
+    common: &Common,
+) -> Result<Solution, CliError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut first = FirstEvents::new(common.event_limit());
+    let mut sol = solve_with(model, &s.params, &s.opts, &mut first).map_err(solve_err)?;
+    sol.events = first.records;
+    Ok(sol)
+}
+
 /// Maps a runtime failure to an exit status: bad input (options, parameters, horizon)
 /// is 2, a model that ran and failed (non-finite values, step size underflow, too many
 /// events) is 1. The runtime's messages name no flags; the hints naming this CLI's flags
@@ -409,6 +462,7 @@ pub fn solve_err(e: SolveError) -> CliError {
         | SolveError::ParamCount { .. }
         | SolveError::BadParam { .. }
         | SolveError::BadOption { .. }
+        | SolveError::BadSchedule { .. }
         | SolveError::NoSuchObservable { .. }
         | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}{hint}")),
         _ => CliError::Run(format!("error: the run failed: {e}{hint}")),

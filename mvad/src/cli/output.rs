@@ -220,6 +220,9 @@ pub fn join_or<S: AsRef<str>>(items: &[S], sep: &str, empty: &str) -> String {
 /// The most event rows a human-readable table shows (`--json` always prints them all).
 pub const MAX_EVENT_ROWS: usize = 20;
 
+/// The most events a JSON object lists without `--all-events`.
+pub const MAX_JSON_EVENTS: usize = 1000;
+
 /// The most event times a one-line list shows (`fdcheck`).
 pub const MAX_LISTED_TIMES: usize = 5;
 
@@ -228,7 +231,7 @@ pub const MAX_LISTED_TIMES: usize = 5;
 pub fn more_events(total: usize) -> String {
     if total > MAX_EVENT_ROWS {
         format!(
-            "… and {} more events (--json prints all)\n",
+            "… and {} more events (--json lists 1000, --all-events all)\n",
             total - MAX_EVENT_ROWS
         )
     } else {
@@ -322,7 +325,7 @@ mod tests {
         assert_eq!(more_events(MAX_EVENT_ROWS), "");
         assert_eq!(
             more_events(12_000),
-            "… and 11980 more events (--json prints all)\n"
+            "… and 11980 more events (--json lists 1000, --all-events all)\n"
         );
     }
 

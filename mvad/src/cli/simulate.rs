@@ -82,6 +82,7 @@ where
         let events: Vec<Value> = sol
             .events
             .iter()
+            .take(args.common.event_limit())
             .map(|e| {
                 serde_json::json!({
                     "index": e.index,
