@@ -11,6 +11,7 @@
 //! | [`stiff_relay`] | lag with τ = 1e-8 | stiffness (`--method auto`) |
 //! | [`zeno_ball`] | e = 0.5 to T = 3 | Zeno accumulation, tail of the series |
 //! | [`ceiling`] | near-grazing impact | t' ∝ 1/√(apex − c) |
+//! | [`queue`] | the seed paper's E4, a FIFO queue | `at each` table events, 10³–10⁷ customers |
 //!
 //! [`paper`] holds the numbers the seed paper printed (Tables 1 and 2), which the
 //! examples `table1` and `table2` print beside ours.
@@ -19,6 +20,7 @@ pub mod bouncing_ball;
 pub mod ceiling;
 pub mod e2_sweep;
 pub mod paper;
+pub mod queue;
 pub mod stiff_relay;
 pub mod thermostat;
 pub mod zeno_ball;

@@ -473,7 +473,10 @@ impl<'a> Lowerer<'a> {
             ExprKind::Name(id) => self.name(id, ctx),
             ExprKind::Column { table, column } => {
                 if self.consts_only {
-                    self.internal(e.span, "a table column cannot be used in a constant expression");
+                    self.internal(
+                        e.span,
+                        "a table column cannot be used in a constant expression",
+                    );
                 }
                 self.column(table, column)
             }

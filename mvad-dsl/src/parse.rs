@@ -291,13 +291,9 @@ fn build_trigger(pair: Pair<'_, Rule>) -> Res<ast::Trigger> {
     let rule = pair.as_rule();
     let mut it = significant(pair);
     Ok(match rule {
-        Rule::when_trigger => {
-            ast::Trigger::When(build_condition(next(&mut it, span, "guard")?)?.0)
-        }
+        Rule::when_trigger => ast::Trigger::When(build_condition(next(&mut it, span, "guard")?)?.0),
         Rule::at_trigger => ast::Trigger::At(build_expr(next(&mut it, span, "event time")?)?),
-        Rule::each_trigger => {
-            ast::Trigger::Each(build_expr(next(&mut it, span, "event times")?)?)
-        }
+        Rule::each_trigger => ast::Trigger::Each(build_expr(next(&mut it, span, "event times")?)?),
         Rule::every_trigger => {
             let period = build_expr(next(&mut it, span, "event period")?)?;
             let start = it.next().map(build_expr).transpose()?;

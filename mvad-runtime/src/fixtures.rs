@@ -218,7 +218,16 @@ impl HybridModel for Ball {
     fn event_cost(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
         0.0
     }
-    fn event_cost_grad(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
+    fn event_cost_grad(
+        &self,
+        _k: usize,
+        _j: usize,
+        _t: f64,
+        _x: &X,
+        _p: &Th,
+        cx: &mut X,
+        cp: &mut Th,
+    ) -> f64 {
         zero_grad(cx, cp)
     }
     fn final_cost(&self, _t: f64, _x: &X, _p: &Th) -> f64 {

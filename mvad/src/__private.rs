@@ -2,12 +2,12 @@
 //! to `::mvad::__private::…` only, so users need no direct dependency on nalgebra or the
 //! runtime crate.
 
+pub use crate::table::{bind_columns, Table, TableError, TableNeeds};
 pub use mvad_dsl::ir::sign;
 pub use mvad_runtime::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
     ModelSens, Point, Switches, Trigger,
 };
-pub use crate::table::{bind_columns, Table, TableError, TableNeeds};
 pub use nalgebra::{Const, OMatrix, OVector};
 
 /// Owned names from string literals (builds `ModelInfo` lists).

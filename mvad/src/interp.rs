@@ -367,7 +367,10 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
 
 /// The point (t, x, θ) at a table row, for the reset and event cost of an event.
 fn pt_row<'a>(t: f64, x: &'a X, p: &'a X, row: &'a [f64]) -> At<'a> {
-    At { row, ..pt0(t, x, p) }
+    At {
+        row,
+        ..pt0(t, x, p)
+    }
 }
 
 /// The point for functions of θ alone (x₀, T).

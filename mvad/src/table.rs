@@ -199,7 +199,8 @@ impl Table {
                     Ok(v) if v.is_finite() => columns[i].push(v),
                     _ => {
                         let span = field_span(&src.text, start, i);
-                        let msg = format!("`{field}` in column `{}` is not a finite number", names[i]);
+                        let msg =
+                            format!("`{field}` in column `{}` is not a finite number", names[i]);
                         return Err(TableError::located(&src, span, msg));
                     }
                 }
@@ -353,7 +354,11 @@ mod tests {
     fn errors_are_located_in_the_file() {
         let e = parse("t,s\n1,2\n3,abc\n").unwrap_err();
         assert_eq!((e.line, e.col), (3, 3), "{e}");
-        assert!(e.to_string().starts_with("q.csv:3:3: error: `abc` in column `s` is not a finite number"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("q.csv:3:3: error: `abc` in column `s` is not a finite number"),
+            "{e}"
+        );
         assert!(e.to_string().contains("^^^"), "{e}");
         let e = parse("t,s\n1,2\n3\n").unwrap_err();
         assert_eq!(e.line, 3, "{e}");
@@ -362,7 +367,11 @@ mod tests {
         let e = parse("# nothing\n").unwrap_err();
         assert!(e.message.contains("no header"), "{e}");
         let e = Table::read_csv(Path::new("/nonexistent/q.csv")).unwrap_err();
-        assert!(e.to_string().starts_with("/nonexistent/q.csv:1:1: error: cannot read"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent/q.csv:1:1: error: cannot read"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -390,6 +399,9 @@ mod tests {
         };
         let e = bind_columns(&needs, &[&t]).unwrap_err();
         assert_eq!((e.line, e.col), (1, 1), "{e}");
-        assert!(e.message.contains("no column `w`; its columns are t, s"), "{e}");
+        assert!(
+            e.message.contains("no column `w`; its columns are t, s"),
+            "{e}"
+        );
     }
 }

@@ -40,24 +40,23 @@ pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
             out.push(
                 Diagnostic::new(
                     times.span,
-                    format!(
-                        "the times of {} read no table column",
-                        event_label(ev)
-                    ),
+                    format!("the times of {} read no table column", event_label(ev)),
                 )
                 .with_help("`at each` runs over the rows of a table: write `at each TABLE.COL`"),
             );
             continue;
         };
         if let Some(&(other, span)) = read.iter().find(|(t, _)| *t != first) {
-            out.push(Diagnostic::new(
-                span,
-                format!(
-                    "the times of {} read two tables, `{first}` and `{other}`",
-                    event_label(ev)
-                ),
-            )
-            .with_help("`at each` runs over the rows of one table"));
+            out.push(
+                Diagnostic::new(
+                    span,
+                    format!(
+                        "the times of {} read two tables, `{first}` and `{other}`",
+                        event_label(ev)
+                    ),
+                )
+                .with_help("`at each` runs over the rows of one table"),
+            );
             continue;
         }
         for x in event_row_exprs(model, ev, times) {

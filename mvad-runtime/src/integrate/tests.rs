@@ -172,7 +172,16 @@ impl HybridModel for Decay {
     fn event_cost(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
         0.0
     }
-    fn event_cost_grad(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
+    fn event_cost_grad(
+        &self,
+        _k: usize,
+        _j: usize,
+        _t: f64,
+        _x: &X,
+        _p: &Th,
+        cx: &mut X,
+        cp: &mut Th,
+    ) -> f64 {
         cx.fill(0.0);
         cp.fill(0.0);
         0.0

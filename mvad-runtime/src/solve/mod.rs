@@ -367,8 +367,8 @@ where
         let nev = info.events.len();
         for w in 0..self.scanner.len() {
             // Time events are not watched: the loop steps onto their times.
-            let active = w >= nev
-                || (info.events[w].armed_in(self.mode) && !info.events[w].is_time_event());
+            let active =
+                w >= nev || (info.events[w].armed_in(self.mode) && !info.events[w].is_time_event());
             let v = if active {
                 Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
             } else {
@@ -458,9 +458,7 @@ where
                     integ.dense_x(t, xe);
                     Self::signed(model, p, nev, sw, w, t, xe)
                 };
-                let res = self
-                    .scanner
-                    .scan(t0, t1, sample, eval, sim_tol);
+                let res = self.scanner.scan(t0, t1, sample, eval, sim_tol);
                 if let Err((w, t)) = res {
                     return Err(self.guard_nonfinite(w, t));
                 }
@@ -529,9 +527,11 @@ where
         if user > 1 {
             self.report_simultaneous(t);
         }
-        // Events from a table never count: their number is the table's, not a flood.
+        // Events from a table never count: their number is the table's, not a flood. Nor
+        // does one state event (or switch crossing) per table row: a queue drains once per
+        // arrival at most. A flood is many more than that.
         let total = self.nevents - self.table_events + self.switch_crossings;
-        if total > self.opts.max_events {
+        if total > self.opts.max_events.saturating_add(self.table_events) {
             return Err(SolveError::MaxEvents {
                 t,
                 count: self.opts.max_events,

@@ -417,7 +417,17 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec
             .reset(k, t, x.as_slice(), p.as_slice(), xp.as_mut_slice());
     }
-    fn reset_jac(&self, k: usize, _j: usize, t: f64, x: &V, p: &V, rx: &mut Mx, rp: &mut Mx, rt: &mut V) {
+    fn reset_jac(
+        &self,
+        k: usize,
+        _j: usize,
+        t: f64,
+        x: &V,
+        p: &V,
+        rx: &mut Mx,
+        rp: &mut Mx,
+        rt: &mut V,
+    ) {
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
         let mut r = vec![D::c(0.0); self.n()];
         self.spec.reset(k, td, &xd, &pd, &mut r);
@@ -474,7 +484,16 @@ impl<T: Spec> HybridModel for AdModel<T> {
     fn event_cost(&self, k: usize, _j: usize, t: f64, x: &V, p: &V) -> f64 {
         self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
     }
-    fn event_cost_grad(&self, k: usize, _j: usize, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
+    fn event_cost_grad(
+        &self,
+        k: usize,
+        _j: usize,
+        t: f64,
+        x: &V,
+        p: &V,
+        cx: &mut V,
+        cp: &mut V,
+    ) -> f64 {
         self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.event_cost(k, t, x, p))
             .1
     }
