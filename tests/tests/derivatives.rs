@@ -204,12 +204,23 @@ where
     // Events.
     for k in 0..info.events.len() {
         let what = format!("{} event {k}", info.name);
-        let g = |q: &Pt| vec![m.guard(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-        let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.guard_grad(k, t, &x, &pv, &mut gx, &mut gp);
-        fd_check(&format!("{what} guard"), pt, Wrt::X, gx.as_slice(), &g);
-        fd_check(&format!("{what} guard"), pt, Wrt::P, gp.as_slice(), &g);
-        fd_check(&format!("{what} guard"), pt, Wrt::T, &[gt], &g);
+        if info.events[k].is_time_event() {
+            // A time event has no guard: its time τ_kj(θ) (occurrence 1, so a period counts)
+            // and ∂τ/∂θ; NaN for a table that is not bound here.
+            let tau = |q: &Pt| vec![m.event_time(k, 1, &vp(m, &q.p))];
+            if tau(pt)[0].is_finite() {
+                let mut dtau = zp();
+                m.event_time_grad(k, 1, &pv, &mut dtau);
+                fd_check(&format!("{what} time"), pt, Wrt::P, dtau.as_slice(), &tau);
+            }
+        } else {
+            let g = |q: &Pt| vec![m.guard(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+            let (mut gx, mut gp) = (zn(), zp());
+            let gt = m.guard_grad(k, t, &x, &pv, &mut gx, &mut gp);
+            fd_check(&format!("{what} guard"), pt, Wrt::X, gx.as_slice(), &g);
+            fd_check(&format!("{what} guard"), pt, Wrt::P, gp.as_slice(), &g);
+            fd_check(&format!("{what} guard"), pt, Wrt::T, &[gt], &g);
+        }
 
         let r = |q: &Pt| {
             let mut xp = zn();
@@ -309,8 +320,10 @@ where
 fn interpreted_models_match_finite_differences() {
     let files = model_files();
     assert!(files.len() >= 4, "models/*.hyb not found");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
     for (name, src) in files {
-        let m = InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        let mut m = InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        mvad::load::bind_tables(&mut m, &dir, &[]).unwrap_or_else(|e| panic!("{name}: {e}"));
         check_all(&m, 7, 20);
     }
     let m = InterpretedModel::from_source(SINK).expect("sink model");
@@ -327,4 +340,17 @@ fn compiled_models_match_finite_differences() {
     check_all(&models::thermostat::Thermostat::new(), 5, 20);
     check_all(&models::zeno_ball::ZenoBall::new(), 6, 20);
     check_all(&Sink::new(), 12, 60);
+    let a = models::queue::Arrivals::generate(10, 1);
+    let q = models::queue::Queue::new(models::queue::QueueTables {
+        arrivals: a.table().expect("table"),
+    })
+    .expect("binds");
+    check_all(&q, 13, 20);
+    let q = models::queue::stretched::StretchedQueue::new(
+        models::queue::stretched::StretchedQueueTables {
+            arrivals: a.table().expect("table"),
+        },
+    )
+    .expect("binds");
+    check_all(&q, 14, 20);
 }

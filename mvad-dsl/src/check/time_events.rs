@@ -36,7 +36,18 @@ pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
             continue;
         };
         let read = tables_read(times);
+        // Columns of an event whose times are wrong get no errors of their own.
+        let mut excuse = |allowed: &mut HashSet<*const Expr>| {
+            for x in event_row_exprs(model, ev, times) {
+                walk_expr(x, &mut |c| {
+                    if matches!(c.kind, ExprKind::Column { .. }) {
+                        allowed.insert(c as *const Expr);
+                    }
+                });
+            }
+        };
         let Some(&(first, _)) = read.first() else {
+            excuse(&mut allowed);
             out.push(
                 Diagnostic::new(
                     times.span,
@@ -57,6 +68,7 @@ pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
                 )
                 .with_help("`at each` runs over the rows of one table"),
             );
+            excuse(&mut allowed);
             continue;
         }
         for x in event_row_exprs(model, ev, times) {
@@ -156,3 +168,6 @@ fn unknown_table(table: &Ident, tables: &HashMap<&str, Span>) -> Diagnostic {
         None => d,
     }
 }
+
+#[cfg(test)]
+mod tests;

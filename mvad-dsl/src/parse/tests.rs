@@ -53,6 +53,7 @@ fn sexpr(e: &Expr) -> String {
         ExprKind::Number(v) => format!("{v}"),
         ExprKind::Name(id) => id.name.clone(),
         ExprKind::Time => "t".into(),
+        ExprKind::Column { table, column } => format!("{}.{}", table.name, column.name),
         ExprKind::Neg(x) => format!("(neg {})", sexpr(x)),
         ExprKind::Binary { op, lhs, rhs, .. } => {
             format!("({} {} {})", op.as_str(), sexpr(lhs), sexpr(rhs))
@@ -455,6 +456,7 @@ fn print(e: &Expr, full: bool) -> String {
         ExprKind::Number(v) => format!("{v:?}"),
         ExprKind::Name(id) => id.name.clone(),
         ExprKind::Time => "t".into(),
+        ExprKind::Column { table, column } => format!("{}.{}", table.name, column.name),
         ExprKind::Neg(x) => format!("-{}", wrap(x, strength(x) < 3)),
         ExprKind::Binary { op, lhs, rhs, .. } => {
             let p = strength(e);
