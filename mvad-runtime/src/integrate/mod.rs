@@ -372,6 +372,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.h
     }
 
+    /// Raises the budget of step attempts by `extra` (the driver grants each row of a data
+    /// table its own allowance: a long table needs at least one step per row).
+    pub fn extend_step_budget(&mut self, extra: usize) {
+        self.max_steps = self.max_steps.saturating_add(extra);
+    }
+
     /// Seeds the magnitude of the next step attempt, e.g. with the step size in use before an
     /// event (call it after a restart, which otherwise starts from Hairer's heuristic; the
     /// error control still rejects and shrinks a seed that is too large). A value that is not
