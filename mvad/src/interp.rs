@@ -47,10 +47,13 @@ struct EventTapes {
     reset_jac: Tape,
     cost: Option<GradTapes>,
     /// A time event's τ (or start) and ∂τ/∂θ, and for `every` the period and its gradient.
-    time: Option<(Tape, Tape, Option<(Tape, Tape)>)>,
+    time: Option<TimeTapes>,
     /// The table an `at each` event runs over.
     table: Option<usize>,
 }
+
+/// τ (or the start of `every`), ∂τ/∂θ, and for `every` the period and its gradient.
+type TimeTapes = (Tape, Tape, Option<(Tape, Tape)>);
 
 /// The data tables of a model: its declarations and the columns it reads, bound to data.
 #[derive(Clone, Debug, Default)]

@@ -58,8 +58,8 @@ fn a_single_dose_matches_its_closed_form_through_both_doors() {
     let interp = loaded("dose.hyb");
     for sol in [run(&Dose::new(), &p, &tight()), run(&interp, &p, &tight())] {
         assert_relative_eq!(sol.cost, c, max_relative = 1e-11);
-        for i in 0..3 {
-            assert_relative_eq!(sol.gradient[i], g[i], max_relative = 1e-10);
+        for (got, want) in sol.gradient.iter().zip(g) {
+            assert_relative_eq!(*got, want, max_relative = 1e-10);
         }
         assert_eq!(sol.events.len(), 1);
         assert_eq!(sol.events[0].t, 0.8);
@@ -107,8 +107,8 @@ fn a_sampled_controller_matches_its_closed_form_through_both_doors() {
         run(&interp, &p, &tight()),
     ] {
         assert_relative_eq!(sol.cost, c, max_relative = 1e-12);
-        for i in 0..3 {
-            assert_relative_eq!(sol.gradient[i], g[i], max_relative = 1e-9);
+        for (got, want) in sol.gradient.iter().zip(g) {
+            assert_relative_eq!(*got, want, max_relative = 1e-9);
         }
         // Samples at j·period for j = 0..10, each moving with dt/dperiod = j.
         assert_eq!(sol.events.len(), 11);

@@ -37,7 +37,7 @@ pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
         };
         let read = tables_read(times);
         // Columns of an event whose times are wrong get no errors of their own.
-        let mut excuse = |allowed: &mut HashSet<*const Expr>| {
+        let excuse = |allowed: &mut HashSet<*const Expr>| {
             for x in event_row_exprs(model, ev, times) {
                 walk_expr(x, &mut |c| {
                     if matches!(c.kind, ExprKind::Column { .. }) {
