@@ -109,7 +109,9 @@ impl Switches {
     /// Clears every bit (keeps the words).
     pub fn clear(&mut self) {
         self.lo = 0;
-        self.hi.fill(0);
+        if !self.hi.is_empty() {
+            self.hi.fill(0);
+        }
     }
     /// Bits 64.. as words: bit j ≥ 64 is bit (j − 64) % 64 of word (j − 64) / 64.
     pub fn high_words(&self) -> &[u64] {

@@ -299,6 +299,9 @@ where
     fn switch_bits(&mut self, t: f64, x_is_plus: bool, keep: bool) {
         let nsw = self.model.info().switches;
         self.sw_next.clear();
+        if nsw == 0 {
+            return;
+        }
         self.sw_undecided.clear();
         let mut undecided = false;
         for j in 0..nsw {
