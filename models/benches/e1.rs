@@ -66,11 +66,7 @@ fn setup() -> E1 {
     )))
     .expect("bouncing_ball.hyb loads");
     let pl = nalgebra::DVector::from_column_slice(p.as_slice());
-    let grad = Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..Options::default()
-    };
+    let grad = models::tolerances(1e-10, 1e-12);
     let primal = Options {
         sensitivities: false,
         ..grad.clone()

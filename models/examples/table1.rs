@@ -6,17 +6,12 @@
 use models::bouncing_ball::{BouncingBall, BouncingBallParams, DCOST_DE};
 use models::paper::TABLE1;
 use mvad::fd::fd_gradient;
-use mvad::solution::Options;
 use mvad::solve::solve;
 
 fn main() {
     let model = BouncingBall::new();
     let theta = BouncingBallParams::default().to_vector();
-    let opts = Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..Options::default()
-    };
+    let opts = models::tolerances(1e-10, 1e-12);
     let sol = match solve(&model, &theta, &opts) {
         Ok(s) => s,
         Err(e) => {

@@ -5,16 +5,11 @@
 
 use models::e2_sweep::{first_impact, E2Sweep, E2SweepParams};
 use models::paper::TABLE2;
-use mvad::solution::Options;
 use mvad::solve::solve;
 
 fn main() {
     let model = E2Sweep::new();
-    let opts = Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        ..Options::default()
-    };
+    let opts = models::tolerances(1e-10, 1e-12);
     println!(
         "Table 2. E2 transversality sweep: first impact, observable position (J = 0: no atom)\n"
     );

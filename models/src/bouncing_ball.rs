@@ -24,11 +24,7 @@ mod tests {
     use mvad::solve::solve;
 
     fn tight() -> Options {
-        Options {
-            rtol: 1e-10,
-            atol: 1e-12,
-            ..Options::default()
-        }
+        crate::tolerances(1e-10, 1e-12)
     }
 
     #[test]

@@ -45,19 +45,14 @@ pub fn dcost_dc(e: f64, g: f64, v0: f64, c: f64, t_end: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::derivative;
+    use crate::{derivative, tolerances};
     use approx::assert_relative_eq;
-    use mvad::solution::Options;
     use mvad::solve::solve;
 
     #[test]
     fn approaching_grazing_against_the_closed_form() {
         let m = Ceiling::new();
-        let opts = Options {
-            rtol: 1e-12,
-            atol: 1e-14,
-            ..Options::default()
-        };
+        let opts = tolerances(1e-12, 1e-14);
         let apex = 4.4f64 * 4.4 / (2.0 * 9.81);
         // Ceilings ever closer to the apex: the slope w shrinks like √(apex − c).
         for gap in [1e-1, 1e-2, 1e-3, 1e-4] {

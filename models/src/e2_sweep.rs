@@ -23,18 +23,14 @@ pub const REFERENCE: [(f64, f64, f64); 2] = [
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tolerances;
     use approx::assert_relative_eq;
-    use mvad::solution::Options;
     use mvad::solve::solve;
 
     #[test]
     fn first_impact_over_the_sweep() {
         let m = E2Sweep::new();
-        let opts = Options {
-            rtol: 1e-10,
-            atol: 1e-12,
-            ..Options::default()
-        };
+        let opts = tolerances(1e-10, 1e-12);
         for (v0, t_ref, slope_ref) in REFERENCE {
             let (t, slope) = first_impact(v0, 9.81, 1.0);
             assert_relative_eq!(t, t_ref, max_relative = 1e-14);

@@ -35,6 +35,16 @@ pub const SOURCES: [(&str, &str); 6] = [
     ("ceiling.hyb", include_str!("../ceiling.hyb")),
 ];
 
+/// Default options but for the tolerances (rtol, atol): the reference runs of the tests,
+/// the examples and the benchmark.
+pub fn tolerances(rtol: f64, atol: f64) -> mvad::solution::Options {
+    mvad::solution::Options {
+        rtol,
+        atol,
+        ..Default::default()
+    }
+}
+
 /// A ball under gravity g with restitution e on a floor at h = 0, from (h0, v0): the
 /// cost ∫₀ᵀ h dt and the impact times, in closed form.
 ///

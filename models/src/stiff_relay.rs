@@ -24,6 +24,7 @@ pub fn switch_times(tau: f64, rate: f64, lo: f64, hi: f64, t_end: f64) -> Vec<f6
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::tolerances;
     use approx::assert_relative_eq;
     use mvad::solution::Options;
     use mvad::solve::solve;
@@ -32,16 +33,7 @@ mod tests {
     fn auto_solves_the_stiff_relay_with_exact_switch_times_and_sensitivities() {
         let m = StiffRelay::new();
         let p = StiffRelayParams::default();
-        let sol = solve(
-            &m,
-            &p.to_vector(),
-            &Options {
-                rtol: 1e-8,
-                atol: 1e-10,
-                ..Options::default()
-            },
-        )
-        .expect("runs");
+        let sol = solve(&m, &p.to_vector(), &tolerances(1e-8, 1e-10)).expect("runs");
         let times = switch_times(p.tau, p.rate, p.lo, p.hi, 3.0);
         assert_eq!(sol.events.len(), times.len());
         assert!(sol.stats.steps < 20_000, "{} steps", sol.stats.steps);

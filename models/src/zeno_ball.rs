@@ -29,9 +29,9 @@ pub fn dcost_de(e: f64, g: f64, h0: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{ball_closed_form, central};
+    use crate::{ball_closed_form, central, tolerances};
     use approx::assert_relative_eq;
-    use mvad::solution::{DiagnosticKind, Options};
+    use mvad::solution::DiagnosticKind;
     use mvad::solve::solve;
 
     #[test]
@@ -39,16 +39,7 @@ mod tests {
         let m = ZenoBall::new();
         let p = ZenoBallParams::default();
         let start = std::time::Instant::now();
-        let sol = solve(
-            &m,
-            &p.to_vector(),
-            &Options {
-                rtol: 1e-10,
-                atol: 1e-12,
-                ..Options::default()
-            },
-        )
-        .expect("runs");
+        let sol = solve(&m, &p.to_vector(), &tolerances(1e-10, 1e-12)).expect("runs");
         assert!(start.elapsed().as_secs_f64() < 1.0);
         let zeno = sol
             .diagnostics

@@ -88,33 +88,25 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
                     ar.div(num, b)
                 }
             }
-            Node::Powi(a, n) => {
-                let da = dv(a);
-                if ar.is_zero(da) {
-                    zero
-                } else {
-                    let c = ar.constant(n as f64);
-                    let p = ar.powi(a, n.saturating_sub(1));
-                    let cp = ar.mul(c, p);
-                    ar.mul(cp, da)
-                }
-            }
+            Node::Powi(a, n) => chain(ar, dv(a), |ar| {
+                let c = ar.constant(n as f64);
+                let p = ar.powi(a, n.saturating_sub(1));
+                ar.mul(c, p)
+            }),
             Node::Pow(a, b) => {
                 let (da, db) = (dv(a), dv(b));
                 match (ar.is_zero(da), ar.is_zero(db)) {
                     (true, true) => zero,
-                    (false, true) => {
+                    (false, true) => chain(ar, da, |ar| {
                         let one = ar.constant(1.0);
                         let bm1 = ar.sub(b, one);
                         let p = ar.pow(a, bm1);
-                        let bp = ar.mul(b, p);
-                        ar.mul(bp, da)
-                    }
-                    (true, false) => {
+                        ar.mul(b, p)
+                    }),
+                    (true, false) => chain(ar, db, |ar| {
                         let ln = ar.call(Func::Log, a);
-                        let el = ar.mul(e, ln);
-                        ar.mul(el, db)
-                    }
+                        ar.mul(e, ln)
+                    }),
                     (false, false) => {
                         let ln = ar.call(Func::Log, a);
                         let t1 = ar.mul(db, ln);
@@ -125,15 +117,7 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
                     }
                 }
             }
-            Node::Call(f, a) => {
-                let da = dv(a);
-                if ar.is_zero(da) {
-                    zero
-                } else {
-                    let fp = func_derivative(ar, f, a, e);
-                    ar.mul(fp, da)
-                }
-            }
+            Node::Call(f, a) => chain(ar, dv(a), |ar| func_derivative(ar, f, a, e)),
             Node::Select(c, cond, a, b) => {
                 let (da, db) = (dv(a), dv(b));
                 ar.select(c, cond, da, db)
@@ -146,6 +130,16 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
         d[i] = r;
     }
     d[root.index()]
+}
+
+/// The chain rule f'(a)·a' for an outer function f of one argument a, with a' = `da` and
+/// f'(a) built by `outer`; 0 when a' = 0, without building f'(a).
+fn chain(ar: &mut ExprArena, da: ExprId, outer: impl FnOnce(&mut ExprArena) -> ExprId) -> ExprId {
+    if ar.is_zero(da) {
+        return ar.constant(0.0);
+    }
+    let fp = outer(ar);
+    ar.mul(fp, da)
 }
 
 /// f'(a) for a call node `e = f(a)`.

@@ -82,6 +82,22 @@ impl ExprArena {
         }
     }
 
+    /// Pulls a negation out of either operand of a product or quotient `op`:
+    /// (−x) op b = −(x op b) and a op (−y) = −(a op y); `None` when neither is negated.
+    fn pull_negation(
+        &mut self,
+        a: ExprId,
+        b: ExprId,
+        op: fn(&mut Self, ExprId, ExprId) -> ExprId,
+    ) -> Option<ExprId> {
+        let inner = match (self.node(a), self.node(b)) {
+            (Node::Neg(x), _) => op(self, x, b),
+            (_, Node::Neg(y)) => op(self, a, y),
+            _ => return None,
+        };
+        Some(self.neg(inner))
+    }
+
     /// a · b.
     pub fn mul(&mut self, a: ExprId, b: ExprId) -> ExprId {
         match (self.as_const(a), self.as_const(b)) {
@@ -93,14 +109,8 @@ impl ExprArena {
             (None, Some(-1.0)) => return self.neg(a),
             _ => {}
         }
-        // Pull negations out: (−a)·b = −(a·b).
-        if let Node::Neg(x) = self.node(a) {
-            let m = self.mul(x, b);
-            return self.neg(m);
-        }
-        if let Node::Neg(y) = self.node(b) {
-            let m = self.mul(a, y);
-            return self.neg(m);
+        if let Some(m) = self.pull_negation(a, b, Self::mul) {
+            return m;
         }
         if a == b {
             return self.powi(a, 2);
@@ -142,13 +152,8 @@ impl ExprArena {
             (None, Some(-1.0)) => return self.neg(a),
             _ => {}
         }
-        if let Node::Neg(x) = self.node(a) {
-            let d = self.div(x, b);
-            return self.neg(d);
-        }
-        if let Node::Neg(y) = self.node(b) {
-            let d = self.div(a, y);
-            return self.neg(d);
+        if let Some(d) = self.pull_negation(a, b, Self::div) {
+            return d;
         }
         self.intern(Node::Div(a, b))
     }

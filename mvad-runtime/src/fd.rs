@@ -47,14 +47,6 @@ pub struct FdPoint {
     pub value: f64,
 }
 
-fn primal_opts(opts: &Options) -> Options {
-    Options {
-        sensitivities: false,
-        record: false,
-        ..opts.clone()
-    }
-}
-
 /// Central-difference estimate of dC/dθ_i with relative step `rel_step` (see the module doc).
 pub fn fd_gradient<M: HybridModel>(
     model: &M,
@@ -66,19 +58,7 @@ pub fn fd_gradient<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    Ok(fd_point(model, params, &primal_opts(opts), param_index, rel_step)?.value)
-}
-
-fn fd_point<M: HybridModel>(
-    model: &M,
-    params: &OVector<f64, M::P>,
-    opts: &Options,
-    i: usize,
-    rel_step: f64,
-) -> Result<FdPoint, SolveError>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
+    let i = param_index;
     if i >= params.len() {
         return Err(SolveError::NoSuchParam {
             index: i,
@@ -103,13 +83,15 @@ where
             ),
         });
     }
-    let cp = solve_with(model, &plus, opts, &mut ())?.cost;
-    let cm = solve_with(model, &minus, opts, &mut ())?.cost;
-    Ok(FdPoint {
-        rel_step,
-        step: h,
-        value: (cp - cm) / denom,
-    })
+    // Primal runs only.
+    let opts = Options {
+        sensitivities: false,
+        record: false,
+        ..opts.clone()
+    };
+    let cp = solve_with(model, &plus, &opts, &mut ())?.cost;
+    let cm = solve_with(model, &minus, &opts, &mut ())?.cost;
+    Ok((cp - cm) / denom)
 }
 
 /// Central differences for every parameter (2p primal runs).
@@ -122,9 +104,8 @@ pub fn fd_full_gradient<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let o = primal_opts(opts);
     (0..params.len())
-        .map(|i| Ok(fd_point(model, params, &o, i, rel_step)?.value))
+        .map(|i| fd_gradient(model, params, opts, i, rel_step))
         .collect()
 }
 
@@ -140,10 +121,15 @@ pub fn fd_sweep<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let o = primal_opts(opts);
     steps
         .iter()
-        .map(|&s| fd_point(model, params, &o, param_index, s))
+        .map(|&rel_step| {
+            Ok(FdPoint {
+                rel_step,
+                value: fd_gradient(model, params, opts, param_index, rel_step)?,
+                step: fd_step(params[param_index], rel_step),
+            })
+        })
         .collect()
 }
 

@@ -106,46 +106,18 @@ impl HybridModel for Ball {
         dt.fill(0.0);
     }
     fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut X) {
-        let Point {
-            mode: _m,
-            sw: _sw,
-            t: _t,
-            x,
-            p,
-        } = pt;
-        f[0] = x[1];
-        f[1] = -p[1];
+        f[0] = pt.x[1];
+        f[1] = -pt.p[1];
     }
-    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
-        let Point {
-            mode: _m,
-            sw: _sw,
-            t: _t,
-            x: _x,
-            p: _p,
-        } = pt;
+    fn rhs_jac_x(&self, _pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
         fx.fill(0.0);
         fx[(0, 1)] = 1.0;
     }
-    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
-        let Point {
-            mode: _m,
-            sw: _sw,
-            t: _t,
-            x: _x,
-            p: _p,
-        } = pt;
+    fn rhs_jac_p(&self, _pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
         fp.fill(0.0);
         fp[(1, 1)] = -1.0;
     }
-    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
-        let Point {
-            mode: _m,
-            sw: _sw,
-            t: _t,
-            x: _x,
-            p: _p,
-        } = pt;
+    fn rhs_dt(&self, _pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {

@@ -6,8 +6,9 @@ mod odes;
 
 use approx::assert_relative_eq;
 use mvad_runtime::fixtures::Ball;
-use mvad_runtime::integrate::{AugState, Integrator};
+use mvad_runtime::integrate::{AugState, Integrator, StepError};
 use mvad_runtime::solution::Method;
+use mvad_runtime::Switches;
 use nalgebra::{DVector, Dyn};
 use odes::*;
 
@@ -515,4 +516,104 @@ fn verner_lazy_interpolation_stages() {
     integrate_to(&mut lazy2, t_end);
     assert_eq!(lazy2.y(), eager.y());
     assert_eq!(se - lazy2.stats().rhs_evals, 9 * steps);
+}
+
+/// The start x₀ of the backward-stepping test.
+const BACKWARD_X0: f64 = 1.3;
+
+/// The augmented state (x, S, q, q_θ) of a one-state, one-parameter problem.
+fn one_by_one(v: [f64; 4]) -> AugState<Dyn, Dyn> {
+    let mut y = AugState::zeros(Dyn(1), Dyn(1));
+    (y.x[0], y.s[(0, 0)], y.q, y.qp[0]) = (v[0], v[1], v[2], v[3]);
+    y
+}
+
+/// (x, S, q, q_θ) of a one-state, one-parameter state.
+fn parts(y: &AugState<Dyn, Dyn>) -> [f64; 4] {
+    [y.x[0], y.s[(0, 0)], y.q, y.qp[0]]
+}
+
+/// |got − want| ≤ tol·max(1, |want|), part by part.
+fn assert_parts_close(got: [f64; 4], want: [f64; 4], tol: f64, what: &str) {
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            (g - w).abs() <= tol * w.abs().max(1.0),
+            "{what}, part {i}: {g} vs {w}"
+        );
+    }
+}
+
+/// Stepping backwards in time: every scheme, from T down to 0, against the closed form and
+/// against the forward run.
+#[test]
+fn backward_steps_match_the_closed_form_and_the_forward_run() {
+    let m = decay_integral();
+    let a = 1.5;
+    let p = DVector::from_element(1, a);
+    let exact = |t: f64| decay_integral_exact(a, BACKWARD_X0, t);
+    let t_end = 2.0;
+    let tol = 1e-7;
+    let sw = Switches::default();
+    for method in Method::ALL {
+        let o = opts(method, 1e-10, 1e-12);
+        // Forward 0 → T, then backward T → 0 from the exact end state.
+        let mut fwd = Integrator::new(&m, &p, &o);
+        fwd.restart(0.0, &one_by_one(exact(0.0)), 0, &sw);
+        integrate_to(&mut fwd, t_end);
+        assert_parts_close(parts(fwd.y()), exact(t_end), tol, "forward end");
+        let mut bwd = Integrator::new(&m, &p, &o);
+        bwd.restart(t_end, &one_by_one(exact(t_end)), 0, &sw);
+        let mut mid = AugState::zeros(Dyn(1), Dyn(1));
+        let mut seen_mid = false;
+        while bwd.t() > 0.0 {
+            bwd.step(0.0).unwrap();
+            assert!(bwd.t() < bwd.t_prev() && bwd.last_step_size() < 0.0);
+            // Dense output between t and t_prev of a backward step.
+            if bwd.t() <= 1.0 && 1.0 <= bwd.t_prev() {
+                bwd.dense(1.0, &mut mid);
+                assert_parts_close(parts(&mid), exact(1.0), tol, "backward dense output");
+                let mut x = DVector::zeros(1);
+                bwd.dense_x(1.0, &mut x);
+                assert_eq!(x[0], mid.x[0]);
+                seen_mid = true;
+            }
+        }
+        assert!(seen_mid);
+        assert_eq!(bwd.t(), 0.0);
+        assert_parts_close(
+            parts(bwd.y()),
+            exact(0.0),
+            tol,
+            &format!("{method:?} backward end"),
+        );
+        // The two directions take similar effort.
+        let (sf, sb) = (fwd.stats().steps as f64, bwd.stats().steps as f64);
+        assert!(
+            sb <= 1.5 * sf + 2.0 && sf <= 1.5 * sb + 2.0,
+            "{method:?}: {sf} vs {sb} steps"
+        );
+        // Truncating a backward step lands on the dense output.
+        bwd.restart(t_end, &one_by_one(exact(t_end)), 0, &sw);
+        bwd.step(0.0).unwrap();
+        let cut = 0.5 * (bwd.t() + bwd.t_prev());
+        bwd.dense(cut, &mut mid);
+        bwd.truncate(cut);
+        assert_eq!(bwd.t(), cut);
+        assert_eq!(parts(bwd.y()), parts(&mid));
+        // Fixed steps: h = −T/n from T reaches 0 and the same end.
+        bwd.restart(t_end, &one_by_one(exact(t_end)), 0, &sw);
+        for _ in 0..400 {
+            bwd.step_fixed(-t_end / 400.0).unwrap();
+        }
+        assert_parts_close(
+            parts(bwd.y()),
+            exact(0.0),
+            1e-6,
+            &format!("{method:?} fixed steps"),
+        );
+        assert!(matches!(
+            bwd.step_fixed(0.0),
+            Err(StepError::StepSizeUnderflow { .. })
+        ));
+    }
 }

@@ -3,71 +3,19 @@
 //! for malformed models (empty, binary, deeply nested, every semantic error class),
 //! none of which may panic.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
 use approx::assert_relative_eq;
+use common::{json, run_status, scratch, stderr, stdout};
 use serde_json::Value;
 
 #[path = "../src/cli/spec_keys.rs"]
 mod spec_keys;
 use spec_keys::missing_spec_keys;
 
-/// The workspace root (the models are under `models/`).
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn mvad(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mvad"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("the binary runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs and asserts the exit status, and that nothing panicked.
-fn run_status(args: &[&str], status: i32) -> Output {
-    let o = mvad(args);
-    let err = stderr(&o);
-    assert!(!err.contains("panicked"), "panic for {args:?}: {err}");
-    assert_eq!(
-        o.status.code(),
-        Some(status),
-        "exit status of {args:?}\nstdout: {}\nstderr: {err}",
-        stdout(&o)
-    );
-    o
-}
-
 /// How many lines of `text` satisfy `pred`.
 fn count_lines(text: &str, pred: impl Fn(&str) -> bool) -> usize {
     text.lines().filter(|l| pred(l)).count()
-}
-
-fn json(o: &Output) -> Value {
-    serde_json::from_str(&stdout(o)).unwrap_or_else(|e| panic!("not JSON ({e}): {}", stdout(o)))
-}
-
-/// A scratch file `name` holding `contents` in a fresh temporary directory: the directory
-/// (removed when dropped) and the file's path as text.
-fn scratch(name: &str, contents: &[u8]) -> (tempfile::TempDir, String) {
-    let dir = tempfile::Builder::new()
-        .prefix("mvad-cli-")
-        .tempdir()
-        .expect("temp dir");
-    let path = dir.path().join(name);
-    std::fs::write(&path, contents).expect("write");
-    let path = path.to_string_lossy().into_owned();
-    (dir, path)
 }
 
 const BALL: &str = "models/bouncing_ball.hyb";
@@ -457,17 +405,6 @@ fn bad_options_and_usage_errors_exit_2() {
     for m in ["auto", "tsit5", "verner9", "rosenbrock"] {
         run_status(&["grad", BALL, "--method", m], 0);
     }
-}
-
-#[test]
-fn a_model_without_horizon_needs_t_end() {
-    let (_dir, p) = scratch(
-        "nohorizon.hyb",
-        b"model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
-    );
-    let o = run_status(&["grad", &p], 2);
-    assert!(stderr(&o).contains("--t-end"), "{}", stderr(&o));
-    run_status(&["grad", &p, "--t-end", "1"], 0);
 }
 
 #[test]

@@ -3,12 +3,10 @@
 //! followed by "… and N more"; `--json` still carries every event. Also: the hints naming
 //! command-line flags come from the CLI, not the runtime.
 
-use std::fs;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use common::{run_status, scratch, stderr, stdout};
 use serde_json::Value;
-use tempfile::TempDir;
 
 /// A sawtooth: x climbs at rate r and is reset to 0 at x = 0.01, so 1 000 events up to T = 10
 /// (999 or 1 000, depending on the rounding of the last one).
@@ -28,50 +26,33 @@ const ROWS: usize = 20;
 /// Event times listed by `fdcheck`.
 const TIMES: usize = 5;
 
-/// A temporary directory holding `saw.hyb` (removed when the guard drops).
-fn saw() -> (TempDir, PathBuf) {
-    let dir = tempfile::tempdir().expect("a temporary directory");
-    let path = dir.path().join("saw.hyb");
-    fs::write(&path, SAW).expect("write the model");
-    (dir, path)
+/// `saw.hyb` in a temporary directory (removed when dropped), its path, and the number of
+/// events of its full run.
+struct Saw {
+    dir: tempfile::TempDir,
+    path: String,
+    events: usize,
 }
 
-fn mvad(args: &[&str]) -> Output {
-    let o = Command::new(env!("CARGO_BIN_EXE_mvad"))
-        .args(args)
-        .output()
-        .expect("the binary runs");
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!err.contains("panicked"), "panic for {args:?}: {err}");
-    o
+/// Writes the sawtooth and counts its events with `grad --json`.
+fn saw() -> Saw {
+    let (dir, path) = scratch("saw.hyb", SAW.as_bytes());
+    let events = json(&["grad", &path, "--json"])["events"]
+        .as_array()
+        .expect("events")
+        .len();
+    assert!((999..=1000).contains(&events), "{events} events");
+    Saw { dir, path, events }
 }
 
+/// Standard output of a successful run.
 fn ok(args: &[&str]) -> String {
-    let o = mvad(args);
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
+    stdout(&run_status(args, 0))
 }
 
+/// Standard output of a successful run, parsed as JSON.
 fn json(args: &[&str]) -> Value {
-    let out = ok(args);
-    serde_json::from_str(&out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
-}
-
-fn path_str(p: &Path) -> &str {
-    p.to_str().expect("a UTF-8 path")
-}
-
-/// The number of events of the full run, from `grad --json`.
-fn event_count(model: &str) -> usize {
-    let v = json(&["grad", model, "--json"]);
-    let n = v["events"].as_array().expect("events").len();
-    assert!((999..=1000).contains(&n), "{n} events");
-    n
+    common::json(&run_status(args, 0))
 }
 
 /// Lines of `text` that are rows of an event table: they start with an event index and
@@ -87,9 +68,8 @@ fn event_rows(text: &str) -> usize {
 
 #[test]
 fn grad_prints_twenty_events_and_json_all_of_them() {
-    let (_dir, model) = saw();
-    let model = path_str(&model);
-    let n = event_count(model);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
     let out = ok(&["grad", model]);
     assert!(out.contains(&format!("events ({n}):")), "{out}");
     assert_eq!(event_rows(&out), ROWS, "{out}");
@@ -101,11 +81,15 @@ fn grad_prints_twenty_events_and_json_all_of_them() {
 
 #[test]
 fn simulate_event_table_is_capped_and_json_is_complete() {
-    let (dir, model) = saw();
-    let model = path_str(&model);
-    let n = event_count(model);
-    let csv = dir.path().join("traj.csv");
-    let out = ok(&["simulate", model, "--out", path_str(&csv)]);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
+    let csv = saw.dir.path().join("traj.csv");
+    let out = ok(&[
+        "simulate",
+        model,
+        "--out",
+        csv.to_str().expect("a UTF-8 path"),
+    ]);
     assert!(out.contains(&format!("{n} events up to T")), "{out}");
     assert_eq!(event_rows(&out), ROWS, "{out}");
     assert!(
@@ -113,7 +97,10 @@ fn simulate_event_table_is_capped_and_json_is_complete() {
         "{out}"
     );
     // The CSV keeps both sides of every event.
-    let rows = fs::read_to_string(&csv).expect("the CSV").lines().count();
+    let rows = std::fs::read_to_string(&csv)
+        .expect("the CSV")
+        .lines()
+        .count();
     assert!(rows > 2 * n, "{rows} CSV lines for {n} events");
     let v = json(&["simulate", model, "--json"]);
     assert_eq!(v["events"].as_array().map(Vec::len), Some(n));
@@ -121,9 +108,8 @@ fn simulate_event_table_is_capped_and_json_is_complete() {
 
 #[test]
 fn measure_atom_table_is_capped_and_json_is_complete() {
-    let (_dir, model) = saw();
-    let model = path_str(&model);
-    let n = event_count(model);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
     let out = ok(&["measure", model, "--observable", "y"]);
     assert!(out.contains(&format!("atoms ({n}):")), "{out}");
     assert!(
@@ -136,9 +122,8 @@ fn measure_atom_table_is_capped_and_json_is_complete() {
 
 #[test]
 fn fdcheck_lists_five_event_times() {
-    let (_dir, model) = saw();
-    let model = path_str(&model);
-    let n = event_count(model);
+    let saw = saw();
+    let (model, n) = (saw.path.as_str(), saw.events);
     let out = ok(&["fdcheck", model]);
     let line = out
         .lines()
@@ -156,18 +141,24 @@ fn fdcheck_lists_five_event_times() {
 
 #[test]
 fn runtime_errors_get_their_flag_hints_from_the_cli() {
-    let dir = tempfile::tempdir().expect("a temporary directory");
-    let path = dir.path().join("endless.hyb");
-    fs::write(
-        &path,
-        "model Endless { state x = 0; flow { der(x) = 1; } cost = integral(x); }",
-    )
-    .expect("write the model");
-    let o = mvad(&["grad", path_str(&path)]);
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("no horizon"), "{err}");
-    assert!(err.contains("--t-end"), "{err}");
+    // Models without a horizon need `--t-end`, and the CLI says so.
+    for (name, src) in [
+        (
+            "nohorizon.hyb",
+            "model M {\n  state x = 1;\n  flow { der(x) = -x; }\n}\n",
+        ),
+        (
+            "endless.hyb",
+            "model Endless { state x = 0; flow { der(x) = 1; } cost = integral(x); }",
+        ),
+    ] {
+        let (_dir, path) = scratch(name, src.as_bytes());
+        let o = run_status(&["grad", &path], 2);
+        let err = stderr(&o);
+        assert!(err.contains("no horizon"), "{name}: {err}");
+        assert!(err.contains("--t-end"), "{name}: {err}");
+        run_status(&["grad", &path, "--t-end", "1"], 0);
+    }
     // The runtime's own message names no flag.
     let e = mvad::SolveError::NoHorizon.to_string();
     assert!(!e.contains("--"), "{e}");

@@ -13,11 +13,17 @@ mvad::hybrid! {
     }
 }
 
+/// The point both `Quad` tests evaluate at: a = 0.7, (x, y) = (0.4, −1), as
+/// (a, x, state vector, parameter vector).
+fn quad_point() -> (f64, f64, Vector2<f64>, Vector1<f64>) {
+    let (a, x) = (0.7, 0.4);
+    (a, x, Vector2::new(x, -1.0), Vector1::new(a))
+}
+
 #[test]
 fn adjoint_products_are_lambda_times_the_jacobians() {
     let m = Quad::new();
-    let (a, x) = (0.7, 0.4);
-    let (xv, pv) = (Vector2::new(x, -1.0), Vector1::new(a));
+    let (a, x, xv, pv) = quad_point();
     let lam = Vector2::new(1.5, -2.0);
     let (mut vx, mut vp) = (Vector2::zeros(), Vector1::zeros());
     m.rhs_vjp(
@@ -39,8 +45,7 @@ fn adjoint_products_are_lambda_times_the_jacobians() {
 #[test]
 fn second_order_default_is_the_directional_derivative_of_the_sensitivity_rhs() {
     let m = Quad::new();
-    let (a, x) = (0.7, 0.4);
-    let (xv, pv) = (Vector2::new(x, -1.0), Vector1::new(a));
+    let (a, x, xv, pv) = quad_point();
     let s = Matrix2x1::new(0.3, -0.8);
     let v = Vector2::new(0.9, 2.0);
     let mut out = Matrix2x1::zeros();

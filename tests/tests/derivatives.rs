@@ -93,6 +93,13 @@ enum Wrt {
     T,
 }
 
+/// [`fd_check`] of the three blocks ∂/∂x, ∂/∂θ, ∂/∂t of `val`, given in that order.
+fn fd_check_xpt(what: &str, pt: &Pt, sym: [&[f64]; 3], val: &dyn Fn(&Pt) -> Vec<f64>) {
+    for (wrt, sym) in [Wrt::X, Wrt::P, Wrt::T].into_iter().zip(sym) {
+        fd_check(what, pt, wrt, sym, val);
+    }
+}
+
 /// Compares `sym` (row-major outputs × vars of block `wrt`) with central differences of `val`.
 fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec<f64>) {
     let nout = val(pt).len();
@@ -132,6 +139,24 @@ fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec
     }
 }
 
+/// A scalar s(t, x, θ) of `m` whose gradient method `grad` fills ∂ₓs and ∂θs and returns
+/// ∂ₜs, against central differences of its `value` at `pt`.
+fn check_scalar<M: HybridModel>(
+    m: &M,
+    pt: &Pt,
+    what: &str,
+    value: impl Fn(f64, &OVector<f64, M::N>, &OVector<f64, M::P>) -> f64,
+    grad: impl FnOnce(&mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut gx = OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    let mut gp = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    let gt = grad(&mut gx, &mut gp);
+    let val = |q: &Pt| vec![value(q.t, &vn(m, &q.x), &vp(m, &q.p))];
+    fd_check_xpt(what, pt, [gx.as_slice(), gp.as_slice(), &[gt]], &val);
+}
+
 /// Checks every partial of `m` at `pt` with switch word `sw`.
 pub fn check_model<M: HybridModel>(m: &M, pt: &Pt, sw: u64, rng: &mut Rng)
 where
@@ -147,7 +172,6 @@ where
     let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(m.nstates(), m.nparams());
     let (x, pv) = (vn(m, &pt.x), vp(m, &pt.p));
     let t = pt.t;
-
     // Flow, per mode.
     for mode in 0..info.modes.len() {
         let f = |q: &Pt| {
@@ -165,9 +189,7 @@ where
         let mut ft = zn();
         m.rhs_dt(mvad::Point::new(mode, sw, t, &x, &pv), &mut ft);
         let what = format!("{} mode {mode} f", info.name);
-        fd_check(&what, pt, Wrt::X, &rows(&fx), &f);
-        fd_check(&what, pt, Wrt::P, &rows(&fp), &f);
-        fd_check(&what, pt, Wrt::T, ft.as_slice(), &f);
+        fd_check_xpt(&what, pt, [&rows(&fx), &rows(&fp), ft.as_slice()], &f);
         if !m.rhs_depends_on_t(mode) {
             assert!(
                 ft.iter().all(|&v| v == 0.0),
@@ -214,12 +236,13 @@ where
                 fd_check(&format!("{what} time"), pt, Wrt::P, dtau.as_slice(), &tau);
             }
         } else {
-            let g = |q: &Pt| vec![m.guard(k, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-            let (mut gx, mut gp) = (zn(), zp());
-            let gt = m.guard_grad(k, t, &x, &pv, &mut gx, &mut gp);
-            fd_check(&format!("{what} guard"), pt, Wrt::X, gx.as_slice(), &g);
-            fd_check(&format!("{what} guard"), pt, Wrt::P, gp.as_slice(), &g);
-            fd_check(&format!("{what} guard"), pt, Wrt::T, &[gt], &g);
+            check_scalar(
+                m,
+                pt,
+                &format!("{what} guard"),
+                |t, x, p| m.guard(k, t, x, p),
+                |gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
+            );
         }
 
         let r = |q: &Pt| {
@@ -229,27 +252,31 @@ where
         };
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
         m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
-        fd_check(&format!("{what} reset"), pt, Wrt::X, &rows(&rx), &r);
-        fd_check(&format!("{what} reset"), pt, Wrt::P, &rows(&rp), &r);
-        fd_check(&format!("{what} reset"), pt, Wrt::T, rt.as_slice(), &r);
+        fd_check_xpt(
+            &format!("{what} reset"),
+            pt,
+            [&rows(&rx), &rows(&rp), rt.as_slice()],
+            &r,
+        );
 
-        let c = |q: &Pt| vec![m.event_cost(k, 0, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-        let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(k, 0, t, &x, &pv, &mut cx, &mut cp);
-        fd_check(&format!("{what} cost"), pt, Wrt::X, cx.as_slice(), &c);
-        fd_check(&format!("{what} cost"), pt, Wrt::P, cp.as_slice(), &c);
-        fd_check(&format!("{what} cost"), pt, Wrt::T, &[ct], &c);
+        check_scalar(
+            m,
+            pt,
+            &format!("{what} cost"),
+            |t, x, p| m.event_cost(k, 0, t, x, p),
+            |cx, cp| m.event_cost_grad(k, 0, t, &x, &pv, cx, cp),
+        );
     }
 
     // Switching functions.
     for j in 0..info.switches {
-        let what = format!("{} switch {j}", info.name);
-        let s = |q: &Pt| vec![m.switch_value(j, q.t, &vn(m, &q.x), &vp(m, &q.p))];
-        let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.switch_grad(j, t, &x, &pv, &mut gx, &mut gp);
-        fd_check(&what, pt, Wrt::X, gx.as_slice(), &s);
-        fd_check(&what, pt, Wrt::P, gp.as_slice(), &s);
-        fd_check(&what, pt, Wrt::T, &[gt], &s);
+        check_scalar(
+            m,
+            pt,
+            &format!("{} switch {j}", info.name),
+            |t, x, p| m.switch_value(j, t, x, p),
+            |gx, gp| m.switch_grad(j, t, &x, &pv, gx, gp),
+        );
     }
 
     // Observables.
@@ -271,12 +298,13 @@ where
     assert_eq!(lv, l(pt)[0], "running_cost_value_grad returns ℓ");
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
-    let phi = |q: &Pt| vec![m.final_cost(q.t, &vn(m, &q.x), &vp(m, &q.p))];
-    let (mut cx, mut cp) = (zn(), zp());
-    let ct = m.final_cost_grad(t, &x, &pv, &mut cx, &mut cp);
-    fd_check(&format!("{} Φ", info.name), pt, Wrt::X, cx.as_slice(), &phi);
-    fd_check(&format!("{} Φ", info.name), pt, Wrt::P, cp.as_slice(), &phi);
-    fd_check(&format!("{} Φ", info.name), pt, Wrt::T, &[ct], &phi);
+    check_scalar(
+        m,
+        pt,
+        &format!("{} Φ", info.name),
+        |t, x, p| m.final_cost(t, x, p),
+        |cx, cp| m.final_cost_grad(t, &x, &pv, cx, cp),
+    );
 
     // x₀(θ) and T(θ).
     let x0 = |q: &Pt| {

@@ -58,29 +58,22 @@ where
     put("dT".into(), dt.as_slice());
 
     for mode in 0..info.modes.len() {
-        let mut f = zn();
-        m.rhs(mvad::Point::new(mode, sw, t, &xv, &pv), &mut f);
+        let pt = mvad::Point::new(mode, sw, t, &xv, &pv);
+        let (mut f, mut fx, mut fp, mut ft) = (zn(), znn(), znp(), zn());
+        m.rhs(pt, &mut f);
+        m.rhs_jac_x(pt, &mut fx);
+        m.rhs_jac_p(pt, &mut fp);
+        m.rhs_dt(pt, &mut ft);
         put(format!("f{mode}"), f.as_slice());
-        let mut fx = znn();
-        m.rhs_jac_x(mvad::Point::new(mode, sw, t, &xv, &pv), &mut fx);
         put(format!("fx{mode}"), fx.as_slice());
-        let mut fp = znp();
-        m.rhs_jac_p(mvad::Point::new(mode, sw, t, &xv, &pv), &mut fp);
         put(format!("fp{mode}"), fp.as_slice());
-        let mut ft = zn();
-        m.rhs_dt(mvad::Point::new(mode, sw, t, &xv, &pv), &mut ft);
         put(format!("ft{mode}"), ft.as_slice());
         put(
             format!("dep_t{mode}"),
             &[f64::from(u8::from(m.rhs_depends_on_t(mode)))],
         );
         let (mut f2, mut ds) = (zn(), znp());
-        m.rhs_sens(
-            mvad::Point::new(mode, sw, t, &xv, &pv),
-            &sv,
-            &mut f2,
-            &mut ds,
-        );
+        m.rhs_sens(pt, &sv, &mut f2, &mut ds);
         put(format!("sens_f{mode}"), f2.as_slice());
         put(format!("sens_ds{mode}"), ds.as_slice());
     }

@@ -1,51 +1,11 @@
 use super::*;
 use crate::span::line_col;
 
-pub(crate) const BALL: &str = r#"
-// Bouncing ball: the seed paper's E1.
-model BouncingBall {
-param e = 0.8;            // restitution coefficient, differentiable
-param g = 9.81;
-param h0 = 2.0;
-param v0 = 0.0;
-state h = h0;             // initial values may depend on params
-state v = v0;
+/// The spec's first model, E1's bouncing ball, as the bundled model file.
+pub(crate) const BALL: &str = include_str!("../../../models/bouncing_ball.hyb");
 
-flow {
-    der(h) = v;
-    der(v) = -g;
-}
-
-event impact when h <= 0 {
-    v = -e * v;
-}
-
-observe height = h;
-observe velocity = v;
-
-cost = integral(h);
-horizon 2.0;
-}
-"#;
-
-pub(crate) const THERMOSTAT: &str = r#"
-model Thermostat {
-param k = 0.5;  param lo = 18.0;  param hi = 22.0;  param p = 10.0;
-const ambient = 10.0;
-state temp = 19.0;
-initial mode heating;
-mode heating {
-    der(temp) = -k * (temp - ambient) + p;
-    event switch_off when temp >= hi -> cooling;
-}
-mode cooling {
-    der(temp) = -k * (temp - ambient);
-    event switch_on when temp <= lo -> heating;
-}
-cost = integral((temp - 20)^2);
-horizon 10;
-}
-"#;
+/// The spec's multi-mode example, as the bundled model file.
+pub(crate) const THERMOSTAT: &str = include_str!("../../../models/thermostat.hyb");
 
 /// Lisp-style rendering of an expression, for precedence tests.
 fn sexpr(e: &Expr) -> String {

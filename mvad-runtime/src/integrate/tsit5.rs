@@ -12,7 +12,14 @@ use super::explicit::Tableau;
 /// Number of stages.
 pub(super) const STAGES: usize = 7;
 
-/// The tableau; `b` repeats the last row of `a` (FSAL), `dense` holds r_i1..r_i4 of
+/// The weights b_i of the 5th-order solution (also the last row of `a`: FSAL).
+#[rustfmt::skip]
+const B: [f64; STAGES] = [
+    0.09646076681806523, 0.01, 0.4798896504144996, 1.379008574103742,
+    -3.290069515436081, 2.324710524099774, 0.0,
+];
+
+/// The tableau; the last row of `a` is `b` (FSAL), `dense` holds r_i1..r_i4 of
 /// b_i(θ) = r_i1 θ + r_i2 θ² + r_i3 θ³ + r_i4 θ⁴.
 #[rustfmt::skip]
 pub(super) const TSIT5: Tableau<STAGES, STAGES, 4> = Tableau {
@@ -33,15 +40,10 @@ pub(super) const TSIT5: Tableau<STAGES, STAGES, 4> = Tableau {
             5.86145544294642, -12.92096931784711, 8.159367898576159,
             -0.071584973281401, -0.028269050394068383,
         ],
-        &[
-            0.09646076681806523, 0.01, 0.4798896504144996,
-            1.379008574103742, -3.290069515436081, 2.324710524099774,
-        ],
+        // FSAL: stage 7 is F(t₀ + h, y₁), its row is b.
+        B.split_at(STAGES - 1).0,
     ],
-    b: [
-        0.09646076681806523, 0.01, 0.4798896504144996, 1.379008574103742,
-        -3.290069515436081, 2.324710524099774, 0.0,
-    ],
+    b: B,
     btilde: [
         -0.001780011052225777, -0.0008164344596567469, 0.007880878010261995, -0.1447110071732629,
         0.5823571654525552, -0.45808210592918697, 0.015151515151515152,

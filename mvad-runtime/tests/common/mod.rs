@@ -281,11 +281,12 @@ impl<T: Spec> AdModel<T> {
         let d = f(td, &xd, &pd);
         (d.v, self.split(&d, gx.as_mut_slice(), gp.as_mut_slice()))
     }
-    /// The flow in dual numbers seeded at (t, x, p).
-    fn flow(&self, m: usize, sw: u64, t: f64, x: &V, p: &V) -> Vec<D> {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+    /// The flow at `pt` in dual numbers seeded at (t, x, p).
+    fn flow(&self, pt: Pt<'_>) -> Vec<D> {
+        let (td, xd, pd) = self.seed(pt.t, pt.x.as_slice(), pt.p.as_slice());
         let mut f = vec![D::c(0.0); self.n()];
-        self.spec.rhs(m, sw, td, &xd, &pd, &mut f);
+        self.spec
+            .rhs(pt.mode, pt.sw.low_word(), td, &xd, &pd, &mut f);
         f
     }
     fn split(&self, d: &D, gx: &mut [f64], gp: &mut [f64]) -> f64 {
@@ -298,6 +299,16 @@ impl<T: Spec> AdModel<T> {
 
 type V = OVector<f64, Dyn>;
 type Mx = OMatrix<f64, Dyn, Dyn>;
+type Pt<'a> = mvad_runtime::Point<'a, Dyn, Dyn>;
+
+/// out[(r, c)] = ∂v_r along dual direction `first + c`, for every entry of `out`.
+fn partials(v: &[D], first: usize, out: &mut Mx) {
+    for r in 0..out.nrows() {
+        for c in 0..out.ncols() {
+            out[(r, c)] = v[r].g[first + c];
+        }
+    }
+}
 
 impl<T: Spec> ModelSens for AdModel<T> {}
 impl<T: Spec> ModelAdjoint for AdModel<T> {}
@@ -325,11 +336,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         let pd: Vec<D> = p.iter().enumerate().map(|(i, &v)| D::var(v, i)).collect();
         let mut x = vec![D::c(0.0); self.n()];
         self.spec.x0(&pd, &mut x);
-        for r in 0..self.n() {
-            for c in 0..self.np() {
-                dx0[(r, c)] = x[r].g[c];
-            }
-        }
+        partials(&x, 0, dx0);
     }
     fn horizon(&self, p: &V) -> Option<f64> {
         self.spec.horizon(p.as_slice())
@@ -343,62 +350,24 @@ impl<T: Spec> HybridModel for AdModel<T> {
             }
         }
     }
-    fn rhs(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, f: &mut V) {
-        let mvad_runtime::Point {
-            mode: m,
-            sw,
-            t,
-            x,
-            p,
-        } = pt;
+    fn rhs(&self, pt: Pt<'_>, f: &mut V) {
         self.spec.rhs(
-            m,
-            sw.low_word(),
-            t,
-            x.as_slice(),
-            p.as_slice(),
+            pt.mode,
+            pt.sw.low_word(),
+            pt.t,
+            pt.x.as_slice(),
+            pt.p.as_slice(),
             f.as_mut_slice(),
         );
     }
-    fn rhs_jac_x(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fx: &mut Mx) {
-        let mvad_runtime::Point {
-            mode: m,
-            sw,
-            t,
-            x,
-            p,
-        } = pt;
-        let f = self.flow(m, sw.low_word(), t, x, p);
-        for r in 0..self.n() {
-            for c in 0..self.n() {
-                fx[(r, c)] = f[r].g[1 + c];
-            }
-        }
+    fn rhs_jac_x(&self, pt: Pt<'_>, fx: &mut Mx) {
+        partials(&self.flow(pt), 1, fx);
     }
-    fn rhs_jac_p(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fp: &mut Mx) {
-        let mvad_runtime::Point {
-            mode: m,
-            sw,
-            t,
-            x,
-            p,
-        } = pt;
-        let f = self.flow(m, sw.low_word(), t, x, p);
-        for r in 0..self.n() {
-            for c in 0..self.np() {
-                fp[(r, c)] = f[r].g[1 + self.n() + c];
-            }
-        }
+    fn rhs_jac_p(&self, pt: Pt<'_>, fp: &mut Mx) {
+        partials(&self.flow(pt), 1 + self.n(), fp);
     }
-    fn rhs_dt(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, ft: &mut V) {
-        let mvad_runtime::Point {
-            mode: m,
-            sw,
-            t,
-            x,
-            p,
-        } = pt;
-        let f = self.flow(m, sw.low_word(), t, x, p);
+    fn rhs_dt(&self, pt: Pt<'_>, ft: &mut V) {
+        let f = self.flow(pt);
         for r in 0..self.n() {
             ft[r] = f[r].g[0];
         }
@@ -431,16 +400,11 @@ impl<T: Spec> HybridModel for AdModel<T> {
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
         let mut r = vec![D::c(0.0); self.n()];
         self.spec.reset(k, td, &xd, &pd, &mut r);
-        let n = self.n();
-        for i in 0..n {
-            rt[i] = r[i].g[0];
-            for c in 0..n {
-                rx[(i, c)] = r[i].g[1 + c];
-            }
-            for c in 0..self.np() {
-                rp[(i, c)] = r[i].g[1 + n + c];
-            }
+        for (rti, ri) in rt.iter_mut().zip(&r) {
+            *rti = ri.g[0];
         }
+        partials(&r, 1, rx);
+        partials(&r, 1 + self.n(), rp);
     }
     fn switch_value(&self, j: usize, t: f64, x: &V, p: &V) -> f64 {
         self.spec.switch(j, t, x.as_slice(), p.as_slice())

@@ -14,6 +14,7 @@ use nalgebra::{Const, DVector, Dyn, OVector};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Ode {
     Decay,
+    DecayIntegral,
     Oscillator,
     TwoModes,
     Blowup,
@@ -29,7 +30,7 @@ impl Ode {
         match self {
             Ode::Decay | Ode::ProtheroRobinson | Ode::Quintic => (1, 2),
             Ode::Oscillator | Ode::ZeroComponent => (2, 1),
-            Ode::TwoModes | Ode::Blowup => (1, 1),
+            Ode::TwoModes | Ode::Blowup | Ode::DecayIntegral => (1, 1),
             Ode::StiffLag => (2, 2),
         }
     }
@@ -46,7 +47,7 @@ impl Spec for Ode {
         let states: Vec<&str> = states.iter().map(String::as_str).collect();
         let params: Vec<(&str, f64)> = params.iter().map(|p| (p.as_str(), 0.0)).collect();
         let mut i = info("ode", &states, &params, &["a", "b"], vec![], &[], 0);
-        i.has_running_cost = matches!(self, Ode::Decay | Ode::Oscillator);
+        i.has_running_cost = matches!(self, Ode::Decay | Ode::DecayIntegral | Ode::Oscillator);
         i.has_horizon = false;
         i
     }
@@ -58,7 +59,7 @@ impl Spec for Ode {
     }
     fn rhs<S: Sc>(&self, m: usize, _sw: u64, t: S, x: &[S], p: &[S], f: &mut [S]) {
         match self {
-            Ode::Decay => f[0] = -(p[0] * x[0]),
+            Ode::Decay | Ode::DecayIntegral => f[0] = -(p[0] * x[0]),
             Ode::Oscillator => {
                 f[0] = x[1];
                 f[1] = -(p[0] * p[0] * x[0]);
@@ -80,7 +81,7 @@ impl Spec for Ode {
     fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         match self {
             Ode::Decay => x[0] * x[0],
-            Ode::Oscillator => x[0],
+            Ode::Oscillator | Ode::DecayIntegral => x[0],
             _ => S::cst(0.0),
         }
     }
@@ -110,6 +111,24 @@ pub fn decay_exact(a: f64, x0: f64, t: f64) -> [f64; 6] {
     let qa = x0 * x0 * (t * e2 / a - (1.0 - e2) / (2.0 * a * a));
     let qx0 = x0 * (1.0 - e2) / a;
     [x0 * e, -t * x0 * e, e, q, qa, qx0]
+}
+
+/// ẋ = −a x, θ = (a), ℓ = x (the start is set by the caller).
+pub fn decay_integral() -> Model {
+    Ode::DecayIntegral.model()
+}
+
+/// Closed form of [`decay_integral`] from x(0) = x0: (x, S, q, q_θ) =
+/// (x0 e^{−at}, −t x, x0 (1 − e^{−at})/a, x0 (t e^{−at}/a − (1 − e^{−at})/a²)).
+pub fn decay_integral_exact(a: f64, x0: f64, t: f64) -> [f64; 4] {
+    let e = (-a * t).exp();
+    let x = x0 * e;
+    [
+        x,
+        -t * x,
+        x0 * (1.0 - e) / a,
+        x0 * (t * e / a - (1.0 - e) / (a * a)),
+    ]
 }
 
 /// ẍ = −ω² x as (x, v), θ = (ω): x = cos ωt, v = −ω sin ωt,

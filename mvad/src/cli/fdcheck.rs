@@ -22,9 +22,26 @@ pub struct FdcheckArgs {
     /// Common options.
     #[command(flatten)]
     pub common: Common,
+    /// The step of the central differences.
+    #[command(flatten)]
+    pub fd: FdStep,
+}
+
+/// `--step H`, the relative step of central differences (`fdcheck`, and `measure` for its
+/// plot).
+#[derive(Args, Clone, Copy, Debug)]
+pub struct FdStep {
     /// Relative step of the central differences.
     #[arg(long, value_name = "H", default_value_t = 1e-6)]
     pub step: f64,
+}
+
+impl FdStep {
+    /// The step, or a bad-input error unless 0 < h < 1.
+    pub fn checked(self) -> Result<f64, CliError> {
+        check_step(self.step)?;
+        Ok(self.step)
+    }
 }
 
 /// Runs `mvad fdcheck`.
@@ -33,7 +50,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let s = setup(model, &args.common)?;
-    check_step(args.step)?;
+    let step = args.fd.checked()?;
     let info = model.info();
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let mut mvad = Vec::new();
@@ -43,7 +60,7 @@ where
     let mut fd: Vec<Result<f64, String>> = Vec::new();
     for &k in &s.wrt {
         mvad.push(sol.gradient[k]);
-        match fd_gradient(model, &s.params, &s.opts, k, args.step).map_err(solve_err) {
+        match fd_gradient(model, &s.params, &s.opts, k, step).map_err(solve_err) {
             Ok(v) => fd.push(Ok(v)),
             Err(CliError::Run(msg)) => fd.push(Err(msg)),
             Err(e) => return Err(e),
@@ -85,7 +102,7 @@ where
         m.insert("model".into(), Value::from(info.name.clone()));
         m.insert("t_end".into(), num(sol.t_end));
         m.insert("cost".into(), num(sol.cost));
-        m.insert("step".into(), num(args.step));
+        m.insert("step".into(), num(step));
         m.insert("rows".into(), Value::Array(rows));
         m.insert("cosine_similarity".into(), num(cos));
         m.insert("events".into(), Value::from(sol.events.len()));
@@ -100,7 +117,7 @@ where
     let mut out = format!(
         "model {} ({file}): dC/dθ by MV-AD and by central differences (relative step {})\n\n",
         info.name,
-        g(args.step, 3)
+        g(step, 3)
     );
     let mut t = Table::new(&["param", "MV-AD", "FD", "abs err", "rel err"]);
     let mut failures = String::new();

@@ -23,12 +23,13 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
 use serde_json::{Map, Value};
 
+use super::fdcheck::FdStep;
 use super::output::{
     diagnostics_json, diagnostics_text, g, json_text, more_events, num, param_header, Table,
     MAX_EVENT_ROWS,
 };
 use super::plot::{figure1, format_of, Figure1};
-use super::{check_step, observable_index, setup, solve_err, xvec, CliError, CmdResult, Common};
+use super::{observable_index, setup, solve_err, xvec, CliError, CmdResult, Common};
 
 /// Arguments of `mvad measure`.
 #[derive(Args, Debug)]
@@ -45,9 +46,9 @@ pub struct MeasureArgs {
     /// Number of grid points for the density.
     #[arg(long, value_name = "N", default_value_t = 201)]
     pub points: usize,
-    /// Relative step of the central differences in the plot.
-    #[arg(long, value_name = "H", default_value_t = 1e-6)]
-    pub step: f64,
+    /// The step of the central differences in the plot.
+    #[command(flatten)]
+    pub fd: FdStep,
 }
 
 /// Runs `mvad measure`.
@@ -64,7 +65,7 @@ where
             args.points
         )));
     }
-    check_step(args.step)?;
+    let step = args.fd.checked()?;
     if let Some(p) = &args.plot {
         format_of(p)?;
         if s.wrt.is_empty() {
@@ -88,7 +89,7 @@ where
 
     let mut plot_note = None;
     if let Some(path) = &args.plot {
-        let fig = figure_data(model, &s.params, &s.opts, &sol, &mu, obs, wrt[0], args.step)?;
+        let fig = figure_data(model, &s.params, &s.opts, &sol, &mu, obs, wrt[0], step)?;
         plot_note = Some(fig.note.clone());
         figure1(path, &fig)?;
     }

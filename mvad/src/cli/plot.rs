@@ -13,6 +13,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use plotters::coord::combinators::{LogCoord, WithKeyPoints};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -149,6 +150,30 @@ fn panel<'a, 'b, DB: DrawingBackend>(
     .x_label_area_size(40)
     .y_label_area_size(y_label_area);
     b
+}
+
+/// A [`panel`] on `area` over t ∈ `t_range` (x axis "t") and `y_range` (labelled `y_desc`
+/// if given, ticks by [`axis_label`]), its mesh drawn.
+fn time_panel<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    caption_size: u32,
+    t_range: Range<f64>,
+    y_range: &Range<f64>,
+    y_desc: Option<&str>,
+) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let mut chart = panel(area, caption, caption_size, 60)
+        .build_cartesian_2d(t_range, y_range.clone())
+        .map_err(e)?;
+    let ticks = axis_label(y_range);
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc("t").y_label_formatter(&ticks);
+    if let Some(desc) = y_desc {
+        mesh.y_desc(desc);
+    }
+    mesh.draw().map_err(e)?;
+    Ok(chart)
 }
 
 /// The polyline `points` cut into pieces that plotters strokes correctly when the line
@@ -384,16 +409,8 @@ impl Picture for Figure1 {
         let y_range = span(fig.trajectory.iter().map(|p| p.1));
         {
             let caption = format!("{}(t) and events", fig.observable);
-            let mut chart = panel(&tl, &caption, 18, 60)
-                .build_cartesian_2d(t_range.clone(), y_range.clone())
-                .map_err(e)?;
-            chart
-                .configure_mesh()
-                .x_desc("t")
-                .y_desc(fig.observable.as_str())
-                .y_label_formatter(&axis_label(&y_range))
-                .draw()
-                .map_err(e)?;
+            let y_desc = Some(fig.observable.as_str());
+            let mut chart = time_panel(&tl, &caption, 18, t_range.clone(), &y_range, y_desc)?;
             let trajectory = fig.trajectory.iter().copied();
             line(
                 &mut chart,
@@ -426,15 +443,7 @@ impl Picture for Figure1 {
             // Headroom for the legend in the upper right corner.
             let d_range = d_range.start..d_range.end + 0.25 * (d_range.end - d_range.start);
             let caption = format!("d{}/d{}: density and atoms", fig.observable, fig.param);
-            let mut chart = panel(&tr, &caption, 18, 60)
-                .build_cartesian_2d(t_range.clone(), d_range.clone())
-                .map_err(e)?;
-            chart
-                .configure_mesh()
-                .x_desc("t")
-                .y_label_formatter(&axis_label(&d_range))
-                .draw()
-                .map_err(e)?;
+            let mut chart = time_panel(&tr, &caption, 18, t_range.clone(), &d_range, None)?;
             let density = fig.density.iter().copied();
             let blue = BLUE.stroke_width(2);
             line(&mut chart, density, blue, Stroke::Solid, Some("density"))?;
@@ -473,15 +482,7 @@ impl Picture for Figure1 {
                     .chain(&fig.cumulative_fd)
                     .map(|p| p.1),
             );
-            let mut chart = panel(&bottom, &fig.note, 15, 60)
-                .build_cartesian_2d(t_range, c_range.clone())
-                .map_err(e)?;
-            chart
-                .configure_mesh()
-                .x_desc("t")
-                .y_label_formatter(&axis_label(&c_range))
-                .draw()
-                .map_err(e)?;
+            let mut chart = time_panel(&bottom, &fig.note, 15, t_range, &c_range, None)?;
             let mvad = fig.cumulative_mvad.iter().copied();
             line(
                 &mut chart,
