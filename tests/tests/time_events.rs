@@ -256,3 +256,45 @@ fn bad_tables_are_located_errors() {
         "{err}"
     );
 }
+
+#[test]
+fn occurrences_before_zero_or_outside_their_mode_are_skipped() {
+    // Ticks at −0.25 + 0.1·j count in mode `a` only; `switch` leaves `a` at t = 0.35 and
+    // `back` returns at 0.62: ticks at 0.05, 0.15, 0.25, 0.35 (with `switch`, applied after the
+    // tick in declaration order), then 0.65, 0.75, 0.85, 0.95.
+    let src = "model Ticks {
+        param start = -0.25;
+        state n = 0;
+        initial mode a;
+        mode a { der(n) = 0; event tick every 0.1 from start { n = n + 1; } }
+        mode b { der(n) = 0; }
+        event switch at 0.35 -> b;
+        event back at 0.62 -> a;
+        cost = final(n);
+        horizon 1;
+    }";
+    let m = InterpretedModel::from_source(src).expect("model");
+    let sol = solve(&m, &nalgebra::DVector::from_vec(vec![-0.25]), &tight()).expect("runs");
+    let ticks: Vec<f64> = sol
+        .events
+        .iter()
+        .filter(|e| e.event == 0)
+        .map(|e| e.t)
+        .collect();
+    let want = [0.05, 0.15, 0.25, 0.35, 0.65, 0.75, 0.85, 0.95];
+    assert_eq!(ticks.len(), want.len(), "{ticks:?}");
+    for (t, w) in ticks.iter().zip(want) {
+        assert_relative_eq!(*t, w, max_relative = 1e-14);
+    }
+    assert_eq!(sol.cost, 8.0);
+    assert!(sol
+        .diagnostics
+        .iter()
+        .any(|d| d.kind == mvad::DiagnosticKind::SimultaneousEvents && (d.t - 0.35).abs() < 1e-12));
+    // The tick times move with `start`: t' = 1 for each.
+    assert!(sol
+        .events
+        .iter()
+        .filter(|e| e.event == 0)
+        .all(|e| e.dt == vec![1.0]));
+}

@@ -58,8 +58,7 @@ impl Schedule {
                 continue;
             }
             if ev.trigger == Trigger::Every {
-                let (t0, t1) = (model.event_time(k, 0, p), model.event_time(k, 1, p));
-                let period = t1 - t0;
+                let (t0, period) = first_and_period(model, p, k);
                 if !(t0.is_finite() && period.is_finite() && period > 0.0) {
                     return Err(SolveError::BadSchedule {
                         event: ev.name.clone(),
@@ -156,8 +155,8 @@ impl Schedule {
         }
         if model.info().events[k].trigger == Trigger::Every {
             // Jump to just before t (a short period would otherwise take many steps), then walk.
-            let (t0, t1) = (model.event_time(k, 0, p), model.event_time(k, 1, p));
-            let target = ((t - t0) / (t1 - t0)).floor();
+            let (t0, period) = first_and_period(model, p, k);
+            let target = ((t - t0) / period).floor();
             if target.is_finite() && target > self.next[k] as f64 + 1.0 && target < 1e15 {
                 let j = target as usize - 1;
                 self.next[k] = j;
@@ -195,4 +194,13 @@ impl Schedule {
         }
         Ok(next)
     }
+}
+
+/// The first time and the period of `every` event k: τ_k0 and τ_k1 − τ_k0.
+fn first_and_period<M: HybridModel>(model: &M, p: &OVector<f64, M::P>, k: usize) -> (f64, f64)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let t0 = model.event_time(k, 0, p);
+    (t0, model.event_time(k, 1, p) - t0)
 }
