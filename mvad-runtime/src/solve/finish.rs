@@ -44,7 +44,7 @@ where
                 rec.close_segment(t_end, self.mode, &self.sw);
             }
             let y = self.integ.y();
-            cost = y.q + self.c_ev;
+            cost = y.q + self.c_ev.value();
             grad.copy_from(&y.qp);
             grad += &self.g_ev;
             model.rhs(Point::new(self.mode, &self.sw, t_end, &y.x, p), &mut fw.f);

@@ -143,14 +143,13 @@ where
     /// resolution of t (a few ulp of t), so the state there misses the guard by up to
     /// |ġ|·ulp(t), which at t ~ 10⁶ dwarfs ulp(x); the step removes that miss to first order (a
     /// queue that drains ends with w = 0 exactly, as w − (−1)·(w/(−1)) = 0). It is taken only
-    /// when it is that small (|g/ġ| ≤ 16 ulp(t)), i.e. it never moves the state by more than
+    /// when it is that small (|g/ġ| ≤ [`super::time_resolution`]), i.e. it never moves the state by more than
     /// the time resolution does, and only when it leaves the state on or past the guard.
     fn snap_onto_guard(&mut self, k: usize, t: f64, gt: f64) {
         let (model, p) = (self.model, self.p);
         let g = model.guard(k, t, &self.y.x, p);
         let shift = g / (self.gx.dot(&self.f_minus) + gt);
-        let resolution = 16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE;
-        if shift == 0.0 || shift.abs() > resolution {
+        if shift == 0.0 || shift.abs() > super::time_resolution(t) {
             return;
         }
         // Keep the root finder's promise: the state handed to the reset is on or past the
@@ -260,7 +259,7 @@ where
                     what: format!("cost term of event `{}`", ev.name),
                 });
             }
-            self.c_ev += phi;
+            self.c_ev.add(phi);
             if sens {
                 let phi_t =
                     model.event_cost_grad(k, j, t, &self.x_plus, p, &mut self.cx, &mut self.cp);

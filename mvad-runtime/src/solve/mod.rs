@@ -34,6 +34,7 @@ use crate::error::SolveError;
 use crate::event::{Crossing, Scanner, Watch};
 use crate::integrate::{AugState, Forward, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::reduce::CompensatedSum;
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, Options, Solution};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
@@ -147,6 +148,13 @@ where
     Ok(())
 }
 
+/// The resolution of the time t in the event loop, 16 ulp: a located crossing is that close
+/// to the true one, a state event's state is snapped onto its guard only that far, and a time
+/// event due that soon after an instant joins it (no step that short can be taken).
+fn time_resolution(t: f64) -> f64 {
+    16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE
+}
+
 /// All state and buffers of one run (allocated once in `new`).
 struct Driver<'a, M: HybridModel>
 where
@@ -188,7 +196,7 @@ where
     obs_minus: Vec<f64>,
     obs_plus: Vec<f64>,
     /// Accumulated event costs Σ φ_k and their total derivatives.
-    c_ev: f64,
+    c_ev: CompensatedSum,
     g_ev: OVector<f64, M::P>,
     fired: Vec<bool>,
     /// Occurrence indices and next times of the events (the time events' source).
@@ -259,7 +267,7 @@ where
             cp: vp(),
             obs_minus: vec![0.0; nobs],
             obs_plus: vec![0.0; nobs],
-            c_ev: 0.0,
+            c_ev: CompensatedSum::default(),
             g_ev: vp(),
             fired: vec![false; nev],
             schedule: Schedule::new(nev),
@@ -418,7 +426,7 @@ where
         loop {
             let t = self.integ.t();
             let t_next = self.schedule.next_in_mode(model, p, self.mode, t)?;
-            if t_next <= t {
+            if t_next <= t + time_resolution(t) {
                 // The last step landed on a time event (or one is due at the start).
                 self.y.copy_from(self.integ.y());
                 if let Some(rec) = &mut self.rec {
@@ -497,12 +505,14 @@ where
 
     /// Applies everything that fires at t, `self.y` holding x(t⁻): the crossings in
     /// `scanner.found` and the time events armed in the current mode that are due by
-    /// t + the simultaneity window; user events in declaration order, switch flips only when
+    /// t + [`time_resolution`]; user events in declaration order, switch flips only when
     /// no user event fires. Then checks the event budget and restarts. Returns true when the
     /// run must stop (an accumulation).
     fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<bool, SolveError> {
         let info = self.model.info();
-        let due = t + self.simultaneity(t);
+        // A time event joins this instant only if it is due within the resolution of t (a
+        // step to it would be too short to take); one a little later fires at its own time.
+        let due = t + time_resolution(t);
         for (k, ev) in info.events.iter().enumerate() {
             if ev.is_time_event() && ev.armed_in(self.mode) && self.schedule.time(k) <= due {
                 self.scanner.found.push(Crossing { w: k, t });
