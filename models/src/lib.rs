@@ -12,6 +12,8 @@
 //! | [`zeno_ball`] | e = 0.5 to T = 3 | Zeno accumulation, tail of the series |
 //! | [`ceiling`] | near-grazing impact | t' ∝ 1/√(apex − c) |
 //! | [`queue`] | the seed paper's E4, a FIFO queue | `at each` table events, 10³–10⁷ customers |
+//! | [`qp_kink`] | the seed paper's E3 | a static qp, its kink at θ = 0, no states |
+//! | [`qp_cart`] | a saturating qp controller, a wall | a qp in the flow, its active-set changes as kinks |
 //!
 //! [`paper`] holds the numbers the seed paper printed (Tables 1 and 2), which the
 //! examples `table1` and `table2` print beside ours.
@@ -20,19 +22,23 @@ pub mod bouncing_ball;
 pub mod ceiling;
 pub mod e2_sweep;
 pub mod paper;
+pub mod qp_cart;
+pub mod qp_kink;
 pub mod queue;
 pub mod stiff_relay;
 pub mod thermostat;
 pub mod zeno_ball;
 
 /// The `.hyb` sources, by file name (for tests that load them at run time).
-pub const SOURCES: [(&str, &str); 6] = [
+pub const SOURCES: [(&str, &str); 8] = [
     ("bouncing_ball.hyb", include_str!("../bouncing_ball.hyb")),
     ("e2_sweep.hyb", include_str!("../e2_sweep.hyb")),
     ("thermostat.hyb", include_str!("../thermostat.hyb")),
     ("stiff_relay.hyb", include_str!("../stiff_relay.hyb")),
     ("zeno_ball.hyb", include_str!("../zeno_ball.hyb")),
     ("ceiling.hyb", include_str!("../ceiling.hyb")),
+    ("qp_kink.hyb", include_str!("../qp_kink.hyb")),
+    ("qp_cart.hyb", include_str!("../qp_cart.hyb")),
 ];
 
 /// Default options but for the tolerances (rtol, atol): the reference runs of the tests,
@@ -73,6 +79,34 @@ pub fn ball_closed_form(e: f64, g: f64, h0: f64, v0: f64, t_end: f64) -> (f64, V
         }
     }
     (cost, impacts)
+}
+
+/// Median over 15 batches of the mean time per call of `f`, in µs, each batch sized to
+/// ~20 ms (for the benches and examples that print timing tables; robust on a shared machine).
+pub fn median_us<R>(mut f: impl FnMut() -> R) -> f64 {
+    let mut batch = 200usize;
+    // Size the batch to ~20 ms.
+    loop {
+        let t = std::time::Instant::now();
+        for _ in 0..batch {
+            std::hint::black_box(f());
+        }
+        if t.elapsed().as_secs_f64() > 0.02 || batch > 1_000_000 {
+            break;
+        }
+        batch *= 2;
+    }
+    let mut v: Vec<f64> = (0..15)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            for _ in 0..batch {
+                std::hint::black_box(f());
+            }
+            t.elapsed().as_secs_f64() * 1e6 / batch as f64
+        })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// Derivative of `f` at `x`: [`derivative`] with a first step of 1e-2·max(1, |x|).

@@ -1,5 +1,5 @@
 //! The numbers the seed paper printed, for side-by-side tables (`examples/table1.rs`,
-//! `examples/table2.rs`). They are what the paper reports, not references: its Table 1
+//! `examples/table2.rs`, `examples/table3.rs`). They are what the paper reports, not references: its Table 1
 //! MV-AD value 2.835 and FD value 2.831 are both ~1e-3 from the exact 2.8314408141470055.
 
 /// Table 1 (E1, dC/de of C = ∫₀² h dt): MV-AD, FD, abs. error, rel. error, cosine
@@ -47,3 +47,25 @@ pub const TABLE2: [(f64, f64, bool, f64, f64); 10] = [
     (-4.5, 6.3143, true, 0.0, 0.1849),
     (-5.0, 6.6798, true, 0.0, 0.1712),
 ];
+
+/// Table 3 (E3, 101 points θ ∈ [−1, 1] of min ½u² − θu s.t. u ≥ 0, J = ½u*²): the counts of
+/// active, boundary and inactive points and the mean |dJ/dθ − θH(θ)| the paper reports.
+pub const TABLE3: Table3 = Table3 {
+    active: 50,
+    boundary: 1,
+    inactive: 50,
+    mean_abs_err: 2.52e-11,
+};
+
+/// The summary of Table 3.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Table3 {
+    /// Points with the constraint active (θ < 0).
+    pub active: usize,
+    /// Points on the boundary (θ = 0, the kink).
+    pub boundary: usize,
+    /// Points with the constraint inactive (θ > 0).
+    pub inactive: usize,
+    /// Mean absolute difference of dJ/dθ from θH(θ).
+    pub mean_abs_err: f64,
+}

@@ -21,6 +21,75 @@ pub fn switch_times(tau: f64, rate: f64, lo: f64, hi: f64, t_end: f64) -> Vec<f6
     out
 }
 
+/// C = ∫₀³ y² dt and dC/dθ for θ = (tau, rate, lo, hi), in closed form, for the horizon 3
+/// and parameters near the defaults (three switches before T, each segment ≫ τ).
+///
+/// On a segment that starts at y = A in direction σ = ±1 (up: +1), y(s) = B + σ·rate·s +
+/// 2σ·rate·τ e^{−s/τ} with B = A − 2σ·rate·τ, so over a length L ≫ τ
+/// ∫y² = ((B + σ·rate·L)³ − B³)/(3σ·rate) + 4σ·rate·B τ² + 6 rate² τ³ (terms in e^{−L/τ}
+/// dropped: below rounding for L ≫ τ). The first segment is y = rate·t up to hi/rate, full
+/// segments last (hi − lo)/rate + 2τ (see [`switch_times`]), the last one ends at T = 3.
+/// Summed and expanded (by sympy), with the gradient differentiated the same way.
+pub fn cost_closed(tau: f64, rate: f64, lo: f64, hi: f64) -> (f64, [f64; 4]) {
+    let (t, r, l, h) = (tau, rate, lo, hi);
+    let (r2, r3, t2, t3) = (r * r, r * r * r, t * t, t * t * t);
+    let c = -(20.0 * h * h * h - 32.0 * h * h * l + 92.0 * h * h * r * t - 48.0 * h * h * r
+        + 16.0 * h * l * l
+        - 96.0 * h * l * r * t
+        + 48.0 * h * l * r
+        + 144.0 * h * r2 * t2
+        - 144.0 * h * r2 * t
+        + 36.0 * h * r2
+        - 2.0 * l * l * l
+        + 22.0 * l * l * r * t
+        - 12.0 * l * l * r
+        - 72.0 * l * r2 * t2
+        + 72.0 * l * r2 * t
+        - 18.0 * l * r2
+        + 70.0 * r3 * t3
+        - 108.0 * r3 * t2
+        + 54.0 * r3 * t
+        - 9.0 * r3)
+        / r;
+    let d_tau = -2.0
+        * (46.0 * h * h - 48.0 * h * l + 144.0 * h * r * t - 72.0 * h * r + 11.0 * l * l
+            - 72.0 * l * r * t
+            + 36.0 * l * r
+            + 105.0 * r2 * t2
+            - 108.0 * r2 * t
+            + 27.0 * r2);
+    let d_rate = 2.0
+        * (10.0 * h * h * h - 16.0 * h * h * l + 8.0 * h * l * l - 72.0 * h * r2 * t2
+            + 72.0 * h * r2 * t
+            - 18.0 * h * r2
+            - l * l * l
+            + 36.0 * l * r2 * t2
+            - 36.0 * l * r2 * t
+            + 9.0 * l * r2
+            - 70.0 * r3 * t3
+            + 108.0 * r3 * t2
+            - 54.0 * r3 * t
+            + 9.0 * r3)
+        / r2;
+    let d_lo = 2.0
+        * (16.0 * h * h - 16.0 * h * l + 48.0 * h * r * t - 24.0 * h * r + 3.0 * l * l
+            - 22.0 * l * r * t
+            + 12.0 * l * r
+            + 36.0 * r2 * t2
+            - 36.0 * r2 * t
+            + 9.0 * r2)
+        / r;
+    let d_hi = -4.0
+        * (15.0 * h * h - 16.0 * h * l + 46.0 * h * r * t - 24.0 * h * r + 4.0 * l * l
+            - 24.0 * l * r * t
+            + 12.0 * l * r
+            + 36.0 * r2 * t2
+            - 36.0 * r2 * t
+            + 9.0 * r2)
+        / r;
+    (c, [d_tau, d_rate, d_lo, d_hi])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -49,6 +118,58 @@ mod tests {
             ];
             for (a, b) in e.dt.iter().zip(exact) {
                 assert_relative_eq!(*a, b, max_relative = 1e-5, epsilon = 1e-6);
+            }
+        }
+    }
+
+    /// The closed form's gradient is the derivative of its value (Ridders' differences) and
+    /// its dC/dτ is the hand-derived 1.5 of the next test to O(τ).
+    #[test]
+    fn the_closed_form_gradient_differentiates_the_closed_form_cost() {
+        let p = StiffRelayParams::default();
+        let th = [p.tau, p.rate, p.lo, p.hi];
+        let (_, g) = cost_closed(th[0], th[1], th[2], th[3]);
+        for (j, gj) in g.iter().enumerate() {
+            let at = |v: f64| {
+                let mut q = th;
+                q[j] = v;
+                cost_closed(q[0], q[1], q[2], q[3]).0
+            };
+            assert_relative_eq!(*gj, crate::central(at, th[j]), max_relative = 1e-9);
+        }
+        assert_relative_eq!(g[0], 1.5, max_relative = 1e-7);
+    }
+
+    /// Rosenbrock at atol 1e-15 (far below the rounding of S_τ ~ 1/τ near a switch) runs
+    /// without a non-finite value at every rtol, and every entry of dC/dθ and C are within
+    /// 10× rtol of the closed form: the exact second-order products keep the stage Jacobian
+    /// exact where difference quotients of f_θ ~ 1/τ² would lose it.
+    #[test]
+    fn rosenbrock_at_atol_1e_15_matches_the_closed_form() {
+        let m = StiffRelay::new();
+        let pp = StiffRelayParams::default();
+        let (c, g) = cost_closed(pp.tau, pp.rate, pp.lo, pp.hi);
+        for rtol in [1e-3, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12] {
+            let opts = Options {
+                method: mvad::solution::Method::Rosenbrock,
+                rtol,
+                atol: 1e-15,
+                ..Options::default()
+            };
+            let sol =
+                solve(&m, &pp.to_vector(), &opts).unwrap_or_else(|e| panic!("rtol {rtol:e}: {e}"));
+            assert!(sol.diagnostics.is_empty(), "{:?}", sol.diagnostics);
+            assert!(
+                (sol.cost - c).abs() <= 10.0 * rtol * c,
+                "rtol {rtol:e}: C {}",
+                sol.cost
+            );
+            for (j, (a, b)) in sol.gradient.iter().zip(g).enumerate() {
+                let err = ((a - b) / b).abs();
+                assert!(
+                    err <= 10.0 * rtol + 1e-12,
+                    "rtol {rtol:e}: dC/dθ[{j}] = {a:e}, closed form {b:e}, rel err {err:.1e}"
+                );
             }
         }
     }

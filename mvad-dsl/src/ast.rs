@@ -59,6 +59,8 @@ pub enum Item {
     Cost(Cost),
     /// `horizon EXPR;`
     Horizon(Horizon),
+    /// `qp NAME(VAR, ...) { minimize ..; subject to ..; }`
+    Qp(Qp),
 }
 
 impl Item {
@@ -76,6 +78,7 @@ impl Item {
             Item::Observe(x) => x.span,
             Item::Cost(x) => x.span,
             Item::Horizon(x) => x.span,
+            Item::Qp(x) => x.span,
         }
     }
 }
@@ -285,6 +288,10 @@ pub enum CostKind {
     },
     /// `final(EXPR)`: EXPR at t = T (Φ).
     Final(Expr),
+    /// A static term, written bare: an expression of params, consts and static qp
+    /// solutions, added to C as it is (lowered with the final cost Φ, which does not depend
+    /// on x or t through it).
+    Static(Expr),
 }
 
 /// `horizon EXPR;` — the final time T(θ).
@@ -294,6 +301,66 @@ pub struct Horizon {
     pub value: Expr,
     /// The whole declaration.
     pub span: Span,
+}
+
+/// `qp NAME(VAR, ...) { minimize EXPR; subject to LHS OP RHS; ... }` — a parametric
+/// quadratic program whose solution `NAME.VAR` expressions may read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Qp {
+    /// The qp's name.
+    pub name: Ident,
+    /// The decision variables, in declaration order (the order of u).
+    pub vars: Vec<Ident>,
+    /// The objective (quadratic and strictly convex in the variables, after checking).
+    pub objective: Expr,
+    /// The constraints, numbered from 0 in declaration order.
+    pub constraints: Vec<QpConstraint>,
+    /// The whole declaration.
+    pub span: Span,
+}
+
+/// One constraint `LHS OP RHS;` of a qp.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QpConstraint {
+    /// Left-hand side.
+    pub lhs: Expr,
+    /// The relation.
+    pub op: ConstraintOp,
+    /// Span of the operator token.
+    pub op_span: Span,
+    /// Right-hand side.
+    pub rhs: Expr,
+    /// The whole constraint.
+    pub span: Span,
+}
+
+/// The relation of a qp constraint. Only `<=`, `>=` and `==` are valid (the feasible set
+/// must be closed); `<` and `>` are parsed so that the checker can say so.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConstraintOp {
+    /// `<=`
+    Le,
+    /// `>=`
+    Ge,
+    /// `==`
+    Eq,
+    /// `<` (a checker error)
+    Lt,
+    /// `>` (a checker error)
+    Gt,
+}
+
+impl ConstraintOp {
+    /// The operator's text.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ConstraintOp::Le => "<=",
+            ConstraintOp::Ge => ">=",
+            ConstraintOp::Eq => "==",
+            ConstraintOp::Lt => "<",
+            ConstraintOp::Gt => ">",
+        }
+    }
 }
 
 /// Comparison operators of guards and `if` conditions.
@@ -410,11 +477,12 @@ pub enum ExprKind {
     Name(Ident),
     /// The time `t`.
     Time,
-    /// `TABLE.COL`: column COL of table TABLE, at the current row.
+    /// `NAME.VAR`: column VAR of table NAME at the current row, or variable VAR of the
+    /// solution of qp NAME (the checker resolves which; a name may not be both).
     Column {
-        /// The table.
+        /// The table or qp (NAME).
         table: Ident,
-        /// The column.
+        /// The column or variable (VAR).
         column: Ident,
     },
     /// Unary minus, `-EXPR`.
@@ -531,6 +599,14 @@ impl Model {
     pub fn cost(&self) -> Option<&Cost> {
         self.items.iter().find_map(|i| match i {
             Item::Cost(c) => Some(c),
+            _ => None,
+        })
+    }
+
+    /// The `qp` declarations, in source order.
+    pub fn qps(&self) -> impl Iterator<Item = &Qp> {
+        self.items.iter().filter_map(|i| match i {
+            Item::Qp(q) => Some(q),
             _ => None,
         })
     }

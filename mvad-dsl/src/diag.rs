@@ -80,7 +80,7 @@ pub fn rule_phrase(rule: Rule) -> &'static str {
         Rule::kw_table | Rule::table_decl => "`table`",
         Rule::string => "a file name in quotes",
         Rule::dot => "`.`",
-        Rule::column => "a table column",
+        Rule::column => "a dotted name (`TABLE.COL` or `QP.VAR`)",
         Rule::kw_observe | Rule::observe_decl => "`observe`",
         Rule::kw_cost | Rule::cost_decl => "`cost`",
         Rule::kw_horizon | Rule::horizon_decl => "`horizon`",
@@ -88,7 +88,15 @@ pub fn rule_phrase(rule: Rule) -> &'static str {
         Rule::kw_integral | Rule::integral_term => "`integral`",
         Rule::kw_sum | Rule::sum_term => "`sum`",
         Rule::kw_final | Rule::final_term => "`final`",
-        Rule::cost_term => "a cost term (`integral`, `sum` or `final`)",
+        Rule::cost_term | Rule::static_term => {
+            "a cost term (`integral`, `sum`, `final` or a static expression)"
+        }
+        Rule::kw_qp | Rule::qp_decl => "`qp`",
+        Rule::kw_minimize | Rule::qp_objective => "`minimize`",
+        Rule::kw_subject | Rule::qp_constraints => "`subject to`",
+        Rule::kw_to => "`to`",
+        Rule::qp_constraint => "a constraint",
+        Rule::eq => "`==`",
         Rule::kw_if => "`if`",
         Rule::kw_then => "`then`",
         Rule::kw_else => "`else`",

@@ -16,8 +16,10 @@
 //! | sinh, cosh, tanh | cosh·u', sinh·u', (1 − tanh²)·u' |
 //! | abs, sign | sign(u)·u', 0 |
 //! | select / switch (min, max, if, frozen kinks) | the derivative of the side taken |
+//! | qp solution u*_k | w.r.t. x, θ, t: the leaf ∂u*_k/∂w (`Node::QpDeriv`); w.r.t. the qp variable u_k: 1 |
+//! | ∂u*_k/∂w | 0 (only first derivatives are taken of expressions reading qp solutions) |
 
-use crate::ir::{ExprArena, ExprId, Func, Node};
+use crate::ir::{ExprArena, ExprId, Func, Node, Wrt};
 
 /// A variable to differentiate with respect to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -28,6 +30,9 @@ pub enum Var {
     Param(usize),
     /// Time t.
     Time,
+    /// Variable k of the qps (`Node::QpSol(k)` read as a decision variable), to extract a
+    /// qp's data from its objective and constraints.
+    Qp(usize),
 }
 
 impl Var {
@@ -36,7 +41,18 @@ impl Var {
             (Var::State(i), Node::State(j)) => i == *j as usize,
             (Var::Param(i), Node::Param(j)) => i == *j as usize,
             (Var::Time, Node::Time) => true,
+            (Var::Qp(i), Node::QpSol(j)) => i == *j as usize,
             _ => false,
+        }
+    }
+
+    /// What ∂u*/∂(this variable) is taken with respect to (`None` for a qp variable).
+    fn wrt(self) -> Option<Wrt> {
+        match self {
+            Var::State(i) => Some(Wrt::State(i as u32)),
+            Var::Param(i) => Some(Wrt::Param(i as u32)),
+            Var::Time => Some(Wrt::Time),
+            Var::Qp(_) => None,
         }
     }
 }
@@ -56,7 +72,19 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
         let node = ar.node(e);
         let dv = |id: ExprId| d[id.index()];
         let r = match node {
-            Node::Const(_) | Node::Column(_) => zero,
+            Node::Const(_) | Node::Column(_) | Node::QpDeriv(..) => zero,
+            Node::QpSol(k) => match var.wrt() {
+                Some(w) => {
+                    let (on_x, on_t) = ar.qp_deps(k);
+                    match w {
+                        Wrt::State(_) if !on_x => zero,
+                        Wrt::Time if !on_t => zero,
+                        _ => ar.intern(Node::QpDeriv(k, w)),
+                    }
+                }
+                None if var.matches(&node) => ar.constant(1.0),
+                None => zero,
+            },
             Node::Time | Node::State(_) | Node::Param(_) => {
                 if var.matches(&node) {
                     ar.constant(1.0)
@@ -229,12 +257,14 @@ mod tests {
             Var::State(_) => x,
             Var::Param(_) => p,
             Var::Time => t,
+            Var::Qp(_) => unreachable!("the finite-difference helper has no qp variables"),
         };
         let h = f64::EPSILON.cbrt() * base.abs().max(1.0);
         let (up, dn) = match var {
             Var::State(_) => (at(x + h, p, t), at(x - h, p, t)),
             Var::Param(_) => (at(x, p + h, t), at(x, p - h, t)),
             Var::Time => (at(x, p, t + h), at(x, p, t - h)),
+            Var::Qp(_) => unreachable!("the finite-difference helper has no qp variables"),
         };
         (up - dn) / (2.0 * h)
     }

@@ -4,9 +4,10 @@
 //! topological order, instruction i writing register i from earlier registers. Evaluation
 //! reads `&[f64]` slices (no nalgebra) and writes into caller-provided scratch, so a call
 //! allocates nothing. Every instruction computes exactly what [`crate::ir::apply_node`]
-//! and the generated code compute, operation for operation.
+//! and the generated code compute, operation for operation; qp solutions, their
+//! derivatives and table columns are read from the [`Inputs`] of the run.
 
-use crate::ir::{Cmp, ExprArena, Func, Node, Point};
+use crate::ir::{Cmp, ExprArena, Func, Inputs, Node, Point, Wrt};
 use crate::schedule::Kernel;
 
 /// One tape instruction; operands are register indices.
@@ -26,6 +27,8 @@ enum Op {
     Call(Func, u32),
     Select(Cmp, u32, u32, u32),
     Switch(u32, u32, u32),
+    QpSol(u32),
+    QpDeriv(u32, Wrt),
 }
 
 /// A kernel compiled to register code.
@@ -34,6 +37,8 @@ pub struct Tape {
     ops: Vec<Op>,
     outputs: Vec<(u32, u32)>,
     len: usize,
+    reads_qp: bool,
+    reads_qp_derivs: bool,
 }
 
 impl Tape {
@@ -59,6 +64,8 @@ impl Tape {
                 Node::Call(f, a) => Op::Call(f, g(a)),
                 Node::Select(c, x, a, b) => Op::Select(c, g(x), g(a), g(b)),
                 Node::Switch(j, a, b) => Op::Switch(j, g(a), g(b)),
+                Node::QpSol(k) => Op::QpSol(k),
+                Node::QpDeriv(k, w) => Op::QpDeriv(k, w),
             };
             ops.push(op);
             reg.insert(id, r as u32);
@@ -68,11 +75,27 @@ impl Tape {
             .iter()
             .map(|&(s, e)| (s as u32, reg.get(&e).copied().unwrap_or(0)))
             .collect();
+        let reads_qp = ops
+            .iter()
+            .any(|o| matches!(o, Op::QpSol(_) | Op::QpDeriv(..)));
+        let reads_qp_derivs = ops.iter().any(|o| matches!(o, Op::QpDeriv(..)));
         Tape {
             ops,
             outputs,
             len: kernel.len,
+            reads_qp,
+            reads_qp_derivs,
         }
+    }
+
+    /// Whether the tape reads qp solutions (then they must be passed to [`Tape::run_inputs`]).
+    pub fn reads_qp(&self) -> bool {
+        self.reads_qp
+    }
+
+    /// Whether the tape reads derivatives of qp solutions.
+    pub fn reads_qp_derivs(&self) -> bool {
+        self.reads_qp_derivs
     }
 
     /// Registers needed by [`Tape::run`].
@@ -104,12 +127,18 @@ impl Tape {
     /// [`Tape::run`] with switch bits beyond the first 64: `at.sw` holds bits 0..64 and
     /// `hi` the rest (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent).
     pub fn run_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> bool {
-        self.run_row(at, hi, &[], regs)
+        self.run_inputs(at, hi, &Inputs::NONE, regs)
     }
 
-    /// [`Tape::run_with`] at a table row: column c ([`Node::Column`]) reads `row[c]` (NaN when
-    /// absent).
-    pub fn run_row(&self, at: &Point<'_>, hi: &[u64], row: &[f64], regs: &mut [f64]) -> bool {
+    /// [`Tape::run_with`] reading qp solutions, their derivatives and table columns from
+    /// `inputs`.
+    pub fn run_inputs(
+        &self,
+        at: &Point<'_>,
+        hi: &[u64],
+        inputs: &Inputs<'_>,
+        regs: &mut [f64],
+    ) -> bool {
         if regs.len() < self.ops.len() {
             return false;
         }
@@ -120,7 +149,6 @@ impl Tape {
                 Op::Time => at.t,
                 Op::X(k) => at.x.get(k as usize).copied().unwrap_or(f64::NAN),
                 Op::P(k) => at.p.get(k as usize).copied().unwrap_or(f64::NAN),
-                Op::Col(c) => row.get(c as usize).copied().unwrap_or(f64::NAN),
                 Op::Add(a, b) => r(a) + r(b),
                 Op::Mul(a, b) => r(a) * r(b),
                 Op::Neg(a) => -r(a),
@@ -148,6 +176,9 @@ impl Tape {
                         r(b)
                     }
                 }
+                Op::Col(c) => inputs.row.get(c as usize).copied().unwrap_or(f64::NAN),
+                Op::QpSol(k) => inputs.qp.leaf(&Node::QpSol(k)),
+                Op::QpDeriv(k, w) => inputs.qp.leaf(&Node::QpDeriv(k, w)),
             };
             regs[i] = v;
         }
@@ -162,19 +193,20 @@ impl Tape {
 
     /// [`Tape::eval`] with switch bits beyond the first 64 in `hi` (see [`Tape::run_with`]).
     pub fn eval_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64], out: &mut [f64]) {
-        self.eval_row(at, hi, &[], regs, out);
+        self.eval_inputs(at, hi, &Inputs::NONE, regs, out);
     }
 
-    /// [`Tape::eval_with`] at a table row (see [`Tape::run_row`]).
-    pub fn eval_row(
+    /// [`Tape::eval_with`] reading qp solutions, their derivatives and table columns from
+    /// `inputs`.
+    pub fn eval_inputs(
         &self,
         at: &Point<'_>,
         hi: &[u64],
-        row: &[f64],
+        inputs: &Inputs<'_>,
         regs: &mut [f64],
         out: &mut [f64],
     ) {
-        if !self.run_row(at, hi, row, regs) {
+        if !self.run_inputs(at, hi, inputs, regs) {
             out.iter_mut().take(self.len).for_each(|o| *o = f64::NAN);
             return;
         }

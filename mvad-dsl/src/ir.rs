@@ -174,6 +174,28 @@ impl Cmp {
     }
 }
 
+/// What a derivative of a qp solution is taken with respect to (see [`Node::QpDeriv`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Wrt {
+    /// State x_i.
+    State(u32),
+    /// Parameter θ_i.
+    Param(u32),
+    /// Time t.
+    Time,
+}
+
+impl Wrt {
+    /// The column of ∂u/∂w in a row (∂/∂x (n), ∂/∂θ (p), ∂/∂t) of [`QpValues::du`].
+    pub fn column(self, n: usize, p: usize) -> usize {
+        match self {
+            Wrt::State(i) => i as usize,
+            Wrt::Param(i) => n + i as usize,
+            Wrt::Time => n + p,
+        }
+    }
+}
+
 /// One node of the expression DAG. Children are ids of earlier nodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Node {
@@ -206,15 +228,29 @@ pub enum Node {
     Select(Cmp, ExprId, ExprId, ExprId),
     /// Frozen choice: `if bit j of sw then a else b` (the branch for σ_j > 0 is `a`).
     Switch(u32, ExprId, ExprId),
+    /// Variable k of the qp solutions, all qps' variables flattened in declaration order
+    /// ([`Qp::offset`]): inside a qp's own data the decision variable (differentiated with
+    /// `diff::Var::Qp` to extract H, c, A, b), elsewhere the solution u*_k, an input of the
+    /// evaluation ([`QpValues::u`]).
+    QpSol(u32),
+    /// ∂u*_k/∂w, an input of the evaluation ([`QpValues::du`]): the derivative of
+    /// [`Node::QpSol`]`(k)` with respect to a state, a param or t, from the KKT system.
+    /// Its own derivatives are zero: only first derivatives are taken of expressions that
+    /// read qp solutions.
+    QpDeriv(u32, Wrt),
 }
 
 impl Node {
     /// The children of the node, in order (at most three).
     pub fn children(&self) -> impl Iterator<Item = ExprId> {
         let (a, b, c) = match *self {
-            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) | Node::Column(_) => {
-                (None, None, None)
-            }
+            Node::Const(_)
+            | Node::Time
+            | Node::State(_)
+            | Node::Param(_)
+            | Node::Column(_)
+            | Node::QpSol(_)
+            | Node::QpDeriv(..) => (None, None, None),
             Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => (Some(a), None, None),
             Node::Add(a, b)
             | Node::Mul(a, b)
@@ -226,12 +262,40 @@ impl Node {
         a.into_iter().chain(b).chain(c)
     }
 
-    /// Whether the node is a leaf (constant, time, state, parameter or table column).
+    /// The node with each child c replaced by `f(c)`.
+    pub fn map_children(self, f: impl Fn(ExprId) -> ExprId) -> Node {
+        match self {
+            Node::Add(a, b) => Node::Add(f(a), f(b)),
+            Node::Mul(a, b) => Node::Mul(f(a), f(b)),
+            Node::Neg(a) => Node::Neg(f(a)),
+            Node::Div(a, b) => Node::Div(f(a), f(b)),
+            Node::Powi(a, n) => Node::Powi(f(a), n),
+            Node::Pow(a, b) => Node::Pow(f(a), f(b)),
+            Node::Call(g, a) => Node::Call(g, f(a)),
+            Node::Select(c, x, a, b) => Node::Select(c, f(x), f(a), f(b)),
+            Node::Switch(j, a, b) => Node::Switch(j, f(a), f(b)),
+            leaf => leaf,
+        }
+    }
+
+    /// Whether the node is a leaf (constant, time, state, parameter, table column, qp
+    /// solution or its derivative).
     pub fn is_leaf(&self) -> bool {
         matches!(
             self,
-            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) | Node::Column(_)
+            Node::Const(_)
+                | Node::Time
+                | Node::State(_)
+                | Node::Param(_)
+                | Node::Column(_)
+                | Node::QpSol(_)
+                | Node::QpDeriv(..)
         )
+    }
+
+    /// Whether the node reads a qp solution or its derivative.
+    pub fn is_qp(&self) -> bool {
+        matches!(self, Node::QpSol(_) | Node::QpDeriv(..))
     }
 }
 
@@ -248,8 +312,72 @@ pub struct Point<'a> {
     pub sw: u64,
 }
 
+/// The qp solutions and their derivatives an evaluation reads: `u` (one entry per
+/// [`Node::QpSol`] index) and `du`, row k holding ∂u*_k/∂(x (n), θ (p), t) ([`Wrt::column`]).
+#[derive(Clone, Copy, Debug)]
+pub struct QpValues<'a> {
+    /// u*, all qps' variables flattened.
+    pub u: &'a [f64],
+    /// ∂u*/∂(x, θ, t), row-major, rows of n + p + 1.
+    pub du: &'a [f64],
+    /// Number of states n.
+    pub n: usize,
+    /// Number of params p.
+    pub p: usize,
+}
+
+impl QpValues<'_> {
+    /// No qp values (every qp leaf reads NaN).
+    pub const NONE: QpValues<'static> = QpValues {
+        u: &[],
+        du: &[],
+        n: 0,
+        p: 0,
+    };
+
+    /// The value of a qp leaf (NaN when absent).
+    pub fn leaf(&self, node: &Node) -> f64 {
+        let got = match *node {
+            Node::QpSol(k) => self.u.get(k as usize),
+            Node::QpDeriv(k, w) => self
+                .du
+                .get(k as usize * (self.n + self.p + 1) + w.column(self.n, self.p)),
+            _ => None,
+        };
+        got.copied().unwrap_or(f64::NAN)
+    }
+}
+
+/// The inputs of an evaluation beyond its [`Point`]: the qp solutions and the current row of
+/// a table (column c, [`Node::Column`]`(c)`, reads `row[c]`).
+#[derive(Clone, Copy, Debug)]
+pub struct Inputs<'a> {
+    /// The qp solutions and their derivatives.
+    pub qp: QpValues<'a>,
+    /// The current row's value of every column of [`Program::columns`] (empty outside the
+    /// methods of `at each` events).
+    pub row: &'a [f64],
+}
+
+impl Inputs<'_> {
+    /// No inputs (every qp leaf and column reads NaN).
+    pub const NONE: Inputs<'static> = Inputs {
+        qp: QpValues::NONE,
+        row: &[],
+    };
+
+    /// The value of a leaf that is an input (NaN when absent or not an input).
+    pub fn leaf(&self, node: &Node) -> f64 {
+        match *node {
+            Node::Column(c) => self.row.get(c as usize).copied().unwrap_or(f64::NAN),
+            _ => self.qp.leaf(node),
+        }
+    }
+}
+
 /// Evaluates one node given the values of its children (`v` indexed by node id).
 /// The single definition of every node's value: folding, the tape and codegen agree with it.
+/// The reference evaluator has no [`Inputs`]: qp leaves and columns are NaN here.
 pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
     let g = |id: ExprId| v[id.index()];
     match *node {
@@ -257,8 +385,6 @@ pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
         Node::Time => at.t,
         Node::State(i) => at.x.get(i as usize).copied().unwrap_or(f64::NAN),
         Node::Param(i) => at.p.get(i as usize).copied().unwrap_or(f64::NAN),
-        // The reference evaluator has no row: a column is undefined there.
-        Node::Column(_) => f64::NAN,
         Node::Add(a, b) => g(a) + g(b),
         Node::Mul(a, b) => g(a) * g(b),
         Node::Neg(a) => -g(a),
@@ -280,6 +406,7 @@ pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
                 g(b)
             }
         }
+        Node::Column(_) | Node::QpSol(_) | Node::QpDeriv(..) => Inputs::NONE.leaf(node),
     }
 }
 
@@ -288,6 +415,9 @@ pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
 pub struct ExprArena {
     nodes: Vec<Node>,
     map: HashMap<Node, ExprId>,
+    /// Per [`Node::QpSol`] index: whether that solution can depend on x and on t (its qp's
+    /// data read states, t); `diff` gives ∂u*/∂x and ∂u*/∂t only where they can be non-zero.
+    qp_deps: Vec<(bool, bool)>,
 }
 
 impl ExprArena {
@@ -304,6 +434,19 @@ impl ExprArena {
     /// Whether the arena is empty.
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
+    }
+
+    /// Records, per [`Node::QpSol`] index, whether the solution can depend on (x, t).
+    pub fn set_qp_deps(&mut self, deps: Vec<(bool, bool)>) {
+        self.qp_deps = deps;
+    }
+
+    /// Whether qp solution k can depend on (x, t) (both true when not recorded).
+    pub fn qp_deps(&self, k: u32) -> (bool, bool) {
+        self.qp_deps
+            .get(k as usize)
+            .copied()
+            .unwrap_or((true, true))
     }
 
     /// The node with id `id`.
@@ -450,6 +593,56 @@ pub struct Event {
     pub cost: Option<ExprId>,
 }
 
+/// The kind of a lowered qp constraint aᵀu (op) b.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum QpKind {
+    /// aᵀu = b.
+    Eq,
+    /// aᵀu ≤ b (a `>=` constraint is stored negated).
+    Le,
+}
+
+/// A lowered qp: min ½uᵀHu + cᵀu s.t. a_iᵀu (= or ≤) b_i, its data expressions of (t, x, θ).
+#[derive(Clone, Debug)]
+pub struct Qp {
+    /// The qp's name.
+    pub name: String,
+    /// Its variables' names.
+    pub vars: Vec<String>,
+    /// The [`Node::QpSol`] index of its first variable.
+    pub offset: usize,
+    /// Each constraint's kind, in declaration order.
+    pub kinds: Vec<QpKind>,
+    /// H = ∂²F/∂u², row-major (n_u × n_u).
+    pub h: Vec<ExprId>,
+    /// c = ∂F/∂u at u = 0.
+    pub c: Vec<ExprId>,
+    /// Rows a_i = ∂g_i/∂u, row-major (m × n_u).
+    pub a: Vec<ExprId>,
+    /// b_i = −g_i(u = 0).
+    pub b: Vec<ExprId>,
+    /// Whether the data read states or t (solved along the trajectory) rather than only θ.
+    pub dynamic: bool,
+    /// When a flow or ℓ reads the solution of this dynamic qp: the switch index of the
+    /// first of its bits, one per inequality constraint in order (after the kinks'
+    /// switching functions in [`Program::switches`]); bit set ⇔ the constraint is held
+    /// active.
+    pub switches: Option<usize>,
+    /// Whether a flow or ℓ reads its solution.
+    pub in_flow: bool,
+}
+
+impl Qp {
+    /// The data in one list: H (row-major), c, A (row-major), b.
+    pub fn data(&self) -> Vec<ExprId> {
+        let mut v = self.h.clone();
+        v.extend(&self.c);
+        v.extend(&self.a);
+        v.extend(&self.b);
+        v
+    }
+}
+
 /// A checked model with all names resolved.
 #[derive(Clone, Debug)]
 pub struct Program {
@@ -487,6 +680,8 @@ pub struct Program {
     /// Switching functions σ_j (pointwise expressions), any number: the tape reads the bits
     /// past 64 through `eval_with`; the arena's own evaluator ([`Point::sw`]) sees bits 0..64.
     pub switches: Vec<ExprId>,
+    /// The qps, in declaration order; their variables are flattened in this order.
+    pub qps: Vec<Qp>,
 }
 
 impl Program {
@@ -498,4 +693,15 @@ impl Program {
     pub fn nparams(&self) -> usize {
         self.params.len()
     }
+    /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
+    pub fn nswitches(&self) -> usize {
+        self.switches.len() + qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
+    }
+}
+
+/// The number of qp switch bits: one per inequality constraint of each qp that has them.
+pub fn qp_switch_bits<'a>(qps: impl Iterator<Item = (Option<usize>, &'a Vec<QpKind>)>) -> usize {
+    qps.filter(|(s, _)| s.is_some())
+        .map(|(_, kinds)| kinds.iter().filter(|&&k| k == QpKind::Le).count())
+        .sum()
 }

@@ -142,6 +142,10 @@ fn significant(pair: Pair<'_, Rule>) -> impl Iterator<Item = Pair<'_, Rule>> {
                 | Rule::kw_from
                 | Rule::dot
                 | Rule::kw_observe
+                | Rule::kw_qp
+                | Rule::kw_minimize
+                | Rule::kw_subject
+                | Rule::kw_to
                 | Rule::kw_cost
                 | Rule::kw_horizon
                 | Rule::kw_der
@@ -249,6 +253,7 @@ fn build_item(pair: Pair<'_, Rule>) -> Res<ast::Item> {
             })
         }
         Rule::cost_decl => ast::Item::Cost(build_cost(pair)?),
+        Rule::qp_decl => ast::Item::Qp(qp::build_qp(pair)?),
         Rule::horizon_decl => {
             let mut it = significant(pair);
             ast::Item::Horizon(ast::Horizon {
@@ -416,6 +421,7 @@ fn build_cost_term(pair: Pair<'_, Rule>) -> Res<ast::CostTerm> {
                 let value = build_expr(next(&mut it, s, "sum argument")?)?;
                 kind = Some(ast::CostKind::Sum { event, value });
             }
+            Rule::static_term => kind = Some(ast::CostKind::Static(build_expr(p)?)),
             _ => return Err(internal(span_of(&p), "unexpected part of a cost term")),
         }
     }
@@ -593,8 +599,8 @@ fn build_primary(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
         }
         Rule::column => {
             let mut it = significant(pair);
-            let table = ident(next(&mut it, span, "table name")?);
-            let column = ident(next(&mut it, span, "column name")?);
+            let table = ident(next(&mut it, span, "table or qp name")?);
+            let column = ident(next(&mut it, span, "column or qp variable")?);
             Ok((
                 Expr {
                     kind: ExprKind::Column { table, column },
@@ -655,6 +661,8 @@ fn build_primary(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
         _ => Err(internal(span, "unexpected operand")),
     }
 }
+
+mod qp;
 
 #[cfg(test)]
 pub(crate) mod tests;

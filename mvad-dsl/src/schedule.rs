@@ -7,9 +7,14 @@
 //! layout documented on the field that holds it. Matrices are row-major in slots:
 //! entry (r, c) of an r×c block is slot r·cols + c. Both back ends (codegen, tape) read
 //! the same kernels.
+//!
+//! Besides the first derivatives, each flow and the running cost get the kernels of the
+//! capability products ([`SecondOrderKernels`]): the non-zero entries of G_x and G_θ (for
+//! the adjoint's λᵀG_x, λᵀG_θ) and their non-zero derivatives in x and t (for the implicit
+//! method's ∂ₓ(G_x S + G_θ)·v and ∂ₜ(G_x S + G_θ)), all taken in the same arena.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, Node, Program, Schedule};
+use crate::ir::{Direction, ExprArena, ExprId, Node, Program, QpKind, Schedule, Wrt};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -89,6 +94,47 @@ pub struct ModeKernels {
     /// `sparsity` (∂f/∂x values, same order), then ∂f/∂θ (n×p row-major). Ṡ = f_x S + f_θ is
     /// formed from these by the back ends with only the non-zero f_x entries.
     pub sens: Kernel,
+    /// The non-zero entries of f_x and f_θ, for λᵀf_x and λᵀf_θ: slot e < |x_entries| is
+    /// f_x entry e, slot |x_entries| + e is f_θ entry e (entries as in `second`).
+    pub jac: Kernel,
+    /// The second-order kernels of f (its `x_entries` are `sparsity`).
+    pub second: SecondOrderKernels,
+}
+
+/// The sparse first derivatives (G_x, G_θ) of a vector function G(t, x, θ) — a mode's flow f,
+/// or the running cost ℓ as one row — and their derivatives in x and in t: what the products
+///
+/// ```text
+///   ∂ₓ(G_x S + G_θ)·v = (Σᵢ vᵢ ∂G_x/∂xᵢ) S + Σᵢ vᵢ ∂G_θ/∂xᵢ,
+///   ∂ₜ(G_x S + G_θ)   = (∂ₜG_x) S + ∂ₜG_θ
+/// ```
+///
+/// need. "Entry e" numbers the non-zero first derivatives: e < |x_entries| is the G_x entry
+/// `x_entries[e]`, e ≥ |x_entries| the G_θ entry `p_entries[e − |x_entries|]`. Only entries
+/// that are structurally non-zero are ever formed, so a product costs the number of non-zero
+/// second derivatives plus one pass over the non-zero G_x entries per column of S.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SecondOrderKernels {
+    /// Number of rows of G (n for a flow, 1 for ℓ).
+    pub rows: usize,
+    /// (row, state) of the non-zero entries of G_x, row-major order.
+    pub x_entries: Vec<(usize, usize)>,
+    /// (row, param) of the non-zero entries of G_θ, row-major order.
+    pub p_entries: Vec<(usize, usize)>,
+    /// The non-zero ∂(entry e)/∂xᵢ: slot j is the derivative named by `dx_terms[j]`.
+    pub dx: Kernel,
+    /// (entry e, state i) of each slot of `dx`, e ascending, then i ascending.
+    pub dx_terms: Vec<(usize, usize)>,
+    /// ∂ₜ of the entries: slot e is ∂ₜ(entry e); for ℓ, slot |entries| + r is ∂ₜG_r (∂ₜℓ).
+    /// Zeros dropped.
+    pub dt: Kernel,
+}
+
+impl SecondOrderKernels {
+    /// Number of entries (non-zero first derivatives).
+    pub fn nentries(&self) -> usize {
+        self.x_entries.len() + self.p_entries.len()
+    }
 }
 
 /// The kernels of one event.
@@ -151,6 +197,31 @@ pub struct EventMeta {
     pub time: Option<TimeKind>,
 }
 
+/// The kernels of one qp: its data and their derivatives, which the back ends hand to the
+/// runtime's qp solver.
+#[derive(Clone, Debug, PartialEq)]
+pub struct QpKernels {
+    /// The qp's name.
+    pub name: String,
+    /// Its variables' names.
+    pub vars: Vec<String>,
+    /// Each constraint's kind.
+    pub kinds: Vec<QpKind>,
+    /// The [`Node::QpSol`] index of its first variable.
+    pub offset: usize,
+    /// Whether the data read states or t.
+    pub dynamic: bool,
+    /// The switch index of its first switch bit, if a flow reads it ([`crate::ir::Qp::switches`]).
+    pub switches: Option<usize>,
+    /// Whether a flow or ℓ reads its solution.
+    pub in_flow: bool,
+    /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
+    pub data: Kernel,
+    /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
+    /// ([`Wrt::column`]).
+    pub data_jac: Kernel,
+}
+
 /// Everything the back ends need: the arena, names and one kernel per model function.
 #[derive(Clone, Debug)]
 pub struct ModelKernels {
@@ -194,8 +265,12 @@ pub struct ModelKernels {
     pub observe_jac: Kernel,
     /// ℓ and (ℓ_x, ℓ_θ, ℓ), if the cost has `integral` terms.
     pub running_cost: Option<GradKernels>,
-    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` terms.
+    /// Φ and (Φ_x, Φ_θ, Φ_t), if the cost has `final` or static terms.
     pub final_cost: Option<GradKernels>,
+    /// The second-order kernels of ℓ as one row (with ∂ₜℓ), if the cost has `integral` terms.
+    pub running_cost_second: Option<SecondOrderKernels>,
+    /// Per qp, in declaration order.
+    pub qps: Vec<QpKernels>,
 }
 
 impl ModelKernels {
@@ -232,7 +307,8 @@ impl ModelKernels {
             v.push(b);
         }
         for m in &self.modes {
-            v.extend([&m.rhs, &m.jac_x, &m.jac_p, &m.dt, &m.sens]);
+            v.extend([&m.rhs, &m.jac_x, &m.jac_p, &m.dt, &m.sens, &m.jac]);
+            v.extend([&m.second.dx, &m.second.dt]);
         }
         for e in &self.events {
             v.extend([&e.guard.value, &e.guard.grad]);
@@ -253,7 +329,31 @@ impl ModelKernels {
         for c in [&self.running_cost, &self.final_cost].into_iter().flatten() {
             v.extend([&c.value, &c.grad]);
         }
+        if let Some(c) = &self.running_cost_second {
+            v.extend([&c.dx, &c.dt]);
+        }
+        for q in &self.qps {
+            v.extend([&q.data, &q.data_jac]);
+        }
         v
+    }
+
+    /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
+    pub fn nswitches(&self) -> usize {
+        self.switches.len()
+            + crate::ir::qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
+    }
+
+    /// Whether the second-order products must be difference quotients: a flow or ℓ reads
+    /// the solution of a qp of the state, whose second derivatives the kernels do not have
+    /// (the `QpDeriv` leaves are first derivatives; see `ir::Node::QpDeriv`).
+    pub fn second_order_by_differences(&self) -> bool {
+        self.qps.iter().any(|q| q.dynamic && q.in_flow)
+    }
+
+    /// Number of qp solution variables (all qps).
+    pub fn nqp_vars(&self) -> usize {
+        self.qps.iter().map(|q| q.vars.len()).sum()
     }
 }
 
@@ -306,6 +406,66 @@ fn jacobian(
     out
 }
 
+/// The states an expression reads, ascending.
+fn states_read(ar: &ExprArena, e: ExprId) -> Vec<usize> {
+    let live = ar.live(&[e]);
+    let mut v: Vec<usize> = live
+        .iter()
+        .zip(ar.nodes())
+        .filter_map(|(&l, nd)| match nd {
+            Node::State(i) if l => Some(*i as usize),
+            _ => None,
+        })
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+/// The second-order kernels of G (`rows` expressions) from its Jacobians `gx` (rows×n) and
+/// `gp` (rows×p), row-major; with `time_rows`, `dt` also holds ∂ₜG_r.
+fn second_order(
+    ar: &mut ExprArena,
+    rows: &[ExprId],
+    gx: &[ExprId],
+    gp: &[ExprId],
+    n: usize,
+    p: usize,
+    time_rows: bool,
+) -> SecondOrderKernels {
+    let nonzero = |ar: &ExprArena, m: &[ExprId], cols: usize| -> Vec<(usize, usize, ExprId)> {
+        m.iter()
+            .enumerate()
+            .filter(|&(_, &e)| !ar.is_zero(e))
+            .map(|(k, &e)| (k / cols.max(1), k % cols.max(1), e))
+            .collect()
+    };
+    let xs = nonzero(ar, gx, n);
+    let ps = nonzero(ar, gp, p);
+    let entries: Vec<ExprId> = xs.iter().chain(&ps).map(|&(_, _, e)| e).collect();
+    let (mut dx, mut dx_terms) = (Vec::new(), Vec::new());
+    for (e, &g) in entries.iter().enumerate() {
+        for i in states_read(ar, g) {
+            let d = diff(ar, g, Var::State(i));
+            if !ar.is_zero(d) {
+                dx.push(d);
+                dx_terms.push((e, i));
+            }
+        }
+    }
+    let mut dt: Vec<ExprId> = entries.iter().map(|&g| diff(ar, g, Var::Time)).collect();
+    if time_rows {
+        dt.extend(rows.iter().map(|&g| diff(ar, g, Var::Time)));
+    }
+    SecondOrderKernels {
+        rows: rows.len(),
+        x_entries: xs.iter().map(|&(r, c, _)| (r, c)).collect(),
+        p_entries: ps.iter().map(|&(r, c, _)| (r, c)).collect(),
+        dx: Kernel::new(ar, &dx),
+        dx_terms,
+        dt: Kernel::new(ar, &dt),
+    }
+}
+
 /// Differentiates the program and cuts it into kernels.
 pub fn kernels(program: &Program) -> ModelKernels {
     let mut ar = program.arena.clone();
@@ -339,10 +499,17 @@ pub fn kernels(program: &Program) -> ModelKernels {
             let mut sens: Vec<ExprId> = m.flow.clone();
             sens.extend(sparsity.iter().map(|&(r, c)| fx[r * n + c]));
             sens.extend(fp.iter().copied());
+            let second = second_order(&mut ar, &m.flow, &fx, &fp, n, p, false);
+            let jac: Vec<ExprId> = (second.x_entries.iter().map(|&(r, c)| fx[r * n + c]))
+                .chain(second.p_entries.iter().map(|&(r, c)| fp[r * p + c]))
+                .collect();
             let depends_on_t = m
                 .flow
                 .iter()
-                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)));
+                .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::Time)))
+                || ft
+                    .iter()
+                    .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::QpDeriv(_, Wrt::Time))));
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
@@ -351,6 +518,8 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 depends_on_t,
                 sparsity,
                 sens: Kernel::new(&ar, &sens),
+                jac: Kernel::new(&ar, &jac),
+                second,
             }
         })
         .collect();
@@ -405,6 +574,41 @@ pub fn kernels(program: &Program) -> ModelKernels {
     let final_cost = program
         .final_cost
         .map(|c| grad_kernels(&mut ar, c, n, p, false));
+    let running_cost_second = program.running_cost.map(|c| {
+        let gx: Vec<ExprId> = (0..n).map(|i| diff(&mut ar, c, Var::State(i))).collect();
+        let gp: Vec<ExprId> = (0..p).map(|i| diff(&mut ar, c, Var::Param(i))).collect();
+        second_order(&mut ar, &[c], &gx, &gp, n, p, true)
+    });
+
+    let qps = program
+        .qps
+        .iter()
+        .map(|q| {
+            let data = q.data();
+            let jac = jacobian(&mut ar, &data, Var::State, n);
+            let dp = jacobian(&mut ar, &data, Var::Param, p);
+            let dt = jacobian(&mut ar, &data, |_| Var::Time, 1);
+            // Interleave to slot d·(n + p + 1) + w.
+            let w = n + p + 1;
+            let mut dj = Vec::with_capacity(data.len() * w);
+            for d in 0..data.len() {
+                dj.extend_from_slice(&jac[d * n..(d + 1) * n]);
+                dj.extend_from_slice(&dp[d * p..(d + 1) * p]);
+                dj.push(dt[d]);
+            }
+            QpKernels {
+                name: q.name.clone(),
+                vars: q.vars.clone(),
+                kinds: q.kinds.clone(),
+                offset: q.offset,
+                dynamic: q.dynamic,
+                switches: q.switches,
+                in_flow: q.in_flow,
+                data: Kernel::new(&ar, &data),
+                data_jac: Kernel::new(&ar, &dj),
+            }
+        })
+        .collect();
 
     ModelKernels {
         name: program.name.clone(),
@@ -443,6 +647,8 @@ pub fn kernels(program: &Program) -> ModelKernels {
         observe_jac: Kernel::new(&ar, &oj),
         running_cost,
         final_cost,
+        running_cost_second,
+        qps,
         arena: ar,
     }
 }

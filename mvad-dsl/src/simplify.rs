@@ -224,11 +224,40 @@ impl ExprArena {
         self.intern(Node::Switch(j, a, b))
     }
 
+    /// Rebuilds `roots` with every node for which `value` gives a number replaced by that
+    /// constant (through the smart constructors, so the result is simplified), e.g. a qp's
+    /// variables set to 0.
+    pub fn substitute(
+        &mut self,
+        roots: &[ExprId],
+        value: impl Fn(&Node) -> Option<f64>,
+    ) -> Vec<ExprId> {
+        let top = roots.iter().max().map_or(0, |m| m.index() + 1);
+        let live = self.live(roots);
+        let mut map: Vec<ExprId> = (0..top).map(|i| ExprId(i as u32)).collect();
+        for i in 0..top {
+            if !live[i] {
+                continue;
+            }
+            let node = self.node(ExprId(i as u32));
+            map[i] = match value(&node) {
+                Some(v) => self.constant(v),
+                None => self.rebuild(node.map_children(|c| map[c.index()])),
+            };
+        }
+        roots.iter().map(|r| map[r.index()]).collect()
+    }
+
     /// Rebuilds node `n` (with children already mapped) through the smart constructors.
     pub fn rebuild(&mut self, n: Node) -> ExprId {
         match n {
             Node::Const(bits) => self.constant(f64::from_bits(bits)),
-            Node::Time | Node::State(_) | Node::Param(_) | Node::Column(_) => self.intern(n),
+            Node::Time
+            | Node::State(_)
+            | Node::Param(_)
+            | Node::Column(_)
+            | Node::QpSol(_)
+            | Node::QpDeriv(..) => self.intern(n),
             Node::Add(a, b) => self.add(a, b),
             Node::Mul(a, b) => self.mul(a, b),
             Node::Neg(a) => self.neg(a),

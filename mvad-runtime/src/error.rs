@@ -9,6 +9,7 @@
 //! binary adds its hints (`--t-end`, `--method`) when it reports an error (`cli::solve_err`).
 
 use crate::integrate::StepError;
+use crate::qp::QpError;
 use crate::solution::{Diagnostic, DiagnosticKind};
 use std::fmt;
 
@@ -93,6 +94,15 @@ pub enum SolveError {
         /// How many observables the model has.
         count: usize,
     },
+    /// A qp of the model could not be solved (infeasible, not strictly convex, degenerate...).
+    Qp {
+        /// Time of the evaluation (0 for a static qp).
+        t: f64,
+        /// The qp's name.
+        qp: String,
+        /// Why.
+        error: QpError,
+    },
     /// A parameter index is out of range (finite differences).
     NoSuchParam {
         /// The index asked for.
@@ -103,6 +113,22 @@ pub enum SolveError {
 }
 
 impl SolveError {
+    /// Whether the caller asked for something that cannot run (no or a bad horizon, wrong
+    /// parameters, a bad option or index), as opposed to a run that started and failed.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            SolveError::NoHorizon
+                | SolveError::BadHorizon { .. }
+                | SolveError::ParamCount { .. }
+                | SolveError::BadParam { .. }
+                | SolveError::BadOption { .. }
+                | SolveError::BadSchedule { .. }
+                | SolveError::NoSuchObservable { .. }
+                | SolveError::NoSuchParam { .. }
+        )
+    }
+
     /// The spec's diagnostic for the numerical failures (`nonfinite`, `step_size_underflow`,
     /// `max_events`, `max_steps`); `None` for bad input.
     pub fn diagnostic(&self) -> Option<Diagnostic> {
@@ -165,6 +191,7 @@ impl fmt::Display for SolveError {
             SolveError::NoSuchParam { index, count } => {
                 write!(f, "parameter {index} out of range (the model has {count})")
             }
+            SolveError::Qp { t, qp, error } => write!(f, "qp `{qp}` at t = {t}: {error}"),
         }
     }
 }

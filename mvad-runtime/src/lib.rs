@@ -21,15 +21,20 @@ pub mod event;
 pub mod fd;
 pub mod integrate;
 pub mod measure;
+pub mod qp;
 pub mod reduce;
+pub mod sample;
 pub mod sens;
 pub mod sink;
 pub mod solution;
 pub mod solve;
+pub mod vjp;
 
 pub use error::SolveError;
 pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
+pub use qp::{QpError, QpSolver};
+pub use sample::{sample, Samples};
 pub use sink::{EventCounts, EventSink, EventView, FirstEvents, Stream};
 pub use solution::{
     Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,

@@ -79,17 +79,13 @@ where
             let node = &traj.data[(k * TRAJ_NODES + i) * len..(k * TRAJ_NODES + i + 1) * len];
             x.as_mut_slice().copy_from_slice(&node[..n]);
             model.observe_jac(t, &x, params, &mut yx, &mut yp);
-            let s = &node[n..];
-            let row = &yx[observable * n..(observable + 1) * n];
-            for j in 0..np {
-                // (h_x S)_j + h_θj, S column-major: S[r, j] = s[j n + r].
-                let hs: f64 = row
-                    .iter()
-                    .enumerate()
-                    .map(|(r, hr)| hr * s[j * n + r])
-                    .sum();
-                nodes.push(hs + yp[observable * np + j]);
-            }
+            let at = nodes.len();
+            nodes.extend_from_slice(&yp[observable * np..(observable + 1) * np]);
+            add_density(
+                &yx[observable * n..(observable + 1) * n],
+                &node[n..],
+                &mut nodes[at..],
+            );
         }
     }
     let atoms = solution
@@ -114,6 +110,20 @@ where
         mu.add_zeno_tail_atom(d.t);
     }
     Ok(mu)
+}
+
+/// Adds h_x S to `out` (one entry per parameter): out_j += Σ_r h_x[r] S[r, j], with S the
+/// column-major n×p sensitivity. Started from h_θ, `out` becomes the density h_x S + h_θ.
+pub(crate) fn add_density(hx: &[f64], s: &[f64], out: &mut [f64]) {
+    let n = hx.len();
+    for (j, o) in out.iter_mut().enumerate() {
+        let hs: f64 = hx
+            .iter()
+            .zip(&s[j * n..(j + 1) * n])
+            .map(|(h, v)| h * v)
+            .sum();
+        *o += hs;
+    }
 }
 
 impl Measure {

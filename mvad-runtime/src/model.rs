@@ -27,6 +27,9 @@
 //!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
 //! - Gradient methods *overwrite* every entry of their outputs (zeros included).
 
+use crate::qp::{QpError, QpLayerInfo, QpState, Side};
+
+pub mod differences;
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Bound alias for the allocators a model's dimensions need (one line in every where-clause).
@@ -512,6 +515,41 @@ where
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
+
+    // ---- optimisation layers (qp) ------------------------------------------------------
+    //
+    // A model's qps are solved inside its evaluation methods (see `crate::qp::QpBank`); the
+    // runtime only reports on them. A model without qps keeps these defaults.
+
+    /// The model's qp layers, in declaration order.
+    fn qps(&self) -> &[QpLayerInfo] {
+        &[]
+    }
+    /// Every qp solved at (t, x, θ): solutions, multipliers and constraint statuses, for
+    /// reports (it may allocate); the first failure as (qp index, error).
+    fn qp_states(
+        &self,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+    ) -> Result<Vec<QpState>, (usize, QpError)> {
+        let _ = (t, x, p);
+        Ok(Vec::new())
+    }
+    /// Chooses the one-sided derivative the qps give at a kink from now on (right by
+    /// default).
+    fn set_qp_side(&self, side: Side) {
+        let _ = side;
+    }
+    /// The qp failure behind the non-finite values of the last evaluation, if any.
+    fn qp_failure(&self) -> Option<(usize, QpError)> {
+        None
+    }
+    /// The first weakly active constraint of the last evaluation, as (qp, constraint): the
+    /// point is a kink of the qp's solution map. Allocates nothing.
+    fn qp_kink(&self) -> Option<(usize, usize)> {
+        None
+    }
 }
 
 /// Capability: the forward-sensitivity right-hand side.
@@ -621,13 +659,18 @@ where
     }
 }
 
-/// Capability: second-derivative directional products, for the implicit method's
-/// Jacobian of the sensitivity equations.
+/// Capability: second-derivative products, for the implicit method's Jacobian of the
+/// sensitivity equations and its time derivative (see `integrate::forward`).
 ///
-/// The default differentiates [`ModelSens::rhs_sens`] by central differences along v with
-/// the step h = ε^{1/3} (1 + ‖x‖∞) / ‖v‖∞ (ε the machine epsilon; truncation and rounding
-/// errors balance at O(ε^{2/3})); it allocates scratch. A model with symbolic second
-/// derivatives overrides it with the exact product.
+/// The defaults are central differences of the first-derivative methods ([`ModelSens::rhs_sens`],
+/// [`HybridModel::running_cost_value_grad`]); they allocate scratch. Along v the step is
+/// h = 1e-4·max(1, ‖x‖₂)/‖v‖₂, far larger than the usual ε^{1/3}: models with cancellation
+/// inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the rounding of x ± h v by
+/// 1/h, and with ε^{1/3} the sensitivity of a τ = 1e-8 lag had a 2e-6 error floor, with 1e-4
+/// it is 4e-8; central differences are exact when the differenced function is at most
+/// quadratic in x and perturb it by O(1e-8) relative for cubic terms. In t the step is
+/// ε^{1/3}·max(1, |t|). Both doors (`hybrid!` and loaded models) override every method with
+/// exact products from symbolic second derivatives.
 pub trait ModelSecondOrder: ModelSens
 where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
@@ -644,22 +687,56 @@ where
     ) where
         Self: HybridModel,
     {
-        let Point { mode, sw, t, x, p } = pt;
-        let vmax = v.amax();
-        if vmax == 0.0 || !vmax.is_finite() {
-            out.fill(if vmax == 0.0 { 0.0 } else { f64::NAN });
-            return;
-        }
-        let h = f64::EPSILON.cbrt() * (1.0 + x.amax()) / vmax;
-        let mut f = x.clone_owned();
-        let mut xs = x.clone_owned();
-        let mut minus = out.clone_owned();
-        xs.axpy(h, v, 1.0);
-        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, out);
-        xs.copy_from(x);
-        xs.axpy(-h, v, 1.0);
-        self.rhs_sens(Point::new(mode, sw, t, &xs, p), s, &mut f, &mut minus);
-        *out -= &minus;
-        *out /= 2.0 * h;
+        differences::rhs_sens_dir_x(self, pt, s, v, out);
+    }
+
+    /// ∂ₜ(f_x S + f_θ) into `out` (n×p): the time derivative of the sensitivity right-hand
+    /// side at fixed x and S (zeros for an autonomous flow).
+    fn rhs_sens_dt(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        out: &mut OMatrix<f64, Self::N, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        differences::rhs_sens_dt(self, pt, s, out);
+    }
+
+    /// (∂/∂x (ℓ_x S + ℓ_θ)) · v into `out` (p): out = Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ, the
+    /// derivative of the running cost's sensitivity integrand along v (with the frozen
+    /// branches `sw`; zeros without a running cost).
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dir_x(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        v: &OVector<f64, Self::N>,
+        out: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        differences::running_cost_sens_dir_x(self, sw, t, x, p, s, v, out);
+    }
+
+    /// ∂ₜ(ℓ_x S + ℓ_θ) into `out` (p), at fixed x and S, with the frozen branches `sw`;
+    /// returns ∂ₜℓ (zeros and 0 without a running cost).
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dt(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        s: &OMatrix<f64, Self::N, Self::P>,
+        out: &mut OVector<f64, Self::P>,
+    ) -> f64
+    where
+        Self: HybridModel,
+    {
+        differences::running_cost_sens_dt(self, sw, t, x, p, s, out)
     }
 }

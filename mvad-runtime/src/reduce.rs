@@ -15,8 +15,9 @@
 //! (event time, post-event state, its total derivative, accumulated cost and gradient)
 //! converges like a_k ≈ a_∞ + B ρᵏ. [`aitken`] estimates a_∞ from three consecutive values
 //! (Aitken's Δ²: a_∞ = a₂ − (a₂ − a₁)² / ((a₂ − a₁) − (a₁ − a₀))), the sum of the geometric
-//! tail. For the gradient terms the error is a_k ≈ a_∞ + (B + C k) ρᵏ; Aitken then leaves
-//! O(ρᵏ/k) of the tail, which is why the driver runs until the events graze before it stops.
+//! tail. The derivative of a limit is not extrapolated from the derivative sequence (whose
+//! error (B' + B k ρ'/ρ) ρᵏ is not geometric): it is the derivative of the sum of the series,
+//! Σ_i ∂a_∞/∂a_i · da_i/dθ ([`aitken_weights`]), exact when a_k is exactly geometric.
 
 use crate::model::{HybridModel, ModelAlloc, Switches};
 use nalgebra::{DefaultAllocator, OMatrix, OVector};
@@ -25,34 +26,80 @@ use nalgebra::{DefaultAllocator, OMatrix, OVector};
 /// [`aitken`] limit, until fewer than three remain; returns the last. Five values give two
 /// passes, which remove error terms of the form (a + bk)ρᵏ that one pass leaves.
 pub fn aitken_iterated(seq: &[f64]) -> f64 {
-    let mut cur = seq.to_vec();
+    aitken_iterated_weights(seq).0
+}
+
+/// [`aitken_iterated`] with its sensitivities to the inputs: (a_∞, w) with w_i = ∂a_∞/∂a_i,
+/// so that for a sequence a_k(θ) whose derivatives da_k/dθ are known the limit's derivative
+/// is da_∞/dθ = Σ_i w_i da_i/dθ (the chain rule through the extrapolation). The weights sum
+/// to 1 (a shift of every a_i shifts the limit).
+pub fn aitken_iterated_weights(seq: &[f64]) -> (f64, Vec<f64>) {
+    let n = seq.len();
+    let unit = |i: usize| {
+        (0..n)
+            .map(|m| if m == i { 1.0 } else { 0.0 })
+            .collect::<Vec<_>>()
+    };
+    let mut cur: Vec<(f64, Vec<f64>)> =
+        seq.iter().enumerate().map(|(i, &a)| (a, unit(i))).collect();
     while cur.len() >= 3 {
-        cur = cur.windows(3).map(|w| aitken(w[0], w[1], w[2])).collect();
+        cur = cur
+            .windows(3)
+            .map(|w| {
+                let (lim, c) = aitken_weights(w[0].0, w[1].0, w[2].0);
+                let wts = (0..n)
+                    .map(|i| c[0] * w[0].1[i] + c[1] * w[1].1[i] + c[2] * w[2].1[i])
+                    .collect();
+                (lim, wts)
+            })
+            .collect();
     }
-    cur.last().copied().unwrap_or(f64::NAN)
+    cur.pop().unwrap_or((f64::NAN, vec![0.0; n]))
 }
 
 /// Aitken's Δ² limit of a sequence from its last three values a0, a1, a2.
 ///
 /// Falls back to a2 when the differences do not look geometric (ratio outside (−0.999, 0.999),
-/// zero or non-finite denominators).
+/// zero or non-finite denominators) or are at the level of rounding (the sequence has
+/// converged: both differences within 64ε of the largest value).
 pub fn aitken(a0: f64, a1: f64, a2: f64) -> f64 {
+    aitken_weights(a0, a1, a2).0
+}
+
+/// [`aitken`] and its partial derivatives w = (∂/∂a0, ∂/∂a1, ∂/∂a2).
+///
+/// With d1 = a1 − a0, d2 = a2 − a1, r = d2/d1 and D = d1 − d2, the limit is the sum of the
+/// geometric series a2 + d2 (r + r² + …) = a2 + d2²/D, whose derivatives are
+///
+/// ```text
+///   ∂/∂a2 = 1/(1 − r)² = d1²/D²,   ∂/∂a1 = −2 d1 d2 / D²,   ∂/∂a0 = d2²/D².
+/// ```
+///
+/// If a_k = a_∞ + B ρᵏ exactly with a_∞, B and ρ all functions of θ, the limit is a_∞ for
+/// every θ, so Σ w_i da_i/dθ is da_∞/dθ exactly; Aitken applied to the sequence da_k/dθ
+/// itself would not be, since it has the non-geometric term B k ρᵏ⁻¹ dρ/dθ. On a fallback the
+/// weights are (0, 0, 1).
+pub fn aitken_weights(a0: f64, a1: f64, a2: f64) -> (f64, [f64; 3]) {
+    const LAST: [f64; 3] = [0.0, 0.0, 1.0];
     let d1 = a1 - a0;
     let d2 = a2 - a1;
-    if d2 == 0.0 || d1 == 0.0 {
-        return a2;
+    let scale = a0.abs().max(a1.abs()).max(a2.abs());
+    let converged = d1.abs().max(d2.abs()) <= 64.0 * f64::EPSILON * scale;
+    if d2 == 0.0 || d1 == 0.0 || converged {
+        return (a2, LAST);
     }
     let r = d2 / d1;
     if !r.is_finite() || r.abs() >= 0.999 {
-        return a2;
+        return (a2, LAST);
     }
     // a2 + d2 (r + r² + …) = a2 + d2 r/(1 − r)
     let lim = a2 + d2 * r / (1.0 - r);
-    if lim.is_finite() {
-        lim
-    } else {
-        a2
+    if !lim.is_finite() {
+        return (a2, LAST);
     }
+    let q = 1.0 / (1.0 - r);
+    // d1²/D² = q², −2 d1 d2/D² = −2 r q², d2²/D² = r² q².
+    (lim, [r * r * q * q, -2.0 * r * q * q, q * q])
 }
 
 /// Gauss–Legendre nodes and weights on [−1, 1], 8 points (exact for degree 15).
@@ -243,6 +290,42 @@ mod tests {
         let b = |k: i32| 1.0 + (k as f64) * 0.5f64.powi(k);
         let tail = b(20) - 1.0;
         assert!((aitken(b(18), b(19), b(20)) - 1.0).abs() < 0.1 * tail);
+    }
+
+    #[test]
+    fn the_limit_of_a_geometric_sequence_is_differentiated_exactly() {
+        // a_k(θ) = a∞(θ) + B(θ) ρ(θ)ᵏ with a∞ = θ², B = 1 + θ, ρ = θ/2 at θ = 0.9: the chain
+        // rule through the (iterated) extrapolation gives da∞/dθ = 2θ exactly, while Aitken
+        // on the derivative sequence (which carries B k ρᵏ⁻¹ ρ') does not.
+        let th: f64 = 0.9;
+        let (rho, b, drho, db) = (th / 2.0, 1.0 + th, 0.5, 1.0);
+        let a = |k: i32| th * th + b * rho.powi(k);
+        let da = |k: i32| 2.0 * th + db * rho.powi(k) + b * f64::from(k) * rho.powi(k - 1) * drho;
+        let seq: Vec<f64> = (6..11).map(a).collect();
+        let dseq: Vec<f64> = (6..11).map(da).collect();
+        let (lim, w) = aitken_iterated_weights(&seq);
+        assert_relative_eq!(lim, th * th, max_relative = 1e-13);
+        assert_relative_eq!(w.iter().sum::<f64>(), 1.0, max_relative = 1e-12);
+        let d: f64 = w.iter().zip(&dseq).map(|(w, d)| w * d).sum();
+        assert!((d - 2.0 * th).abs() < 1e-12, "{d}");
+        assert!((aitken_iterated(&dseq) - 2.0 * th).abs() > 1e-6);
+        // One pass: the weights are the partial derivatives of the limit (central differences).
+        let (a0, a1, a2) = (a(3), a(4), a(5));
+        let (_, w3) = aitken_weights(a0, a1, a2);
+        let h = 1e-7;
+        let fd = [
+            (aitken(a0 + h, a1, a2) - aitken(a0 - h, a1, a2)) / (2.0 * h),
+            (aitken(a0, a1 + h, a2) - aitken(a0, a1 - h, a2)) / (2.0 * h),
+            (aitken(a0, a1, a2 + h) - aitken(a0, a1, a2 - h)) / (2.0 * h),
+        ];
+        for (x, y) in w3.iter().zip(fd) {
+            assert_relative_eq!(*x, y, max_relative = 1e-6);
+        }
+        // A converged sequence (differences at rounding level) is its last value.
+        assert_eq!(
+            aitken_weights(-2.0, -2.0 + 4e-16, -2.0),
+            (-2.0, [0.0, 0.0, 1.0])
+        );
     }
 
     #[test]

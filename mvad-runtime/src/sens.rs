@@ -52,9 +52,25 @@ where
     (slope, denom)
 }
 
-/// Whether a crossing is grazing: |g_x f⁻| < τ |g_x| |f⁻| (the cosine between the guard's
-/// normal and the flow is below τ). Also true when g_x or f⁻ vanish entirely and g_t does
-/// not make up for it (denominator zero).
+/// The cosine of a crossing: |dg/dt| / (|g_x| |f⁻| + |g_t|), where dg/dt = g_x f⁻ + g_t is the
+/// total rate of the guard along the trajectory at t_k⁻ (the quantity t' divides by, and the
+/// `guard_slope` of an event). It is 0 for a tangential crossing and at most 1; for a guard
+/// without t it is the cosine between the guard's normal and the flow, and a pure time guard
+/// `t ≥ p` has rate 1 and cosine 1. A crossing with vanishing g_x, f⁻ and g_t has cosine 0.
+pub fn crossing_cosine<N: Dim>(gx: &OVector<f64, N>, f_minus: &OVector<f64, N>, gt: f64) -> f64
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<N>,
+{
+    let rate = gx.dot(f_minus) + gt;
+    if rate == 0.0 {
+        return 0.0;
+    }
+    rate.abs() / (gx.norm() * f_minus.norm() + gt.abs())
+}
+
+/// Whether a crossing is grazing: its [`crossing_cosine`] is below τ, i.e.
+/// |g_x f⁻ + g_t| < τ (|g_x| |f⁻| + |g_t|). Also true when the rate vanishes entirely
+/// (the denominator of t' is zero).
 pub fn is_grazing<N: Dim>(
     gx: &OVector<f64, N>,
     f_minus: &OVector<f64, N>,
@@ -64,16 +80,8 @@ pub fn is_grazing<N: Dim>(
 where
     DefaultAllocator: nalgebra::allocator::Allocator<N>,
 {
-    let slope = gx.dot(f_minus);
-    if slope + gt == 0.0 {
-        return true;
-    }
-    if gt != 0.0 {
-        // A time-dependent guard: compare the full rate with the scale of its parts.
-        let scale = gx.norm() * f_minus.norm() + gt.abs();
-        return (slope + gt).abs() < tau * scale;
-    }
-    slope.abs() < tau * gx.norm() * f_minus.norm()
+    let cosine = crossing_cosine(gx, f_minus, gt);
+    cosine == 0.0 || cosine < tau
 }
 
 /// Saltation update at an event with reset R:
@@ -141,6 +149,22 @@ mod tests {
     /// Ball from h0 with v0 = 0, one parameter θ = h0: first impact at t = sqrt(2 h0 / g).
     /// S⁻ = (1, 0)ᵀ (∂h/∂h0 = 1, ∂v/∂h0 = 0 before the impact), f⁻ = (v⁻, −g), g = h.
     /// t' = −1/v⁻ = 1/sqrt(2 g h0) = dt_k/dh0 (closed form: d sqrt(2h0/g)/dh0).
+    #[test]
+    fn a_pure_time_guard_has_rate_one_and_is_not_grazing() {
+        // g = t − p: ∇ₓg = 0, ∂g/∂t = 1, whatever the flow: cosine 1.
+        let (gx, f) = (Vector2::zeros(), Vector2::new(3.0, -4.0));
+        assert_eq!(crossing_cosine(&gx, &f, 1.0), 1.0);
+        assert!(!is_grazing(&gx, &f, 1.0, 1e-3));
+        // A state guard: the cosine between ∇g and f; tangential ⇒ 0 and grazing.
+        let gx = Vector2::new(1.0, 0.0);
+        assert_relative_eq!(crossing_cosine(&gx, &f, 0.0), 0.6);
+        assert!(is_grazing(&gx, &Vector2::new(0.0, 1.0), 0.0, 1e-3));
+        // A moving guard g = x − t crossed with ẋ = 1 + 1e-6: rate 1e-6 of scale 2.
+        let f = Vector2::new(1.0 + 1e-6, 0.0);
+        assert_relative_eq!(crossing_cosine(&gx, &f, -1.0), 0.5e-6, max_relative = 1e-6);
+        assert!(is_grazing(&gx, &f, -1.0, 1e-3));
+    }
+
     #[test]
     fn event_time_matches_closed_form() {
         let (g, h0, e): (f64, f64, f64) = (9.81, 2.0, 0.8);

@@ -111,6 +111,9 @@ pub enum DiagnosticKind {
     MaxSteps,
     /// Two or more events fired at the same time (within `Options::simultaneous_tol`).
     SimultaneousEvents,
+    /// A qp constraint is weakly active (slack and multiplier both zero): the solution map
+    /// has a kink, and the gradient is one-sided.
+    Kink,
 }
 
 impl DiagnosticKind {
@@ -124,6 +127,7 @@ impl DiagnosticKind {
             DiagnosticKind::Nonfinite => "nonfinite",
             DiagnosticKind::MaxSteps => "max_steps",
             DiagnosticKind::SimultaneousEvents => "simultaneous_events",
+            DiagnosticKind::Kink => "kink",
         }
     }
 }
@@ -152,9 +156,10 @@ pub struct EventRecord {
     pub mode_before: usize,
     /// Mode after the event.
     pub mode_after: usize,
-    /// ∇ₓg · f⁻ at t_k⁻ (signed).
+    /// The total rate of the guard at t_k⁻, dg/dt = ∇ₓg · f⁻ + ∂ₜg (signed): what t_k' divides
+    /// by and what the grazing test measures (a pure time guard `t >= p` has slope 1).
     pub guard_slope: f64,
-    /// ∂ₜg at t_k (zero for time-independent guards); t_k' divides by guard_slope + guard_dt.
+    /// ∂ₜg at t_k (zero for time-independent guards), the part of `guard_slope` not along f.
     pub guard_dt: f64,
     /// Whether the crossing passed the transversality (cosine) test.
     pub transversal: bool,
@@ -203,8 +208,14 @@ pub struct Solution {
     pub params: Vec<f64>,
     /// C(θ) = ∫₀ᵀ ℓ dt + Σ_k φ_k + Φ(T, x(T)).
     pub cost: f64,
-    /// dC/dθ, one entry per parameter (empty when `Options::sensitivities` is false).
+    /// dC/dθ, one entry per parameter (empty when `Options::sensitivities` is false). At a
+    /// qp kink, the derivative from the right (θ → θ⁺ along each parameter).
     pub gradient: Vec<f64>,
+    /// The derivative from the left, when a qp of the model is at a kink (a `kink`
+    /// diagnostic); `gradient` is then the right one.
+    pub gradient_left: Option<Vec<f64>>,
+    /// Each qp of the model solved at (T, x(T), θ), in declaration order.
+    pub qp: Vec<crate::qp::QpState>,
     /// x(T) (after a Zeno accumulation: the limit state x*).
     pub x_final: Vec<f64>,
     /// ∂x(T)/∂θ, column-major n×p (empty without sensitivities).

@@ -4,6 +4,9 @@
 
 pub use crate::table::{bind_columns, Table, TableError, TableNeeds};
 pub use mvad_dsl::ir::sign;
+pub use mvad_runtime::qp::{
+    ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side,
+};
 pub use mvad_runtime::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
     ModelSens, Point, Switches, Trigger,

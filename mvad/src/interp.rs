@@ -3,24 +3,31 @@
 //!
 //! Each trait method runs one tape into a scratch register file kept in a `RefCell`, so
 //! no call allocates. Matrices are written entry by entry from the tape's non-zero
-//! outputs after one zero fill. [`HybridModel::rhs_sens`] is overridden with the fused
+//! outputs after one zero fill. [`ModelSens::rhs_sens`] is overridden with the fused
 //! kernel: f, the non-zero entries of f_x and f_θ in one pass, then
 //! Ṡ = f_θ + Σ_{(i,k) ∈ nz(f_x)} (f_x)_{ik} S_{k·}, the same sums in the same order as the
-//! generated code.
+//! generated code. The capability products (`ModelAdjoint`, `ModelSecondOrder`) live in
+//! `interp/products.rs`.
+//!
+//! A model with qps keeps a [`QpBank`]: a tape that reads qp solutions first has the bank
+//! evaluate them at its point (the data tapes fill each qp's data and Jacobian), then runs
+//! with the bank's u* and ∂u*/∂(x, θ, t) as inputs.
 
 use std::cell::RefCell;
 
 use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
-use mvad_dsl::ir::{self, Point};
+use mvad_dsl::ir::{self, Inputs, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
-use mvad_runtime::{
-    EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
-    Switches, Trigger,
-};
-
-use crate::table::{bind_columns, Table, TableError, TableNeeds};
+use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
+use mvad_runtime::{EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Switches, Trigger};
 use nalgebra::{DMatrix, DVector, Dyn};
+
+use products::SecondTapes;
+use tables::{Tables, TimeTapes};
+
+mod products;
+mod tables;
 
 /// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
 #[derive(Clone, Debug)]
@@ -36,6 +43,9 @@ struct ModeTapes {
     jac_p: Tape,
     dt: Tape,
     sens: Tape,
+    /// The non-zero f_x entries, then the non-zero f_θ entries (as in `second`).
+    jac: Tape,
+    second: SecondTapes,
     sparsity: Vec<(usize, usize)>,
     depends_on_t: bool,
 }
@@ -48,30 +58,14 @@ struct EventTapes {
     cost: Option<GradTapes>,
     /// A time event's τ (or start) and ∂τ/∂θ, and for `every` the period and its gradient.
     time: Option<TimeTapes>,
-    /// The table an `at each` event runs over.
-    table: Option<usize>,
-}
-
-/// τ (or the start of `every`), ∂τ/∂θ, and for `every` the period and its gradient.
-type TimeTapes = (Tape, Tape, Option<(Tape, Tape)>);
-
-/// The data tables of a model: its declarations and the columns it reads, bound to data.
-#[derive(Clone, Debug, Default)]
-struct Tables {
-    /// Declared (name, file).
-    decls: Vec<(String, String)>,
-    /// Columns read: (table, column name).
-    names: Vec<(usize, String)>,
-    /// Columns used bare as the times of an `at each` event: (column, event name).
-    times: Vec<(usize, String)>,
-    /// The bound values of each column (empty until [`InterpretedModel::bind_tables`]).
-    values: Vec<Vec<f64>>,
 }
 
 #[derive(Clone, Debug)]
 struct Scratch {
     regs: Vec<f64>,
     out: Vec<f64>,
+    /// Σᵢ vᵢ ∂(G_x)ₑ/∂xᵢ per G_x entry, for the directional second-order products.
+    w: Vec<f64>,
 }
 
 /// A model loaded from `.hyb` text, evaluated by tapes (`N = P = Dyn`).
@@ -90,10 +84,18 @@ pub struct InterpretedModel {
     observe_jac: Tape,
     running_cost: Option<GradTapes>,
     final_cost: Option<GradTapes>,
+    running_cost_second: Option<SecondTapes>,
     tables: Tables,
     scratch: RefCell<Scratch>,
-    /// The current row's values of every column (scratch of the event methods).
-    row: RefCell<Vec<f64>>,
+    /// Per qp: its data tape and their Jacobian's.
+    qp_tapes: Vec<(Tape, Tape)>,
+    qp_info: Vec<QpLayerInfo>,
+    qp_bank: RefCell<QpBank>,
+    /// Registers for the data tapes (run while `scratch` is borrowed).
+    qp_regs: RefCell<Vec<f64>>,
+    /// Whether the second-order products are difference quotients (a flow reads a qp of
+    /// the state; see `ModelKernels::second_order_by_differences`).
+    second_by_differences: bool,
 }
 
 type X = DVector<f64>;
@@ -137,7 +139,7 @@ impl InterpretedModel {
                 })
                 .collect(),
             observables: k.observables.clone(),
-            switches: k.switches.len(),
+            switches: k.nswitches(),
             has_running_cost: k.running_cost.is_some(),
             has_final_cost: k.final_cost.is_some(),
             has_horizon: k.horizon.is_some(),
@@ -146,7 +148,45 @@ impl InterpretedModel {
         let all = k.all_kernels();
         let nregs = all.iter().map(|k| k.nodes.len()).max().unwrap_or(0);
         let nout = all.iter().map(|k| k.len).max().unwrap_or(0);
-        let mut model = InterpretedModel {
+        let second = |so| SecondTapes::new(ar, so);
+        let nw = (k.modes.iter().map(|m| &m.second))
+            .chain(&k.running_cost_second)
+            .map(|so| so.x_entries.len())
+            .max()
+            .unwrap_or(0);
+        let qp_info: Vec<QpLayerInfo> = k
+            .qps
+            .iter()
+            .map(|q| QpLayerInfo {
+                name: q.name.clone(),
+                vars: q.vars.clone(),
+                kinds: q
+                    .kinds
+                    .iter()
+                    .map(|kind| match kind {
+                        ir::QpKind::Eq => ConstraintKind::Eq,
+                        ir::QpKind::Le => ConstraintKind::Le,
+                    })
+                    .collect(),
+                dynamic: q.dynamic,
+                switches: q.switches,
+            })
+            .collect();
+        InterpretedModel {
+            qp_tapes: k
+                .qps
+                .iter()
+                .map(|q| (tape(&q.data), tape(&q.data_jac)))
+                .collect(),
+            qp_bank: RefCell::new(QpBank::new(
+                qp_info.clone(),
+                k.nstates(),
+                k.nparams(),
+                QpOptions::default(),
+            )),
+            qp_info,
+            qp_regs: RefCell::new(vec![0.0; nregs]),
+            second_by_differences: k.second_order_by_differences(),
             n: k.nstates(),
             p: k.nparams(),
             x0: tape(&k.x0),
@@ -161,6 +201,8 @@ impl InterpretedModel {
                     jac_p: tape(&m.jac_p),
                     dt: tape(&m.dt),
                     sens: tape(&m.sens),
+                    jac: tape(&m.jac),
+                    second: second(&m.second),
                     sparsity: m.sparsity.clone(),
                     depends_on_t: m.depends_on_t,
                 })
@@ -177,7 +219,6 @@ impl InterpretedModel {
                         let period = tk.period.as_ref().map(|(a, b)| (tape(a), tape(b)));
                         (tape(&tk.time), tape(&tk.time_grad), period)
                     }),
-                    table: None,
                 })
                 .collect(),
             switches: k.switches.iter().map(grad).collect(),
@@ -185,69 +226,14 @@ impl InterpretedModel {
             observe_jac: tape(&k.observe_jac),
             running_cost: k.running_cost.as_ref().map(grad),
             final_cost: k.final_cost.as_ref().map(grad),
-            tables: Tables {
-                decls: k.tables.clone(),
-                names: k.columns.clone(),
-                times: k
-                    .bare_time_columns()
-                    .into_iter()
-                    .map(|(c, e)| (c, k.event_meta[e].name.clone()))
-                    .collect(),
-                values: Vec::new(),
-            },
+            running_cost_second: k.running_cost_second.as_ref().map(second),
+            tables: Tables::new(&k),
             scratch: RefCell::new(Scratch {
                 regs: vec![0.0; nregs],
                 out: vec![0.0; nout],
+                w: vec![0.0; nw],
             }),
-            row: RefCell::new(vec![f64::NAN; k.columns.len()]),
             info,
-        };
-        for (e, meta) in model.events.iter_mut().zip(&k.event_meta) {
-            if let Some(TimeKind::Each { table }) = meta.time {
-                e.table = Some(table);
-            }
-        }
-        model
-    }
-
-    /// The declared tables: (name, file as written in the model).
-    pub fn table_decls(&self) -> &[(String, String)] {
-        &self.tables.decls
-    }
-
-    /// Binds the model's data: one table per declaration, in declaration order. Checks that
-    /// the columns the model reads exist and that bare `at each` times do not decrease (errors
-    /// located in the table's file), and sets the row counts of the `at each` events.
-    pub fn bind_tables(&mut self, tables: &[&Table]) -> Result<(), TableError> {
-        let t = &self.tables;
-        let needs = TableNeeds {
-            tables: t.decls.iter().map(|(n, _)| n.as_str()).collect(),
-            columns: t.names.iter().map(|(i, c)| (*i, c.as_str())).collect(),
-            times: t.times.iter().map(|(c, e)| (*c, e.as_str())).collect(),
-        };
-        let (values, rows) = bind_columns(&needs, tables)?;
-        for (info, e) in self.info.events.iter_mut().zip(&self.events) {
-            if let Some(table) = e.table {
-                info.trigger = Trigger::Each {
-                    rows: rows.get(table).copied().unwrap_or(0),
-                };
-            }
-        }
-        self.tables.values = values;
-        Ok(())
-    }
-
-    /// Fills the row scratch with row `j` of the table of event `event` (NaN elsewhere).
-    fn fill_row(&self, event: usize, j: usize) {
-        let mut row = self.row.borrow_mut();
-        let table = self.events.get(event).and_then(|e| e.table);
-        for (c, v) in row.iter_mut().enumerate() {
-            *v = match (table, self.tables.names.get(c), self.tables.values.get(c)) {
-                (Some(t), Some((ct, _)), Some(col)) if *ct == t => {
-                    col.get(j).copied().unwrap_or(f64::NAN)
-                }
-                _ => f64::NAN,
-            };
         }
     }
 
@@ -261,6 +247,67 @@ impl InterpretedModel {
         X::from_column_slice(&self.info.param_defaults)
     }
 
+    /// Has the qp bank solve every qp at the point of `at` (on the frozen active sets of a
+    /// flow's point; with derivatives if `derivs`).
+    fn evaluate_qps(&self, at: &At<'_>, derivs: bool) {
+        let Point { t, x, p, .. } = at.pt;
+        self.qp_bank
+            .borrow_mut()
+            .evaluate(t, x, p, at.frozen, derivs, self.qp_fill(at));
+    }
+
+    /// The closure that writes qp q's data (and Jacobian) at the point of `at`.
+    fn qp_fill<'s>(
+        &'s self,
+        at: &'s At<'_>,
+    ) -> impl FnMut(usize, &mut [f64], Option<&mut [f64]>) + 's {
+        move |q, data, jac| {
+            let mut regs = self.qp_regs.borrow_mut();
+            let (dt, jt) = &self.qp_tapes[q];
+            dt.eval_with(&at.pt, at.hi, &mut regs, data);
+            if let Some(jac) = jac {
+                jt.eval_with(&at.pt, at.hi, &mut regs, jac);
+            }
+        }
+    }
+
+    /// Runs `tape` into `regs` with the row of `at`, first solving the qps it reads.
+    fn run(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64]) -> bool {
+        if !tape.reads_qp() {
+            let inputs = Inputs {
+                qp: QpValues::NONE,
+                row: at.row,
+            };
+            return tape.run_inputs(&at.pt, at.hi, &inputs, regs);
+        }
+        self.evaluate_qps(at, tape.reads_qp_derivs());
+        let bank = self.qp_bank.borrow();
+        let inputs = Inputs {
+            qp: QpValues {
+                u: bank.u(),
+                du: bank.du(),
+                n: self.n,
+                p: self.p,
+            },
+            row: at.row,
+        };
+        tape.run_inputs(&at.pt, at.hi, &inputs, regs)
+    }
+
+    /// Runs `tape` and writes its dense output (zeros included) into `out`; NaN on failure.
+    fn eval(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64], out: &mut [f64]) {
+        let ok = self.run(tape, at, regs);
+        let fill = if ok { 0.0 } else { f64::NAN };
+        out.iter_mut().take(tape.len()).for_each(|o| *o = fill);
+        if ok {
+            for (s, r) in tape.outputs() {
+                if let Some(o) = out.get_mut(s) {
+                    *o = regs[r];
+                }
+            }
+        }
+    }
+
     /// Runs `tape` and hands the registers and the dense output buffer to `f`.
     fn with<R>(
         &self,
@@ -269,15 +316,15 @@ impl InterpretedModel {
         f: impl FnOnce(bool, &[f64], &mut [f64]) -> R,
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
-        let ok = tape.run_row(&at.pt, at.hi, at.row, regs);
+        let Scratch { regs, out, .. } = &mut *sc;
+        let ok = self.run(tape, at, regs);
         f(ok, regs, out)
     }
 
     /// Writes a vector kernel into `v` (dense, zeros included).
     fn vec_out(&self, tape: &Tape, at: &At<'_>, v: &mut X) {
         let mut sc = self.scratch.borrow_mut();
-        tape.eval_row(&at.pt, at.hi, at.row, &mut sc.regs, v.as_mut_slice());
+        self.eval(tape, at, &mut sc.regs, v.as_mut_slice());
     }
 
     /// Writes a row-major matrix block of a kernel (slots `off..off + rows·cols`) into `m`.
@@ -307,7 +354,7 @@ impl InterpretedModel {
     fn scalar(&self, tape: &Tape, at: &At<'_>) -> f64 {
         let mut sc = self.scratch.borrow_mut();
         let mut out = [0.0];
-        tape.eval_row(&at.pt, at.hi, at.row, &mut sc.regs, &mut out);
+        self.eval(tape, at, &mut sc.regs, &mut out);
         out[0]
     }
 
@@ -315,8 +362,8 @@ impl InterpretedModel {
     fn grad(&self, g: &GradTapes, at: &At<'_>, gx: &mut X, gp: &mut X) -> f64 {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
-        g.grad.eval_row(&at.pt, at.hi, at.row, regs, out);
+        let Scratch { regs, out, .. } = &mut *sc;
+        self.eval(&g.grad, at, regs, out);
         copy_into(gx.as_mut_slice(), &out[..n]);
         copy_into(gp.as_mut_slice(), &out[n..n + p]);
         out[n + p]
@@ -332,11 +379,13 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
     dst[..k].copy_from_slice(&src[..k]);
 }
 
-/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest,
-/// `row` the current row's column values (event methods of `at each` events).
+/// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest;
+/// `frozen` is the whole switch set at a flow's point (qps are then solved on it); `row` the
+/// current row's column values (event methods of `at each` events).
 struct At<'a> {
     pt: Point<'a>,
     hi: &'a [u64],
+    frozen: Option<&'a Switches>,
     row: &'a [f64],
 }
 
@@ -350,6 +399,7 @@ fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
             sw: sw.low_word(),
         },
         hi: sw.high_words(),
+        frozen: Some(sw),
         row: &[],
     }
 }
@@ -364,6 +414,7 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
             sw: 0,
         },
         hi: &[],
+        frozen: None,
         row: &[],
     }
 }
@@ -386,6 +437,7 @@ fn pt_theta(p: &X) -> At<'_> {
             sw: 0,
         },
         hi: &[],
+        frozen: None,
         row: &[],
     }
 }
@@ -476,8 +528,7 @@ impl HybridModel for InterpretedModel {
         }
     }
     fn reset(&self, event: usize, j: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
-        self.fill_row(event, j);
-        let row = self.row.borrow();
+        let row = self.tables.row(event, j);
         match self.events.get(event) {
             Some(e) => self.vec_out(&e.reset, &pt_row(t, x, p, &row), xplus),
             None => xplus.fill(f64::NAN),
@@ -503,8 +554,7 @@ impl HybridModel for InterpretedModel {
         };
         let (n, np) = (self.n, self.p);
         let tape = &e.reset_jac;
-        self.fill_row(event, j);
-        let row = self.row.borrow();
+        let row = self.tables.row(event, j);
         self.with(tape, &pt_row(t, x, p, &row), |ok, regs, out| {
             Self::mat_out(tape, ok, regs, rx, n, 0);
             Self::mat_out(tape, ok, regs, rp, np, n * n);
@@ -521,56 +571,36 @@ impl HybridModel for InterpretedModel {
     }
 
     fn event_time(&self, event: usize, j: usize, p: &X) -> f64 {
-        let Some((tau, _, period)) = self.events.get(event).and_then(|e| e.time.as_ref()) else {
-            return f64::NAN;
-        };
-        self.fill_row(event, j);
-        let row = self.row.borrow();
-        let at = At {
-            row: &row,
-            ..pt_theta(p)
-        };
-        let first = self.scalar(tau, &at);
-        match period {
-            Some((per, _)) => first + j as f64 * self.scalar(per, &at),
-            None => first,
-        }
+        self.time_of(event, j, p)
     }
     fn event_time_grad(&self, event: usize, j: usize, p: &X, dtau: &mut X) {
-        let Some((_, grad, period)) = self.events.get(event).and_then(|e| e.time.as_ref()) else {
-            dtau.fill(f64::NAN);
-            return;
-        };
-        self.fill_row(event, j);
-        let row = self.row.borrow();
-        let at = At {
-            row: &row,
-            ..pt_theta(p)
-        };
-        self.vec_out(grad, &at, dtau);
-        if let Some((_, per_grad)) = period {
-            let mut sc = self.scratch.borrow_mut();
-            let Scratch { regs, out } = &mut *sc;
-            per_grad.eval_row(&at.pt, at.hi, at.row, regs, out);
-            for (d, g) in dtau.iter_mut().zip(out.iter()) {
-                *d += j as f64 * g;
-            }
-        }
+        self.time_grad_of(event, j, p, dtau);
     }
 
     fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
+        let at = pt0(t, x, p);
         match self.switches.get(j) {
-            Some(s) => self.scalar(&s.value, &pt0(t, x, p)),
-            None => f64::NAN,
+            Some(s) => self.scalar(&s.value, &at),
+            // Past the kinks' switching functions: the qps' constraints.
+            None => self.qp_bank.borrow_mut().switch_value(
+                j,
+                t,
+                x.as_slice(),
+                p.as_slice(),
+                self.qp_fill(&at),
+            ),
         }
     }
     fn switch_grad(&self, j: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
+        let at = pt0(t, x, p);
         match self.switches.get(j) {
-            Some(s) => self.grad(s, &pt0(t, x, p), gx, gp),
+            Some(s) => self.grad(s, &at, gx, gp),
             None => {
-                gx.fill(f64::NAN);
-                gp.fill(f64::NAN);
-                f64::NAN
+                let fill = self.qp_fill(&at);
+                let (gx, gp) = (gx.as_mut_slice(), gp.as_mut_slice());
+                let mut bank = self.qp_bank.borrow_mut();
+                bank.switch_grad(j, t, x.as_slice(), p.as_slice(), fill, gx, gp)
+                    .1
             }
         }
     }
@@ -581,7 +611,7 @@ impl HybridModel for InterpretedModel {
         }
         let mut sc = self.scratch.borrow_mut();
         let at = pt0(t, x, p);
-        self.observe.eval_with(&at.pt, at.hi, &mut sc.regs, y);
+        self.eval(&self.observe, &at, &mut sc.regs, y);
     }
     fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
         let nobs = self.info.observables.len();
@@ -635,8 +665,7 @@ impl HybridModel for InterpretedModel {
         }
     }
     fn event_cost(&self, event: usize, j: usize, t: f64, x: &X, p: &X) -> f64 {
-        self.fill_row(event, j);
-        let row = self.row.borrow();
+        let row = self.tables.row(event, j);
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
             Some(c) => self.scalar(&c.value, &pt_row(t, x, p, &row)),
             None => 0.0,
@@ -653,8 +682,7 @@ impl HybridModel for InterpretedModel {
         cx: &mut X,
         cp: &mut X,
     ) -> f64 {
-        self.fill_row(event, j);
-        let row = self.row.borrow();
+        let row = self.tables.row(event, j);
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
             Some(c) => self.grad(c, &pt_row(t, x, p, &row), cx, cp),
             None => {
@@ -680,6 +708,20 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
+
+    fn qps(&self) -> &[QpLayerInfo] {
+        &self.qp_info
+    }
+    fn qp_states(&self, t: f64, x: &X, p: &X) -> Result<Vec<QpState>, (usize, QpError)> {
+        self.evaluate_qps(&pt0(t, x, p), false);
+        self.qp_bank.borrow().states()
+    }
+    fn set_qp_side(&self, side: Side) {
+        self.qp_bank.borrow_mut().set_side(side);
+    }
+    fn qp_failure(&self) -> Option<(usize, QpError)> {
+        self.qp_bank.borrow().failure().map(|(q, e)| (q, e.clone()))
+    }
 }
 
 impl ModelSens for InterpretedModel {
@@ -704,9 +746,9 @@ impl ModelSens for InterpretedModel {
             return;
         }
         let mut sc = self.scratch.borrow_mut();
-        let Scratch { regs, out } = &mut *sc;
+        let Scratch { regs, out, .. } = &mut *sc;
         let at = at_sw(t, x, p, sw);
-        m.sens.eval_with(&at.pt, at.hi, regs, out);
+        self.eval(&m.sens, &at, regs, out);
         copy_into(f.as_mut_slice(), &out[..n]);
         let fp = &out[n + nnz..n + nnz + n * np];
         for r in 0..n {
@@ -722,6 +764,3 @@ impl ModelSens for InterpretedModel {
         }
     }
 }
-
-impl ModelAdjoint for InterpretedModel {}
-impl ModelSecondOrder for InterpretedModel {}

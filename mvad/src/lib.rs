@@ -9,8 +9,12 @@ pub use mvad_macros::hybrid;
 pub use mvad_runtime as runtime;
 pub use mvad_runtime::*;
 
+pub mod batch;
 pub mod interp;
+pub mod json;
 pub mod load;
+pub mod setup;
+pub mod suite;
 pub mod table;
 
 #[doc(hidden)]

@@ -561,3 +561,76 @@ fn every_semantic_error_class_is_located() {
         assert_located(&format!("{name}.hyb"), src.as_bytes(), *line, fragment);
     }
 }
+
+#[test]
+fn guard_slope_is_the_total_rate_so_a_pure_time_guard_has_slope_one() {
+    // dg/dt = ∇ₓg·f + ∂g/∂t at t_k⁻: `t >= tdose` has ∇ₓg = 0 and ∂g/∂t = 1; a guard on a
+    // state x with ẋ = 2 moving as t (x − t >= 0.5, crossed where 2t − t = 0.5) has 2 − 1 = 1.
+    let (_dir, p) = scratch(
+        "dose.hyb",
+        b"model Dose {
+            param tdose = 0.5; param c = 0.5;
+            state x = 0;
+            flow { der(x) = 2; }
+            event dose when t >= tdose { x = x + 1; }
+            event moving when x - t >= c + 1 { x = x - 10; }
+            cost = integral(x);
+            horizon 2;
+        }",
+    );
+    let v = json(&run_status(&["grad", &p, "--json"], 0));
+    let events = v["events"].as_array().expect("events");
+    assert_eq!(events.len(), 2, "{v}");
+    for ev in events {
+        assert_relative_eq!(
+            ev["guard_slope"].as_f64().expect("n"),
+            1.0,
+            max_relative = 1e-12
+        );
+        assert_eq!(ev["transversal"], true);
+    }
+    // t' of the dose: dt/dtdose = 1 (C = ∫x moves by −1 per unit of tdose before the
+    // second event, which the dose brings forward by 1/(2 − 1) = 1 per unit).
+    assert_relative_eq!(
+        events[0]["dt"]["tdose"].as_f64().expect("n"),
+        1.0,
+        max_relative = 1e-12
+    );
+}
+
+#[test]
+fn report_runs_a_suite_and_refuses_a_missing_one() {
+    let (dir, _) = scratch("x", b"");
+    let out = dir.path().join("report");
+    let o = run_status(
+        &[
+            "report",
+            "suite",
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--only",
+            "zeno e=0.5",
+        ],
+        0,
+    );
+    assert!(
+        stdout(&o).contains("2 cases, 2 passed, 0 failed"),
+        "{}",
+        stdout(&o)
+    );
+    let md = std::fs::read_to_string(out.join("README.md")).expect("README.md");
+    assert!(md.contains("| zeno e=0.5 |"), "{md}");
+    assert!(out.join("zeno-e-0-5.png").is_file());
+    run_status(&["report", "/nonexistent/suite", "--out", "/tmp/x"], 2);
+    run_status(
+        &[
+            "report",
+            "suite",
+            "--out",
+            "/tmp/x",
+            "--only",
+            "no such case",
+        ],
+        2,
+    );
+}

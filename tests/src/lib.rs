@@ -29,6 +29,15 @@ pub fn model_files() -> Vec<(String, String)> {
     out
 }
 
+/// Integration tolerances for comparisons at the level of rounding: rtol 1e-12, atol 1e-14.
+pub fn tight() -> mvad::Options {
+    mvad::Options {
+        rtol: 1e-12,
+        atol: 1e-14,
+        ..mvad::Options::default()
+    }
+}
+
 /// The source of `models/FILE`.
 pub fn model_source(file: &str) -> String {
     std::fs::read_to_string(format!("{}/../models/{file}", env!("CARGO_MANIFEST_DIR"))).expect(file)
@@ -53,5 +62,164 @@ impl Rng {
     /// Uniform in [lo, hi).
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.uniform()
+    }
+}
+
+use mvad::{HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelSecondOrder, ModelSens};
+use nalgebra::{DefaultAllocator, OMatrix, OVector};
+
+/// A model with the capability defaults: `Defaults(m)` answers every core method as `m` does
+/// and every capability ([`ModelSens`], [`ModelAdjoint`], [`ModelSecondOrder`]) with the
+/// trait's dense or finite-difference default, so tests can hold a model's own products
+/// against the defaults.
+pub struct Defaults<M>(pub M);
+
+type Xv<M> = OVector<f64, <M as ModelDims>::N>;
+type Pv<M> = OVector<f64, <M as ModelDims>::P>;
+type Nn<M> = OMatrix<f64, <M as ModelDims>::N, <M as ModelDims>::N>;
+type Np<M> = OMatrix<f64, <M as ModelDims>::N, <M as ModelDims>::P>;
+type Pt<'a, M> = mvad::Point<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
+
+impl<M: ModelDims> ModelDims for Defaults<M> {
+    type N = M::N;
+    type P = M::P;
+}
+
+impl<M: HybridModel> ModelSens for Defaults<M> where DefaultAllocator: ModelAlloc<M::N, M::P> {}
+impl<M: HybridModel> ModelAdjoint for Defaults<M> where DefaultAllocator: ModelAlloc<M::N, M::P> {}
+impl<M: HybridModel> ModelSecondOrder for Defaults<M> where DefaultAllocator: ModelAlloc<M::N, M::P> {}
+
+impl<M: HybridModel> HybridModel for Defaults<M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    fn info(&self) -> &mvad::ModelInfo {
+        self.0.info()
+    }
+    fn nstates(&self) -> M::N {
+        self.0.nstates()
+    }
+    fn nparams(&self) -> M::P {
+        self.0.nparams()
+    }
+    fn initial_state(&self, p: &Pv<M>, x0: &mut Xv<M>) {
+        self.0.initial_state(p, x0)
+    }
+    fn initial_state_jac(&self, p: &Pv<M>, dx0: &mut Np<M>) {
+        self.0.initial_state_jac(p, dx0)
+    }
+    fn horizon(&self, p: &Pv<M>) -> Option<f64> {
+        self.0.horizon(p)
+    }
+    fn horizon_grad(&self, p: &Pv<M>, dt: &mut Pv<M>) {
+        self.0.horizon_grad(p, dt)
+    }
+    fn rhs(&self, pt: Pt<'_, M>, f: &mut Xv<M>) {
+        self.0.rhs(pt, f)
+    }
+    fn rhs_jac_x(&self, pt: Pt<'_, M>, fx: &mut Nn<M>) {
+        self.0.rhs_jac_x(pt, fx)
+    }
+    fn rhs_jac_p(&self, pt: Pt<'_, M>, fp: &mut Np<M>) {
+        self.0.rhs_jac_p(pt, fp)
+    }
+    fn rhs_dt(&self, pt: Pt<'_, M>, ft: &mut Xv<M>) {
+        self.0.rhs_dt(pt, ft)
+    }
+    fn rhs_depends_on_t(&self, mode: usize) -> bool {
+        self.0.rhs_depends_on_t(mode)
+    }
+    fn guard(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
+        self.0.guard(k, t, x, p)
+    }
+    fn guard_grad(
+        &self,
+        k: usize,
+        t: f64,
+        x: &Xv<M>,
+        p: &Pv<M>,
+        gx: &mut Xv<M>,
+        gp: &mut Pv<M>,
+    ) -> f64 {
+        self.0.guard_grad(k, t, x, p, gx, gp)
+    }
+    fn reset(&self, k: usize, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>, xplus: &mut Xv<M>) {
+        self.0.reset(k, j, t, x, p, xplus)
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn reset_jac(
+        &self,
+        k: usize,
+        j: usize,
+        t: f64,
+        x: &Xv<M>,
+        p: &Pv<M>,
+        rx: &mut Nn<M>,
+        rp: &mut Np<M>,
+        rt: &mut Xv<M>,
+    ) {
+        self.0.reset_jac(k, j, t, x, p, rx, rp, rt)
+    }
+    fn event_time(&self, k: usize, j: usize, p: &Pv<M>) -> f64 {
+        self.0.event_time(k, j, p)
+    }
+    fn event_time_grad(&self, k: usize, j: usize, p: &Pv<M>, dtau: &mut Pv<M>) {
+        self.0.event_time_grad(k, j, p, dtau)
+    }
+    fn switch_value(&self, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
+        self.0.switch_value(j, t, x, p)
+    }
+    fn switch_grad(
+        &self,
+        j: usize,
+        t: f64,
+        x: &Xv<M>,
+        p: &Pv<M>,
+        gx: &mut Xv<M>,
+        gp: &mut Pv<M>,
+    ) -> f64 {
+        self.0.switch_grad(j, t, x, p, gx, gp)
+    }
+    fn observe(&self, t: f64, x: &Xv<M>, p: &Pv<M>, y: &mut [f64]) {
+        self.0.observe(t, x, p, y)
+    }
+    fn observe_jac(&self, t: f64, x: &Xv<M>, p: &Pv<M>, yx: &mut [f64], yp: &mut [f64]) {
+        self.0.observe_jac(t, x, p, yx, yp)
+    }
+    fn running_cost(&self, sw: &mvad::Switches, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
+        self.0.running_cost(sw, t, x, p)
+    }
+    fn running_cost_value_grad(
+        &self,
+        sw: &mvad::Switches,
+        t: f64,
+        x: &Xv<M>,
+        p: &Pv<M>,
+        lx: &mut Xv<M>,
+        lp: &mut Pv<M>,
+    ) -> f64 {
+        self.0.running_cost_value_grad(sw, t, x, p, lx, lp)
+    }
+    fn event_cost(&self, k: usize, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
+        self.0.event_cost(k, j, t, x, p)
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn event_cost_grad(
+        &self,
+        k: usize,
+        j: usize,
+        t: f64,
+        x: &Xv<M>,
+        p: &Pv<M>,
+        cx: &mut Xv<M>,
+        cp: &mut Pv<M>,
+    ) -> f64 {
+        self.0.event_cost_grad(k, j, t, x, p, cx, cp)
+    }
+    fn final_cost(&self, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
+        self.0.final_cost(t, x, p)
+    }
+    fn final_cost_grad(&self, t: f64, x: &Xv<M>, p: &Pv<M>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64 {
+        self.0.final_cost_grad(t, x, p, cx, cp)
     }
 }

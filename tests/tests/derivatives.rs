@@ -6,6 +6,12 @@
 //! gradient, ∂h/∂x, ∂h/∂θ, ℓ/φ/Φ partials, ∂x₀/∂θ and dT/dθ. Central differences use
 //! h = ε^(1/3)·|v| (ε^(1/3) at v = 0), so parameters like τ = 1e-8 get a relative step.
 //! Both doors are checked: the interpreted model and the `hybrid!`-compiled one.
+//!
+//! The capability products too ([`check_products`]), under the consistent switch word and
+//! under a random one (frozen branches are respected): λᵀf_x, λᵀf_θ, μᵀR_x, μᵀR_θ, μᵀR_t and
+//! μᵀ∂x₀/∂θ against λ, μ times the (checked) dense Jacobians, and the second-order products
+//! ∂ₓ(f_x S + f_θ)·v, ∂ₜ(f_x S + f_θ), ∂ₓ(ℓ_x S + ℓ_θ)·v, ∂ₜ(ℓ_x S + ℓ_θ) and ∂ₜℓ against
+//! central differences of the first-derivative kernels (`rhs_sens`, `running_cost_value_grad`).
 
 use mvad::interp::InterpretedModel;
 use mvad::{HybridModel, ModelAlloc};
@@ -126,17 +132,158 @@ fn fd_check(what: &str, pt: &Pt, wrt: Wrt, sym: &[f64], val: &dyn Fn(&Pt) -> Vec
         let dn = val(&q);
         let h2 = (v + h) - (v - h);
         for i in 0..nout {
-            let fd = (up[i] - dn[i]) / h2;
-            let s = sym[i * nvar + j];
-            let tol = 1e-6 * s.abs().max(fd.abs())
-                + 20.0 * f64::EPSILON * (up[i].abs() + dn[i].abs()) / h2
-                + 1e-9;
-            assert!(
-                (s - fd).abs() <= tol,
-                "{what}: d[{i}]/d{wrt:?}[{j}] symbolic {s:e} vs FD {fd:e} at {pt:?}"
-            );
+            let what = format!("{what}: d[{i}]/d{wrt:?}[{j}]");
+            assert_fd(&what, sym[i * nvar + j], up[i], dn[i], h2, pt);
         }
     }
+}
+
+/// `sym` against the central difference (up − dn)/h2: to 1e-6 relative, plus the rounding of
+/// up and dn amplified by 1/h2.
+fn assert_fd(what: &str, sym: f64, up: f64, dn: f64, h2: f64, pt: &Pt) {
+    let fd = (up - dn) / h2;
+    let tol =
+        1e-6 * sym.abs().max(fd.abs()) + 20.0 * f64::EPSILON * (up.abs() + dn.abs()) / h2 + 1e-9;
+    assert!(
+        (sym - fd).abs() <= tol,
+        "{what}: symbolic {sym:e} vs FD {fd:e} at {pt:?}"
+    );
+}
+
+/// `got` = Jᵀw for J (rows × cols, row-major `j`): to 8ε·(|J|ᵀ|w|)·rows (summation order).
+fn assert_vjp(what: &str, got: &[f64], j: &[f64], w: &[f64]) {
+    let cols = got.len();
+    for (k, g) in got.iter().enumerate() {
+        let want: f64 = w
+            .iter()
+            .enumerate()
+            .map(|(r, wr)| wr * j[r * cols + k])
+            .sum();
+        let bound: f64 = w
+            .iter()
+            .enumerate()
+            .map(|(r, wr)| (wr * j[r * cols + k]).abs())
+            .sum();
+        assert!(
+            (g - want).abs() <= 8.0 * f64::EPSILON * bound * w.len() as f64,
+            "{what}[{k}]: {g:e} vs {want:e}"
+        );
+    }
+}
+
+/// Checks the capability products of `m` at `pt` with switch word `sw` (see the module doc).
+pub fn check_products<M: HybridModel>(m: &M, pt: &Pt, sw: u64, rng: &mut Rng)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let sw = &mvad::Switches::from_bits(sw);
+    let info = m.info().clone();
+    let zn = || OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    let zp = || OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    let znn = || OMatrix::<f64, M::N, M::N>::zeros_generic(m.nstates(), m.nstates());
+    let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(m.nstates(), m.nparams());
+    let mut random = |v: &mut [f64]| v.iter_mut().for_each(|e| *e = rng.range(-1.0, 1.0));
+    let (mut lam, mut v, mut s) = (zn(), zn(), znp());
+    random(lam.as_mut_slice());
+    random(v.as_mut_slice());
+    random(s.as_mut_slice());
+    let (x, pv, t) = (vn(m, &pt.x), vp(m, &pt.p), pt.t);
+    // The step along v and in t, and the points x ± h v, t ± ht.
+    let h = f64::EPSILON.cbrt() * x.amax().max(1.0) / v.amax().max(f64::MIN_POSITIVE);
+    let (mut xu, mut xd) = (x.clone(), x.clone());
+    xu.axpy(h, &v, 1.0);
+    xd.axpy(-h, &v, 1.0);
+    let ht = f64::EPSILON.cbrt() * t.abs().max(1.0);
+    let (tu, td) = (t + ht, t - ht);
+    let compare = |what: &str, sym: &[f64], up: &[f64], dn: &[f64], h2: f64| {
+        for (i, ((a, u), d)) in sym.iter().zip(up).zip(dn).enumerate() {
+            assert_fd(&format!("{} {what}[{i}]", info.name), *a, *u, *d, h2, pt);
+        }
+    };
+
+    for mode in 0..info.modes.len() {
+        let what = |w: &str| format!("mode {mode} {w}");
+        let pt_at = |t: f64, x| mvad::Point::new(mode, sw, t, x, &pv);
+        // λᵀf_x, λᵀf_θ.
+        let (mut fx, mut fp) = (znn(), znp());
+        m.rhs_jac_x(pt_at(t, &x), &mut fx);
+        m.rhs_jac_p(pt_at(t, &x), &mut fp);
+        let (mut vx, mut vpp) = (zn(), zp());
+        m.rhs_vjp(pt_at(t, &x), &lam, &mut vx, &mut vpp);
+        let l = lam.as_slice();
+        assert_vjp(&what("λᵀf_x"), vx.as_slice(), &rows(&fx), l);
+        assert_vjp(&what("λᵀf_θ"), vpp.as_slice(), &rows(&fp), l);
+        // ∂ₓ(f_x S + f_θ)·v and ∂ₜ(f_x S + f_θ) against differences of rhs_sens.
+        let ds = |t: f64, x: &OVector<f64, M::N>| {
+            let (mut f, mut ds) = (zn(), znp());
+            m.rhs_sens(mvad::Point::new(mode, sw, t, x, &pv), &s, &mut f, &mut ds);
+            ds.as_slice().to_vec()
+        };
+        let mut out = znp();
+        m.rhs_sens_dir_x(pt_at(t, &x), &s, &v, &mut out);
+        compare(
+            &what("B v"),
+            out.as_slice(),
+            &ds(t, &xu),
+            &ds(t, &xd),
+            2.0 * h,
+        );
+        m.rhs_sens_dt(pt_at(t, &x), &s, &mut out);
+        compare(
+            &what("∂ₜṠ"),
+            out.as_slice(),
+            &ds(tu, &x),
+            &ds(td, &x),
+            tu - td,
+        );
+        if !m.rhs_depends_on_t(mode) {
+            assert!(out.iter().all(|&e| e == 0.0), "{}", what("autonomous ∂ₜṠ"));
+        }
+    }
+
+    // ∂ₓ(ℓ_x S + ℓ_θ)·v, ∂ₜ(ℓ_x S + ℓ_θ) and ∂ₜℓ against differences of ℓ and its gradient.
+    let lsens = |t: f64, x: &OVector<f64, M::N>| {
+        let (mut lx, mut lp) = (zn(), zp());
+        let l = m.running_cost_value_grad(sw, t, x, &pv, &mut lx, &mut lp);
+        lp.gemv_tr(1.0, &s, &lx, 1.0);
+        (l, lp.as_slice().to_vec())
+    };
+    let mut out = zp();
+    m.running_cost_sens_dir_x(sw, t, &x, &pv, &s, &v, &mut out);
+    compare(
+        "D v",
+        out.as_slice(),
+        &lsens(t, &xu).1,
+        &lsens(t, &xd).1,
+        2.0 * h,
+    );
+    let lt = m.running_cost_sens_dt(sw, t, &x, &pv, &s, &mut out);
+    let ((lu, su), (ld, sd)) = (lsens(tu, &x), lsens(td, &x));
+    compare("∂ₜq̇_θ", out.as_slice(), &su, &sd, tu - td);
+    compare("∂ₜℓ", &[lt], &[lu], &[ld], tu - td);
+
+    // μᵀR_x, μᵀR_θ, μᵀR_t per event and μᵀ∂x₀/∂θ.
+    let mu = lam.as_slice();
+    for k in 0..info.events.len() {
+        let what = |w: &str| format!("{} event {k} {w}", info.name);
+        let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
+        m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        let (mut vx, mut vpp) = (zn(), zp());
+        let vt = m.reset_vjp(k, 0, t, &x, &pv, &lam, &mut vx, &mut vpp);
+        assert_vjp(&what("μᵀR_x"), vx.as_slice(), &rows(&rx), mu);
+        assert_vjp(&what("μᵀR_θ"), vpp.as_slice(), &rows(&rp), mu);
+        assert_vjp(&what("μᵀR_t"), &[vt], rt.as_slice(), mu);
+    }
+    let mut dx0 = znp();
+    m.initial_state_jac(&pv, &mut dx0);
+    let mut v0 = zp();
+    m.initial_state_vjp(&pv, &lam, &mut v0);
+    assert_vjp(
+        &format!("{} μᵀ∂x₀/∂θ", info.name),
+        v0.as_slice(),
+        &rows(&dx0),
+        mu,
+    );
 }
 
 /// A scalar s(t, x, θ) of `m` whose gradient method `grad` fills ∂ₓs and ∂θs and returns
@@ -332,15 +479,46 @@ where
         .fold(0, |w, j| w | (1 << j))
 }
 
+/// The switch bits (0..64) of the model's qp constraints.
+fn qp_switch_mask<M: HybridModel>(m: &M) -> u64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut mask = 0u64;
+    for q in m.qps() {
+        if let Some(first) = q.switches {
+            let le = q
+                .kinds
+                .iter()
+                .filter(|k| **k == mvad::qp::ConstraintKind::Le)
+                .count();
+            for j in first..(first + le).min(64) {
+                mask |= 1 << j;
+            }
+        }
+    }
+    mask
+}
+
 fn check_all<M: HybridModel>(m: &M, seed: u64, npoints: usize)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let mut rng = Rng::new(seed);
+    let mut rng_products = Rng::new(seed ^ 0x5eed);
+    let nsw = m.info().switches.min(64) as u32;
     for _ in 0..npoints {
         let pt = random_point(m, &mut rng);
         let sw = consistent_switches(m, &pt);
         check_model(m, &pt, sw, &mut rng);
+        check_products(m, &pt, sw, &mut rng_products);
+        // Any frozen word (the branches need not be the active ones) — except for the bits
+        // of qp constraints, which must hold a consistent active set (|u| ≤ 1 held active on
+        // both sides at once has no solution): those keep the point's own bits.
+        let qp_bits = qp_switch_mask(m);
+        let random_word = (rng_products.uniform() * 2f64.powi(nsw as i32)) as u64;
+        let random_word = (random_word & !qp_bits) | (sw & qp_bits);
+        check_products(m, &pt, random_word, &mut rng_products);
     }
 }
 
@@ -367,6 +545,8 @@ fn compiled_models_match_finite_differences() {
     check_all(&models::stiff_relay::StiffRelay::new(), 4, 20);
     check_all(&models::thermostat::Thermostat::new(), 5, 20);
     check_all(&models::zeno_ball::ZenoBall::new(), 6, 20);
+    check_all(&models::qp_kink::QpKink::new(), 13, 20);
+    check_all(&models::qp_cart::QpCart::new(), 14, 20);
     check_all(&Sink::new(), 12, 60);
     let a = models::queue::Arrivals::generate(10, 1);
     let q = models::queue::Queue::new(models::queue::QueueTables {

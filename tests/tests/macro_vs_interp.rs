@@ -2,9 +2,10 @@
 //! straight-line code) and the `InterpretedModel` (tapes, dynamic sizes) give the same
 //! values — f, Jacobians, the fused sensitivity, guards and their gradients, resets and
 //! their Jacobians, switching functions, observables, cost values and partials, x₀,
-//! ∂x₀/∂θ and the horizon — to 1e-14 relative at random states, params, times and switch
-//! words. The hand-written `mvad_runtime::fixtures::Ball` matches the compiled bouncing
-//! ball exactly.
+//! ∂x₀/∂θ and the horizon — and their capability products (the vector–Jacobian products of
+//! the flow, the resets and x₀, and the second-order products of the flow and ℓ) to 1e-14
+//! relative at random states, params, times and switch words. The hand-written
+//! `mvad_runtime::fixtures::Ball` matches the compiled bouncing ball exactly.
 
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
 use mvad::interp::InterpretedModel;
@@ -130,6 +131,61 @@ where
     out
 }
 
+/// Every capability product of `m` at one point, labelled: λᵀf_x, λᵀf_θ, ∂ₓ(f_x S + f_θ)·v
+/// and ∂ₜ(f_x S + f_θ) per mode, μᵀR_x, μᵀR_θ, μᵀR_t per event, μᵀ∂x₀/∂θ, ∂ₓ(ℓ_x S + ℓ_θ)·v,
+/// ∂ₜ(ℓ_x S + ℓ_θ) and ∂ₜℓ. `w` holds λ = μ and v (n each).
+fn products<M: HybridModel>(
+    m: &M,
+    (x, p, t, sw): (&[f64], &[f64], f64, u64),
+    s: &[f64],
+    w: &[f64],
+) -> Vec<(String, Vec<f64>)>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let sw = &mvad::Switches::from_bits(sw);
+    let (nd, pd) = (m.nstates(), m.nparams());
+    let n = x.len();
+    let vec_n =
+        |v: &[f64]| OVector::<f64, M::N>::from_iterator_generic(nd, Const::<1>, v.iter().copied());
+    let zp = || OVector::<f64, M::P>::zeros_generic(pd, Const::<1>);
+    let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(nd, pd);
+    let (xv, lam, v) = (vec_n(x), vec_n(&w[..n]), vec_n(&w[n..]));
+    let pv = OVector::<f64, M::P>::from_iterator_generic(pd, Const::<1>, p.iter().copied());
+    let mut sv = znp();
+    sv.as_mut_slice().copy_from_slice(s);
+    let mut out: Vec<(String, Vec<f64>)> = Vec::new();
+    let mut put = |k: String, v: &[f64]| out.push((k, v.to_vec()));
+    for mode in 0..m.info().modes.len() {
+        let pt = mvad::Point::new(mode, sw, t, &xv, &pv);
+        let (mut vx, mut vp) = (vec_n(x), zp());
+        m.rhs_vjp(pt, &lam, &mut vx, &mut vp);
+        put(format!("vjp_x{mode}"), vx.as_slice());
+        put(format!("vjp_p{mode}"), vp.as_slice());
+        let mut o = znp();
+        m.rhs_sens_dir_x(pt, &sv, &v, &mut o);
+        put(format!("Bv{mode}"), o.as_slice());
+        m.rhs_sens_dt(pt, &sv, &mut o);
+        put(format!("dS_dt{mode}"), o.as_slice());
+    }
+    for k in 0..m.info().events.len() {
+        let (mut vx, mut vp) = (vec_n(x), zp());
+        let vt = m.reset_vjp(k, 0, t, &xv, &pv, &lam, &mut vx, &mut vp);
+        put(format!("reset_vjp_x{k}"), vx.as_slice());
+        put(format!("reset_vjp_p{k}"), vp.as_slice());
+        put(format!("reset_vjp_t{k}"), &[vt]);
+    }
+    let mut vp = zp();
+    m.initial_state_vjp(&pv, &lam, &mut vp);
+    put("x0_vjp".into(), vp.as_slice());
+    m.running_cost_sens_dir_x(sw, t, &xv, &pv, &sv, &v, &mut vp);
+    put("Dv".into(), vp.as_slice());
+    let lt = m.running_cost_sens_dt(sw, t, &xv, &pv, &sv, &mut vp);
+    put("dqp_dt".into(), vp.as_slice());
+    put("dl_dt".into(), &[lt]);
+    out
+}
+
 /// [`snapshot`] of a loaded model (outside any generic where-clause, which would shadow
 /// the `Dyn` allocator impls).
 fn snapshot_interp(
@@ -141,6 +197,16 @@ fn snapshot_interp(
     s: &[f64],
 ) -> Vec<(String, Vec<f64>)> {
     snapshot(m, x, p, t, sw, s)
+}
+
+/// [`products`] of a loaded model (see [`snapshot_interp`]).
+fn products_interp(
+    m: &InterpretedModel,
+    at: (&[f64], &[f64], f64, u64),
+    s: &[f64],
+    w: &[f64],
+) -> Vec<(String, Vec<f64>)> {
+    products(m, at, s, w)
 }
 
 /// Compares the compiled model `c` with the model loaded from `src` at random points.
@@ -164,8 +230,11 @@ where
         let s: Vec<f64> = (0..n * p).map(|_| rng.range(-2.0, 2.0)).collect();
         let t = rng.range(0.0, 3.0);
         let sw = (rng.uniform() * 2f64.powi(info.switches.min(52) as i32)) as u64;
-        let a = snapshot(c, &x, &th, t, sw, &s);
-        let b = snapshot_interp(&i, &x, &th, t, sw, &s);
+        let w: Vec<f64> = (0..2 * n).map(|_| rng.range(-2.0, 2.0)).collect();
+        let mut a = snapshot(c, &x, &th, t, sw, &s);
+        let mut b = snapshot_interp(&i, &x, &th, t, sw, &s);
+        a.extend(products(c, (&x, &th, t, sw), &s, &w));
+        b.extend(products_interp(&i, (&x, &th, t, sw), &s, &w));
         assert_eq!(a.len(), b.len());
         for ((ka, va), (kb, vb)) in a.iter().zip(&b) {
             assert_eq!(ka, kb);
@@ -199,6 +268,8 @@ fn compiled_and_interpreted_models_agree() {
         5,
     );
     agree(&models::zeno_ball::ZenoBall::new(), &m("zeno_ball.hyb"), 6);
+    agree(&models::qp_kink::QpKink::new(), &m("qp_kink.hyb"), 9);
+    agree(&models::qp_cart::QpCart::new(), &m("qp_cart.hyb"), 10);
     agree(&Sink::new(), SINK, 7);
     agree(
         &compiled::Tiny::new(),

@@ -8,7 +8,9 @@
 //! | `const` value | numbers and earlier consts |
 //! | `param` default | numbers and consts |
 //! | `state` initial value, `horizon` | numbers, consts, params |
-//! | flows, guards, resets, observables, cost terms | consts, params, states, observables, `t` |
+//! | flows, guards, resets, observables, cost terms | consts, params, states, observables, `t`, qp solutions `NAME.VAR` |
+//! | the objective and constraints of a qp | its own variables, consts, params, states, `t` |
+//! | a static cost term | consts, params, solutions of static qps |
 //!
 //! After [`check`] returns no error the model satisfies everything [`crate::lower`]
 //! relies on: names resolve, calls are known with the right arity, guards and `if`
@@ -45,7 +47,8 @@ pub const FUNCTIONS: &[(&str, usize)] = &[
 /// The keywords of the language (reserved, together with [`FUNCTIONS`] and `t`).
 pub const KEYWORDS: &[&str] = &[
     "model", "param", "const", "state", "flow", "mode", "initial", "event", "when", "observe",
-    "cost", "horizon", "der", "integral", "sum", "final", "if", "then", "else", "t",
+    "cost", "horizon", "der", "integral", "sum", "final", "if", "then", "else", "t", "qp",
+    "minimize", "subject",
 ];
 
 /// Rust keywords: names become Rust identifiers in `hybrid!`'s output, so they are
@@ -72,6 +75,8 @@ pub fn is_reserved(name: &str) -> bool {
 pub fn check(model: &Model) -> Vec<Diagnostic> {
     let mut out = Vec::new();
     out.extend(check_has_states(model));
+    out.extend(check_stateless(model));
+    out.extend(check_qps(model));
     out.extend(check_reserved_names(model));
     out.extend(check_duplicates(model));
     out.extend(check_flow_or_modes(model));
@@ -99,6 +104,7 @@ enum Kind {
     Const(usize),
     State,
     Observable,
+    Qp,
 }
 
 impl Kind {
@@ -108,6 +114,7 @@ impl Kind {
             Kind::Const(_) => "const",
             Kind::State => "state",
             Kind::Observable => "observable",
+            Kind::Qp => "qp",
         }
     }
 }
@@ -125,6 +132,7 @@ fn symbols(model: &Model) -> HashMap<&str, (Kind, Span)> {
             }
             Item::State(s) => (Kind::State, &s.name),
             Item::Observe(o) => (Kind::Observable, &o.name),
+            Item::Qp(q) => (Kind::Qp, &q.name),
             _ => continue,
         };
         map.entry(id.name.as_str()).or_insert((kind, id.span));
@@ -147,6 +155,10 @@ enum Site<'a> {
     EventTime(Option<&'a Ident>),
     /// Flows, guards, resets, observables, cost terms.
     Dynamic,
+    /// The objective or a constraint of a qp.
+    Qp(&'a crate::ast::Qp),
+    /// A static cost term (written bare in `cost = ...;`).
+    StaticTerm,
 }
 
 /// Every top-level expression of the model with its site, in source order.
@@ -191,14 +203,22 @@ fn sites(model: &Model) -> Vec<(Site<'_>, &Expr)> {
             Item::Observe(o) => out.push((Site::Dynamic, &o.value)),
             Item::Cost(c) => {
                 for t in &c.terms {
-                    let e = match &t.kind {
-                        CostKind::Integral(e) | CostKind::Final(e) => e,
-                        CostKind::Sum { value, .. } => value,
+                    let (site, e) = match &t.kind {
+                        CostKind::Integral(e) | CostKind::Final(e) => (Site::Dynamic, e),
+                        CostKind::Sum { value, .. } => (Site::Dynamic, value),
+                        CostKind::Static(e) => (Site::StaticTerm, e),
                     };
-                    out.push((Site::Dynamic, e));
+                    out.push((site, e));
                 }
             }
             Item::Horizon(h) => out.push((Site::Horizon, &h.value)),
+            Item::Qp(q) => {
+                out.push((Site::Qp(q), &q.objective));
+                for c in &q.constraints {
+                    out.push((Site::Qp(q), &c.lhs));
+                    out.push((Site::Qp(q), &c.rhs));
+                }
+            }
         }
     }
     out
@@ -281,9 +301,10 @@ fn event_label(e: &Event) -> String {
 
 // ------------------------------------------------------------------ checks
 
-/// A model must declare at least one state.
+/// A model must declare at least one state, unless it declares a qp (a stateless model,
+/// see [`check_stateless`]).
 pub fn check_has_states(model: &Model) -> Vec<Diagnostic> {
-    if model.states().next().is_some() {
+    if model.states().next().is_some() || model.qps().next().is_some() {
         return Vec::new();
     }
     vec![Diagnostic::new(
@@ -304,6 +325,10 @@ pub fn check_reserved_names(model: &Model) -> Vec<Diagnostic> {
             Item::Observe(o) => names.push(&o.name),
             Item::Mode(m) => names.push(&m.name),
             Item::Table(t) => names.push(&t.name),
+            Item::Qp(q) => {
+                names.push(&q.name);
+                names.extend(&q.vars);
+            }
             _ => {}
         }
     }
@@ -354,6 +379,7 @@ pub fn check_duplicates(model: &Model) -> Vec<Diagnostic> {
             Item::Const(c) => dup(&mut values, &c.name, "declaration of"),
             Item::State(s) => dup(&mut values, &s.name, "declaration of"),
             Item::Observe(o) => dup(&mut values, &o.name, "declaration of"),
+            Item::Qp(q) => dup(&mut values, &q.name, "declaration of"),
             Item::Mode(m) => dup(&mut modes, &m.name, "mode"),
             Item::Table(t) => dup(&mut tables, &t.name, "table"),
             _ => {}
@@ -403,6 +429,7 @@ pub fn check_flow_or_modes(model: &Model) -> Vec<Diagnostic> {
             )
             .with_help("put the equations of `flow` into each mode, or drop the modes")]
         }
+        (None, None) if is_stateless(model) => Vec::new(),
         (None, None) => vec![Diagnostic::new(
             model.name.span,
             format!(
@@ -670,8 +697,10 @@ pub fn check_conditions(model: &Model) -> Vec<Diagnostic> {
 }
 
 mod names;
+mod qp;
 mod time_events;
 pub use names::{check_names, check_observables};
+pub use qp::{check_qps, check_stateless, is_stateless};
 pub use time_events::check_time_events;
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 
 use std::collections::{HashMap, HashSet};
 
+use super::qp::{check_column, qps_with_var};
 use super::{all_exprs, function_arity, sites, suggest, symbols, walk_expr, Kind, Site};
 use crate::ast::{Condition, Expr, ExprKind, Ident, Model, MAX_DEPTH};
 use crate::diag::Diagnostic;
@@ -25,10 +26,22 @@ pub fn check_names(model: &Model) -> Vec<Diagnostic> {
                     ));
                 }
             }
+            ExprKind::Column { table, column } => {
+                if let Some(d) = check_dotted(model, &syms, site, e, table, column) {
+                    if reported.insert(format!("{}@{}", d.message, d.span.start)) {
+                        out.push(d);
+                    }
+                }
+            }
             ExprKind::Name(id) => {
                 let name = id.name.as_str();
+                if let Site::Qp(q) = site {
+                    if q.vars.iter().any(|v| v.name == id.name) {
+                        continue;
+                    }
+                }
                 match syms.get(name) {
-                    None => out.push(undefined(id, &syms)),
+                    None => out.push(undefined(id, &syms, &qps_with_var(model, name))),
                     Some(&(kind, decl)) => {
                         if let Some(d) = scope_error(site, id, kind, decl) {
                             if reported.insert(d.message.clone()) {
@@ -45,7 +58,7 @@ pub fn check_names(model: &Model) -> Vec<Diagnostic> {
 }
 
 /// How a non-dynamic site is named in messages (`None` for dynamic sites).
-fn static_site(site: Site<'_>) -> Option<String> {
+pub(super) fn static_site(site: Site<'_>) -> Option<String> {
     match site {
         Site::ConstValue(_, c) => Some(format!("const `{}`", c.name)),
         Site::ParamDefault(p) => Some(format!("the default value of param `{}`", p.name)),
@@ -53,15 +66,86 @@ fn static_site(site: Site<'_>) -> Option<String> {
         Site::Horizon => Some("the horizon".to_string()),
         Site::EventTime(Some(e)) => Some(format!("the time of event `{}`", e.name)),
         Site::EventTime(None) => Some("the time of an event".to_string()),
-        Site::Dynamic => None,
+        Site::StaticTerm => Some("a static cost term".to_string()),
+        Site::Dynamic | Site::Qp(_) => None,
     }
 }
 
-fn undefined(id: &Ident, syms: &HashMap<&str, (Kind, Span)>) -> Diagnostic {
+/// Resolves a dotted name `NAME.VAR`: NAME is a table (VAR a column, which only the table's
+/// file can confirm; where a row is current is checked by [`super::time_events`]) or a qp
+/// (then [`check_column`]). A located error when NAME is neither, or both.
+fn check_dotted(
+    model: &Model,
+    syms: &HashMap<&str, (Kind, Span)>,
+    site: Site<'_>,
+    e: &Expr,
+    table: &Ident,
+    column: &Ident,
+) -> Option<Diagnostic> {
+    let name = table.name.as_str();
+    let declared = model.tables().find(|t| t.name.name == name);
+    let qp = model.qps().find(|q| q.name.name == name);
+    let (has_tables, has_qps) = (
+        model.tables().next().is_some(),
+        model.qps().next().is_some(),
+    );
+    let noun = match (has_tables, has_qps) {
+        (true, false) => "table",
+        (false, true) => "qp",
+        _ => "table or qp",
+    };
+    match (declared, qp) {
+        (Some(t), Some(q)) => Some(
+            Diagnostic::new(
+                table.span,
+                format!(
+                    "`{name}.{}` is ambiguous: `{name}` is a table and a qp",
+                    column.name
+                ),
+            )
+            .with_label(t.name.span, "the table")
+            .with_label(q.name.span, "the qp")
+            .with_help("rename the table or the qp"),
+        ),
+        (Some(_), None) => None,
+        (None, Some(q)) => check_column(q, syms, site, e, column),
+        (None, None) => Some(match syms.get(name) {
+            Some(&(kind, decl)) => Diagnostic::new(
+                table.span,
+                format!(
+                    "{} `{name}` is not a {noun}: `{name}.{}` names nothing",
+                    kind.noun(),
+                    column.name
+                ),
+            )
+            .with_label(decl, "declared here"),
+            None => {
+                let d = Diagnostic::new(table.span, format!("unknown {noun} `{name}`"));
+                let known = (model.tables().map(|t| t.name.name.as_str()))
+                    .chain(model.qps().map(|q| q.name.name.as_str()));
+                match suggest(name, known) {
+                    Some(s) => d.with_help(format!("did you mean `{s}`?")),
+                    None if has_tables || has_qps => d,
+                    None => d.with_help(
+                        "declare a table with `table NAME = \"FILE.csv\";` or a qp with \
+                         `qp NAME(VAR, ...) { ... }`",
+                    ),
+                }
+            }
+        }),
+    }
+}
+
+fn undefined(id: &Ident, syms: &HashMap<&str, (Kind, Span)>, qps: &[&str]) -> Diagnostic {
     let name = id.name.as_str();
     let d = Diagnostic::new(id.span, format!("undefined name `{name}`"));
     if function_arity(name).is_some() {
         return d.with_help(format!("`{name}` is a function: call it as `{name}(...)`"));
+    }
+    if let Some(q) = qps.first() {
+        return d.with_help(format!(
+            "`{name}` is a variable of qp `{q}`: write `{q}.{name}` for its solution"
+        ));
     }
     match suggest(name, syms.keys().copied()) {
         Some(s) => d.with_help(format!("did you mean `{s}`?")),
@@ -72,8 +156,32 @@ fn undefined(id: &Ident, syms: &HashMap<&str, (Kind, Span)>) -> Diagnostic {
 fn scope_error(site: Site<'_>, id: &Ident, kind: Kind, decl: Span) -> Option<Diagnostic> {
     let name = id.name.as_str();
     let noun = kind.noun();
+    if kind == Kind::Qp {
+        return Some(
+            Diagnostic::new(id.span, format!("qp `{name}` is not a value"))
+                .with_label(decl, "declared here")
+                .with_help(format!("write `{name}.VAR` for a variable of its solution")),
+        );
+    }
     let (ok, help) = match site {
         Site::Dynamic => (true, ""),
+        Site::Qp(q) => {
+            if matches!(kind, Kind::Param | Kind::Const(_) | Kind::State) {
+                return None;
+            }
+            return Some(
+                Diagnostic::new(
+                    id.span,
+                    format!("the data of qp `{}` cannot depend on {noun} `{name}`", q.name.name),
+                )
+                .with_label(decl, "declared here")
+                .with_help("a qp's objective and constraints may use its variables, consts, params, states and `t`"),
+            );
+        }
+        Site::StaticTerm => (
+            matches!(kind, Kind::Const(_) | Kind::Param),
+            "a static term may use only numbers, consts, params and static qp solutions; wrap it in `final(..)` or `integral(..)`",
+        ),
         Site::ConstValue(order, c) => match kind {
             Kind::Const(k) if k < order => (true, ""),
             Kind::Const(_) => {

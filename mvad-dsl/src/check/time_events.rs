@@ -1,7 +1,9 @@
 //! Rules of time events and data tables.
 //!
-//! - Every `TABLE.COL` names a declared table (its columns are known only once the CSV file is
-//!   read, so the loader checks them, located in the file).
+//! - A `TABLE.COL` whose TABLE is declared reads a column (its columns are known only once the
+//!   CSV file is read, so the loader checks them, located in the file). What a dotted name
+//!   resolves to (a table, a qp, neither) is a name rule ([`super::names`]); the rules below
+//!   concern the names that resolve to tables.
 //! - `at each EXPR` reads columns of exactly one table: the event runs over that table's rows.
 //! - A column is read only where a row is current: in the times, the reset block and the
 //!   `sum(EVENT, ..)` cost terms of an `at each` event over the column's table.
@@ -11,8 +13,8 @@
 
 use std::collections::{HashMap, HashSet};
 
-use super::{all_exprs, suggest, walk_expr};
-use crate::ast::{CostKind, Event, Expr, ExprKind, Ident, Model, Trigger};
+use super::{all_exprs, walk_expr};
+use crate::ast::{CostKind, Event, Expr, ExprKind, Model, Trigger};
 use crate::diag::Diagnostic;
 use crate::span::Span;
 
@@ -23,19 +25,12 @@ pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
         tables.entry(t.name.name.as_str()).or_insert(t.name.span);
     }
     let mut out = Vec::new();
-    for (_, e) in all_exprs(model) {
-        if let ExprKind::Column { table, .. } = &e.kind {
-            if !tables.contains_key(table.name.as_str()) {
-                out.push(unknown_table(table, &tables));
-            }
-        }
-    }
     let mut allowed: HashSet<*const Expr> = HashSet::new();
     for (_, ev) in model.all_events() {
         let Trigger::Each(times) = &ev.trigger else {
             continue;
         };
-        let read = tables_read(times);
+        let read = tables_read(model, times);
         // Columns of an event whose times are wrong get no errors of their own.
         let excuse = |allowed: &mut HashSet<*const Expr>| {
             for x in event_row_exprs(model, ev, times) {
@@ -116,12 +111,16 @@ pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
     out
 }
 
-/// The tables a time expression reads, in order of first use, with the span of that use.
-fn tables_read(e: &Expr) -> Vec<(&str, Span)> {
+/// The tables a time expression reads (its dotted names that are not only qps: an unknown or
+/// ambiguous one is reported by [`super::names`] and counts as a table here, so that it has no
+/// follow-on error), in order of first use, with the span of that use.
+fn tables_read<'a>(model: &Model, e: &'a Expr) -> Vec<(&'a str, Span)> {
     let mut out: Vec<(&str, Span)> = Vec::new();
     walk_expr(e, &mut |x| {
         if let ExprKind::Column { table, .. } = &x.kind {
-            if !out.iter().any(|(t, _)| *t == table.name) {
+            let qp = model.qps().any(|q| q.name.name == table.name)
+                && !model.tables().any(|t| t.name.name == table.name);
+            if !qp && !out.iter().any(|(t, _)| *t == table.name) {
                 out.push((table.name.as_str(), x.span));
             }
         }
@@ -157,15 +156,6 @@ fn event_label(e: &Event) -> String {
     match &e.name {
         Some(n) => format!("event `{}`", n.name),
         None => "the event".to_string(),
-    }
-}
-
-fn unknown_table(table: &Ident, tables: &HashMap<&str, Span>) -> Diagnostic {
-    let d = Diagnostic::new(table.span, format!("unknown table `{}`", table.name));
-    match suggest(&table.name, tables.keys().copied()) {
-        Some(s) => d.with_help(format!("did you mean `{s}`?")),
-        None if tables.is_empty() => d.with_help("declare it with `table NAME = \"FILE.csv\";`"),
-        None => d,
     }
 }
 

@@ -10,7 +10,7 @@ use crate::schedule::{GradKernels, Kernel};
 
 /// Operator precedence of a rendered expression (higher binds tighter).
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-enum Prec {
+pub(super) enum Prec {
     If,
     Add,
     Mul,
@@ -31,12 +31,41 @@ pub(super) struct Body {
     pub(super) lets: TokenStream,
     /// Value tokens of each output, as (slot, value).
     pub(super) outputs: Vec<(usize, TokenStream)>,
-    /// Whether each output's tokens are an `if` expression (lowest precedence).
-    pub(super) is_if: Vec<bool>,
+    /// The precedence of each output's tokens (`If` the lowest).
+    pub(super) prec: Vec<Prec>,
+}
+
+impl Body {
+    /// Output `k` as an operand of `*` on either side: in parentheses unless it is an atom or
+    /// a unary minus, so a product keeps the association the tape evaluates.
+    pub(super) fn factor(&self, k: usize) -> TokenStream {
+        let t = &self.outputs[k].1;
+        if self.prec[k] >= Prec::Unary {
+            t.clone()
+        } else {
+            quote!((#t))
+        }
+    }
+
+    /// Output `k` as an operand of a sum (in parentheses only when it is an `if`).
+    pub(super) fn term(&self, k: usize) -> TokenStream {
+        let t = &self.outputs[k].1;
+        if self.prec[k] == Prec::If {
+            quote!((#t))
+        } else {
+            t.clone()
+        }
+    }
 }
 
 pub(super) struct Gen<'a> {
     pub(super) ar: &'a ExprArena,
+    /// Whether the bodies being generated evaluate under frozen switch bits `sw` (flows
+    /// and ℓ), so that qps read there are solved on their frozen active sets.
+    pub(super) frozen: std::cell::Cell<bool>,
+    /// Number of states and params: the row length n + p + 1 of the qp derivatives `qd`.
+    pub(super) n: usize,
+    pub(super) p: usize,
 }
 
 impl Gen<'_> {
@@ -55,7 +84,7 @@ impl Gen<'_> {
         }
         let mut rendered: Vec<Option<Rendered>> = vec![None; top];
         let mut depth = vec![0u32; top];
-        let mut lets = TokenStream::new();
+        let mut lets = self.qp_prelude(kernel);
         for &id in &kernel.nodes {
             let node = ar.node(id);
             let r = self.render(node, &rendered);
@@ -81,15 +110,15 @@ impl Gen<'_> {
             .iter()
             .map(|&(s, e)| (s, get(e).map_or_else(|| quote!(f64::NAN), |r| r.tokens)))
             .collect();
-        let is_if = kernel
+        let prec = kernel
             .outputs
             .iter()
-            .map(|&(_, e)| get(e).is_some_and(|r| r.prec == Prec::If))
+            .map(|&(_, e)| get(e).map_or(Prec::Atom, |r| r.prec))
             .collect();
         Body {
             lets,
             outputs,
-            is_if,
+            prec,
         }
     }
 
@@ -141,6 +170,16 @@ impl Gen<'_> {
             Node::Column(c) => {
                 let c = usize_lit(c as usize);
                 atom(quote!(row[#c]))
+            }
+            // qp solutions and their derivatives: slices the method binds first (see
+            // `methods::qp_prelude`).
+            Node::QpSol(k) => {
+                let k = usize_lit(k as usize);
+                atom(quote!(qu[#k]))
+            }
+            Node::QpDeriv(k, w) => {
+                let i = usize_lit(k as usize * (self.n + self.p + 1) + w.column(self.n, self.p));
+                atom(quote!(qd[#i]))
             }
             Node::Add(a, b) => {
                 // a + (−c) is printed a − c (the same IEEE operation).

@@ -1,10 +1,11 @@
 //! The model trait's methods, each cut from its kernel by [`Gen`]: the static description
 //! (`ModelInfo`), the `HybridModel` core and the fused sparse `ModelSens::rhs_sens`.
 
-use proc_macro2::{Ident, Literal, TokenStream};
+use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
 use super::emit::Body;
+use super::products::{a_s_plus_b, Coef};
 use super::{lit, usize_lit, Gen};
 use crate::ir::Direction;
 use crate::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
@@ -55,7 +56,7 @@ impl Gen<'_> {
             })
         });
         let obs = strs(&k.observables);
-        let nsw = usize_lit(k.switches.len());
+        let nsw = usize_lit(k.nswitches());
         let (hrc, hfc, hh) = (
             k.running_cost.is_some(),
             k.final_cost.is_some(),
@@ -127,7 +128,8 @@ impl Gen<'_> {
             None => (quote!(::core::option::Option::None), quote!(dt.fill(0.0);)),
         };
 
-        // Flow.
+        // Flow (qps read under the frozen bits `sw`).
+        self.frozen.set(true);
         let per_mode = |f: &dyn Fn(usize) -> TokenStream, buf: TokenStream| {
             let arms: Vec<(usize, TokenStream)> = (0..nm).map(|m| (m, f(m))).collect();
             self.dispatch(quote!(mode), arms, nan_fill(buf), nm)
@@ -166,6 +168,7 @@ impl Gen<'_> {
             quote!(matches!(mode, #(#dep_t)|*))
         };
         let sens = per_mode(&|m| self.sens_body(k, m), quote!(f));
+        self.frozen.set(false);
 
         // Events.
         let ne = k.events.len();
@@ -251,12 +254,7 @@ impl Gen<'_> {
             quote!(dtau.fill(f64::NAN);),
             ne,
         );
-        // The current row's column values, for the methods of `at each` events.
-        let row = if k.columns.is_empty() {
-            quote!()
-        } else {
-            quote!(let row = self.row(j);)
-        };
+        let row = row_binding(k);
 
         // Switching functions.
         let ns = k.switches.len();
@@ -267,17 +265,36 @@ impl Gen<'_> {
                 .map(|(j, g)| (j, f(g)))
                 .collect()
         };
+        // Past the kinks' switching functions come the qps' constraints (`codegen/qp.rs`).
+        let (swv_default, swg_default) = if k.nswitches() > ns {
+            (
+                quote!(self.__qp_switch_value(j, t, x.as_slice(), p.as_slice())),
+                quote!(self.__qp_switch_grad(
+                    j,
+                    t,
+                    x.as_slice(),
+                    p.as_slice(),
+                    gx.as_mut_slice(),
+                    gp.as_mut_slice()
+                )),
+            )
+        } else {
+            (
+                quote!(f64::NAN),
+                quote!(gx.fill(f64::NAN); gp.fill(f64::NAN); f64::NAN),
+            )
+        };
         let swv = self.dispatch(
             quote!(j),
             sw_arms(&|g| self.scalar(&g.value)),
-            quote!(f64::NAN),
-            ns,
+            swv_default,
+            k.nswitches(),
         );
         let swg = self.dispatch(
             quote!(j),
             sw_arms(&|g| self.grad_body(g, n, p, quote!(gx), quote!(gp))),
-            quote!(gx.fill(f64::NAN); gp.fill(f64::NAN); f64::NAN),
-            ns,
+            swg_default,
+            k.nswitches(),
         );
 
         // Observables.
@@ -321,7 +338,8 @@ impl Gen<'_> {
             (obs, jac)
         };
 
-        // Cost.
+        // Cost (ℓ reads qps under the frozen bits, as the flow does).
+        self.frozen.set(true);
         let (rc, rcg) = match &k.running_cost {
             Some(c) => (
                 self.scalar(&c.value),
@@ -329,6 +347,7 @@ impl Gen<'_> {
             ),
             None => (quote!(0.0), quote!(lx.fill(0.0); lp.fill(0.0); 0.0)),
         };
+        self.frozen.set(false);
         let (fc, fcg) = match &k.final_cost {
             Some(c) => (
                 self.scalar(&c.value),
@@ -422,33 +441,24 @@ impl Gen<'_> {
         let p = k.nparams();
         let mk = &k.modes[m];
         let nnz = mk.sparsity.len();
-        let Body {
-            lets,
-            outputs,
-            is_if,
-        } = self.body(&mk.sens);
+        let body = self.body(&mk.sens);
         let mut stores = TokenStream::new();
         // Per non-zero f_x entry: a constant, or the name it is bound to.
-        let mut fxv: Vec<Option<FxVal>> = vec![None; nnz];
+        let mut fxv: Vec<Option<Coef>> = vec![None; nnz];
         let mut fpv: Vec<Option<TokenStream>> = vec![None; n * p];
         let mut fwritten = vec![false; n];
-        for (((s, v), &(_, e)), wrap) in outputs.into_iter().zip(&mk.sens.outputs).zip(is_if) {
+        for (j, (s, v)) in body.outputs.iter().enumerate() {
+            let s = *s;
             if s < n {
                 let i = usize_lit(s);
                 stores.extend(quote!(f[#i] = #v;));
                 fwritten[s] = true;
             } else if s < n + nnz {
-                fxv[s - n] = Some(match self.ar.as_const(e) {
-                    Some(c) => FxVal::Const(c),
-                    None => {
-                        let id = format_ident!("fx{}", s - n);
-                        stores.extend(quote!(let #id: f64 = #v;));
-                        FxVal::Named(id)
-                    }
-                });
+                let id = format_ident!("fx{}", s - n);
+                fxv[s - n] = Some(self.coef(&mk.sens, &body, j, Some(id), &mut stores));
             } else {
                 // Each f_θ entry is used once: inlined (an `if` in parentheses).
-                fpv[s - n - nnz] = Some(if wrap { quote!((#v)) } else { v });
+                fpv[s - n - nnz] = Some(body.term(j));
             }
         }
         for (i, w) in fwritten.iter().enumerate() {
@@ -457,49 +467,22 @@ impl Gen<'_> {
                 stores.extend(quote!(f[#i] = 0.0;));
             }
         }
-        for r in 0..n {
-            let row: Vec<(usize, &FxVal)> = mk
-                .sparsity
-                .iter()
-                .enumerate()
-                .filter(|(_, &(rr, _))| rr == r)
-                .filter_map(|(e, &(_, c))| fxv[e].as_ref().map(|v| (c, v)))
-                .collect();
-            for c in 0..p {
-                // ds = f_θ + Σ f_x·S, summed left to right as the tape does.
-                let mut sum = fpv[r * p + c].clone();
-                let cl = usize_lit(c);
-                for (kk, v) in &row {
-                    let kl = usize_lit(*kk);
-                    let s_kc = quote!(s[(#kl, #cl)]);
-                    let (neg, term) = match v {
-                        FxVal::Const(a) if *a == 1.0 => (false, s_kc),
-                        FxVal::Const(a) if *a == -1.0 => (true, s_kc),
-                        FxVal::Const(a) => {
-                            let a = lit(*a);
-                            (false, quote!((#a) * #s_kc))
-                        }
-                        FxVal::Named(id) => (false, quote!(#id * #s_kc)),
-                    };
-                    sum = Some(match (sum, neg) {
-                        (None, false) => term,
-                        (None, true) => quote!(-#term),
-                        (Some(acc), false) => quote!(#acc + #term),
-                        (Some(acc), true) => quote!(#acc - #term),
-                    });
-                }
-                let rl = usize_lit(r);
-                let rhs = sum.unwrap_or_else(|| quote!(0.0));
-                stores.extend(quote!(ds[(#rl, #cl)] = #rhs;));
-            }
-        }
-        quote!(#lets #stores)
+        // ds = f_θ + Σ f_x·S, summed left to right as the tape does.
+        let ds = a_s_plus_b(&mk.sparsity, &fxv, &fpv, (n, p), None, |r, c| {
+            let (r, c) = (usize_lit(r), usize_lit(c));
+            quote!(ds[(#r, #c)])
+        });
+        let lets = &body.lets;
+        quote!(#lets #stores #ds)
     }
 }
 
-/// A non-zero ∂f/∂x entry in the fused sensitivity code.
-#[derive(Clone)]
-enum FxVal {
-    Const(f64),
-    Named(Ident),
+/// `let row = self.row(j);` in the event methods of a model that reads table columns: the
+/// values of row j (the occurrence) that [`Node::Column`](crate::ir::Node::Column) leaves read.
+pub(super) fn row_binding(k: &ModelKernels) -> TokenStream {
+    if k.columns.is_empty() {
+        quote!()
+    } else {
+        quote!(let row = self.row(j);)
+    }
 }

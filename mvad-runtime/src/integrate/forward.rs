@@ -26,30 +26,26 @@
 //! exactly by block forward substitution:
 //! K_x = W⁻¹ hγ R_x, K_S = W⁻¹ hγ (R_S + B K_x) (all p columns against one factorisation),
 //! K_q = hγ (R_q + ℓ_x K_x), K_{q_θ} = hγ (R_{q_θ} + D K_x + K_Sᵀ ℓ_x).
-//! f_x is the model's symbolic Jacobian; the second-derivative actions B K_x and D K_x (the
-//! model has no second derivatives) are central directional differences of `rhs_sens` /
-//! `running_cost_value_grad` along K_x at (t₀, x₀, S₀), with perturbation ‖εK_x‖ = 1e-4·max(1, ‖x₀‖).
-//! Central differences are exact when f_x S + f_θ is at most quadratic in x, and perturb J by
-//! O(1e-8) relative for cubic terms; the step is far larger than the usual ε^(1/3) because
-//! models with cancellation inside f_θ (a lag (u − y)/τ with ∂/∂τ = −(u − y)/τ²) amplify the
-//! rounding of x ± εK_x by 1/ε: with ε^(1/3) the sensitivity of the τ = 1e-8 lag had a 2e-6
-//! error floor, with 1e-4 it is 4e-8. F_t: ∂f/∂t is the model's `rhs_dt`; the S and q parts of
-//! F_t are central differences in t (only when f depends on t, resp. when there is a running
-//! cost), with step ε^(1/3)·max(|t₀|, |h|).
+//! f_x is the model's [`HybridModel::rhs_jac_x`]; the second-derivative actions B K_x and
+//! D K_x are the model's [`ModelSecondOrder::rhs_sens_dir_x`] and
+//! [`ModelSecondOrder::running_cost_sens_dir_x`] along K_x at (t₀, x₀, S₀), and
+//! F_t = (∂ₜf, ∂ₜ(f_x S + f_θ), ∂ₜℓ, ∂ₜ(ℓ_x S + ℓ_θ)) at (t₀, Y₀) comes from
+//! [`HybridModel::rhs_dt`], [`ModelSecondOrder::rhs_sens_dt`] (only when f depends on t) and
+//! [`ModelSecondOrder::running_cost_sens_dt`] (only with a running cost). Both doors emit
+//! these products exactly, from symbolic second derivatives, so J and F_t are exact and
+//! nothing here takes a difference quotient (a hand-written model without them gets the
+//! trait's central-difference defaults).
 //! The S and q_θ orders are verified empirically in the tests.
 
-use super::aug::{axpy_slice, weighted_rms, AugState};
+use super::aug::{weighted_rms, AugState};
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem};
 use super::Integrator;
+#[cfg(doc)]
+use crate::model::ModelSecondOrder;
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
-
-/// Relative size of the perturbation of x in the directional differences (see module doc).
-const FD_REL: f64 = 1e-4;
-/// Relative step of the central differences in t (ε^(1/3)).
-const FD_REL_T: f64 = 6.055_454_452_393_343e-6;
 
 /// The forward augmented system (x, S, q, q_θ) of `model` at parameters θ in one mode with
 /// frozen switch bits (see the module doc).
@@ -97,10 +93,6 @@ where
     lp0: OVector<f64, P>,
     /// F_t at the step start.
     dt: AugState<N, P>,
-    /// Perturbed argument for the difference quotients.
-    ypert: AugState<N, P>,
-    fplus: AugState<N, P>,
-    fminus: AugState<N, P>,
     /// (f_x, ℓ_x, F_t) belong to the current step start.
     base_valid: bool,
 }
@@ -144,9 +136,6 @@ where
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 lp0: OVector::zeros_generic(rp, Const::<1>),
                 dt: AugState::zeros(rn, rp),
-                ypert: AugState::zeros(rn, rp),
-                fplus: AugState::zeros(rn, rp),
-                fminus: AugState::zeros(rn, rp),
                 base_valid: false,
             },
         }
@@ -284,48 +273,26 @@ impl<M: HybridModel> ImplicitSystem for Forward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0).
-    fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64) {
+    /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0), all exact.
+    fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         let Forward { rhs, imp: w, .. } = self;
         let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
-        model.rhs_jac_x(Point::new(mode, &rhs.sw, t0, &y0.x, p), &mut w.w.jac);
+        let pt = Point::new(mode, &rhs.sw, t0, &y0.x, p);
+        model.rhs_jac_x(pt, &mut w.w.jac);
         w.w.power_iteration();
+        model.rhs_dt(pt, &mut w.dt.x);
+        if rhs.sens && model.rhs_depends_on_t(mode) {
+            model.rhs_sens_dt(pt, &y0.s, &mut w.dt.s);
+        } else {
+            w.dt.s.fill(0.0);
+        }
         if rhs.has_rc {
             model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
+            w.dt.q = model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &y0.s, &mut w.dt.qp);
         } else {
             w.lx0.fill(0.0);
-        }
-        // F_t: exact for x; central differences in t for the S and q parts.
-        let dep_t = model.rhs_depends_on_t(mode);
-        if (dep_t && rhs.sens) || rhs.has_rc {
-            let dt = FD_REL_T * t0.abs().max(h.abs()).max(f64::MIN_POSITIVE);
-            rhs.eval(t0 + dt, y0, &mut w.fplus);
-            rhs.eval(t0 - dt, y0, &mut w.fminus);
-            let s = 0.5 / dt;
-            w.dt.q = (w.fplus.q - w.fminus.q) * s;
-            if rhs.sens {
-                w.dt.s.fill(0.0);
-                axpy_slice(w.dt.s.as_mut_slice(), s, w.fplus.s.as_slice());
-                axpy_slice(w.dt.s.as_mut_slice(), -s, w.fminus.s.as_slice());
-                w.dt.qp.fill(0.0);
-                axpy_slice(w.dt.qp.as_mut_slice(), s, w.fplus.qp.as_slice());
-                axpy_slice(w.dt.qp.as_mut_slice(), -s, w.fminus.qp.as_slice());
-            }
-        } else {
-            w.dt.q = 0.0;
-            w.dt.s.fill(0.0);
-            w.dt.qp.fill(0.0);
-        }
-        if !dep_t {
-            w.dt.s.fill(0.0);
-        }
-        if !rhs.has_rc {
             w.dt.q = 0.0;
             w.dt.qp.fill(0.0);
-        }
-        model.rhs_dt(Point::new(mode, &rhs.sw, t0, &y0.x, p), &mut w.dt.x);
-        if rhs.sens {
-            w.ypert.s.copy_from(&y0.s);
         }
         w.base_valid = true;
     }
@@ -367,25 +334,14 @@ where
         if !rhs.sens {
             return ok_x;
         }
-        // B K_x and D K_x by central differences along K_x at (t0, x0, S0).
-        let nv = k.x.norm();
-        k.s.copy_from(&r.s);
-        k.qp.copy_from(&r.qp);
-        if nv > 0.0 && nv.is_finite() {
-            let eps = FD_REL * y0.x.norm().max(1.0) / nv;
-            w.ypert.x.copy_from(&y0.x);
-            w.ypert.x.axpy(eps, &k.x, 1.0);
-            rhs.eval(t0, &w.ypert, &mut w.fplus);
-            w.ypert.x.copy_from(&y0.x);
-            w.ypert.x.axpy(-eps, &k.x, 1.0);
-            rhs.eval(t0, &w.ypert, &mut w.fminus);
-            let s = 0.5 / eps;
-            axpy_slice(k.s.as_mut_slice(), s, w.fplus.s.as_slice());
-            axpy_slice(k.s.as_mut_slice(), -s, w.fminus.s.as_slice());
-            if rhs.has_rc {
-                axpy_slice(k.qp.as_mut_slice(), s, w.fplus.qp.as_slice());
-                axpy_slice(k.qp.as_mut_slice(), -s, w.fminus.qp.as_slice());
-            }
+        // K_S = W⁻¹ hγ (R_S + B K_x), B K_x at (t0, x0, S0); D K_x likewise.
+        let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, rhs.p);
+        rhs.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
+        k.s += &r.s;
+        if rhs.has_rc {
+            rhs.model
+                .running_cost_sens_dir_x(&rhs.sw, t0, &y0.x, rhs.p, &y0.s, &k.x, &mut k.qp);
+            k.qp += &r.qp;
         }
         k.s *= hg;
         let ok_s = w.w.solve_mut(&mut k.s);

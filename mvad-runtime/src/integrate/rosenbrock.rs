@@ -23,7 +23,6 @@
 use super::system::{ImplicitSystem, StageVector};
 use super::Integrator;
 use nalgebra::allocator::Allocator;
-use nalgebra::linalg::{gauss_step, gauss_step_swap};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Rodas5P stages.
@@ -160,10 +159,13 @@ where
         self.lu_ok.then_some(self.lu_hg)
     }
 
-    /// Factorises W = I − hγ f_x in place with partial pivoting: the elimination steps are
-    /// nalgebra's (`gauss_step`/`gauss_step_swap`, exactly what `LU::new` runs), but on the
-    /// buffers of this struct, so no factorisation allocates (`LU::new` takes its matrix by
-    /// value). Returns false for a singular W.
+    /// Factorises W = I − hγ f_x in place by Gaussian elimination with partial pivoting
+    /// (PW = LU, the algorithm of nalgebra's `LU::new`), on the buffers of this struct so that
+    /// no factorisation allocates (`LU::new` takes its matrix by value and allocates its
+    /// permutation for `Dyn` sizes). Built from nalgebra's public operations only: `icamax`
+    /// picks the pivot, `swap_rows` interchanges rows, and step i scales the column below the
+    /// pivot, l = W[i+1.., i]/W[i, i], then updates the trailing block column by column,
+    /// W[i+1.., k] −= W[i, k]·l (`axpy`). Returns false for a singular W.
     pub fn factorise(&mut self, hg: f64) -> bool {
         let n = self.wlu.nrows();
         self.wlu.copy_from(&self.jac);
@@ -181,10 +183,15 @@ where
             }
             self.piv[i] = piv;
             if piv != i {
-                self.wlu.columns_range_mut(..i).swap_rows(i, piv);
-                gauss_step_swap(&mut self.wlu, diag, i, piv);
-            } else {
-                gauss_step(&mut self.wlu, diag, i);
+                self.wlu.swap_rows(i, piv);
+            }
+            let mut block = self.wlu.view_range_mut(i.., i..);
+            let (mut col, mut rest) = block.columns_range_pair_mut(0, 1..);
+            let mut l = col.rows_range_mut(1..);
+            l *= 1.0 / diag;
+            let (urow, mut down) = rest.rows_range_pair_mut(0, 1..);
+            for k in 0..urow.ncols() {
+                down.column_mut(k).axpy(-urow[k], &l, 1.0);
             }
         }
         self.lu_ok = true;

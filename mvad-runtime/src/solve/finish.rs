@@ -77,6 +77,8 @@ where
             params: p.iter().copied().collect(),
             cost,
             gradient: sens_vec(grad.as_slice()),
+            gradient_left: None,
+            qp: Vec::new(),
             x_final: x_final.iter().copied().collect(),
             s_final: sens_vec(s_final.as_slice()),
             mode_final: self.mode,

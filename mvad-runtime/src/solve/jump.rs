@@ -17,11 +17,15 @@ const STEPS_PER_TABLE_ROW: usize = 100;
 /// How the trajectory met the guard of the event being applied.
 #[derive(Clone, Copy, Debug)]
 struct Approach {
-    /// ∇g·f⁻.
-    slope: f64,
+    /// The total rate dg/dt = ∇g·f⁻ + ∂g/∂t at t⁻ (the event's `guard_slope`).
+    rate: f64,
     /// ∂g/∂t.
     gt: f64,
-    /// |∇g·f⁻ + ∂g/∂t| below the grazing tolerance.
+    /// The crossing's cosine |dg/dt| / (|∇g||f⁻| + |∂g/∂t|) (see [`sens::crossing_cosine`]).
+    cosine: f64,
+    /// Its scale |∇g||f⁻| + |∂g/∂t|.
+    scale: f64,
+    /// The cosine is below the grazing tolerance.
     grazing: bool,
 }
 
@@ -49,7 +53,7 @@ where
         let zeno_stop = if timed {
             None
         } else {
-            self.zeno_verdict(t, l_plus, approach.grazing, approach.slope)
+            self.zeno_verdict(t, l_plus, approach.grazing, approach.cosine)
         };
         self.emit_event(k, t, mode_before, approach, sink);
         if matches!(info.events[k].trigger, crate::model::Trigger::Each { .. }) {
@@ -57,15 +61,14 @@ where
             self.integ.extend_step_budget(STEPS_PER_TABLE_ROW);
         }
         self.schedule.advance(self.model, self.p, k)?;
-        let graze_scale = self.opts.grazing_tol * self.gx.norm() * self.f_minus.norm();
         let mode_after = self.mode;
         let stuck = zeno_stop.is_none()
             && !timed
             && info.events[k].armed_in(mode_after)
             && t < self.t_end
-            && self.stuck_after_reset(k, t, mode_after, approach.slope + approach.gt);
+            && self.stuck_after_reset(k, t, mode_after, approach.rate);
         if approach.grazing && zeno_stop.is_none() && !stuck {
-            self.report_grazing(k, t, approach.slope, graze_scale);
+            self.report_grazing(k, t, approach);
         }
         // The new state.
         self.y.x.copy_from(&self.x_plus);
@@ -118,15 +121,23 @@ where
                 what: format!("guard of event `{name}`"),
             });
         }
+        let cosine = sens::crossing_cosine(&self.gx, &self.f_minus, gt);
         let grazing = sens::is_grazing(&self.gx, &self.f_minus, gt, self.opts.grazing_tol);
         if !timed && !grazing {
             self.snap_onto_guard(k, t, gt);
         }
+        let rate = self.gx.dot(&self.f_minus) + gt;
+        let approach = Approach {
+            rate,
+            gt,
+            cosine,
+            scale: self.gx.norm() * self.f_minus.norm() + gt.abs(),
+            grazing,
+        };
         if !self.sens {
-            let slope = self.gx.dot(&self.f_minus);
-            return Ok(Approach { slope, gt, grazing });
+            return Ok(approach);
         }
-        let (slope, denom) = self.crossing_time_sensitivity(gt);
+        let (_, denom) = self.crossing_time_sensitivity(gt);
         if !self.dt.iter().all(|v| v.is_finite()) {
             return Err(SolveError::NonFinite {
                 t,
@@ -135,7 +146,7 @@ where
                 ),
             });
         }
-        Ok(Approach { slope, gt, grazing })
+        Ok(approach)
     }
 
     /// Moves x⁻ along the flow onto the guard of event k: x⁻ ← x⁻ − f⁻·g/(∇g·f⁻ + ∂g/∂t), one
@@ -289,7 +300,7 @@ where
             t,
             mode_before,
             mode_after: self.mode,
-            guard_slope: a.slope,
+            guard_slope: a.rate,
             guard_dt: a.gt,
             transversal: !a.grazing,
             dt: if self.sens { self.dt.as_slice() } else { &[] },
@@ -301,13 +312,13 @@ where
         self.nevents += 1;
     }
 
-    fn report_grazing(&mut self, k: usize, t: f64, slope: f64, graze_scale: f64) {
+    fn report_grazing(&mut self, k: usize, t: f64, a: Approach) {
         let message = format!(
-            "event `{}` grazes: |∇g·f| = {:.3e} < {} |∇g| |f| = {:.3e}; t' is ill-conditioned",
+            "event `{}` grazes: |dg/dt| = |∇g·f + ∂g/∂t| = {:.3e} < {} (|∇g| |f| + |∂g/∂t|) = {:.3e}; t' is ill-conditioned",
             self.event_name(k),
-            slope.abs(),
+            a.rate.abs(),
             self.opts.grazing_tol,
-            graze_scale
+            self.opts.grazing_tol * a.scale
         );
         self.diagnostics.push(Diagnostic {
             kind: DiagnosticKind::Grazing,

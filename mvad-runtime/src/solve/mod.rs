@@ -26,6 +26,7 @@
 
 mod finish;
 mod jump;
+mod qp;
 mod record;
 mod schedule;
 mod zeno;
@@ -77,16 +78,21 @@ where
 {
     let start = Instant::now();
     validate(model, params, opts)?;
+    // A model without states has no time: its cost is a function of θ, taken at t = 0.
+    let timeless = model.nstates().value() == 0;
     let t_end = match opts.t_end {
         Some(t) => t,
-        None => model.horizon(params).ok_or(SolveError::NoHorizon)?,
+        None => match model.horizon(params) {
+            Some(t) => t,
+            None if timeless => 0.0,
+            None => return Err(SolveError::NoHorizon),
+        },
     };
-    if !(t_end.is_finite() && t_end > 0.0) {
+    if !(t_end.is_finite() && (t_end > 0.0 || timeless && t_end == 0.0)) {
         return Err(SolveError::BadHorizon { t_end });
     }
-    let mut d = Driver::new(model, params, opts, t_end);
-    d.run(sink)?;
-    let mut sol = d.finish()?;
+    let mut sol = qp::run(model, params, opts, t_end, sink)?;
+    qp::report(model, params, opts, &mut sol)?;
     sol.stats.wall_seconds = start.elapsed().as_secs_f64();
     Ok(sol)
 }

@@ -3,18 +3,41 @@
 //!
 //! After each user event the dwell times are checked for geometric shrinking (the last
 //! [`ZENO_RATIOS`] ratios below [`ZENO_MAX_RATIO`] and within 5 % of each other). Once
-//! established, the run stops when an event grazes (|∇g·f⁻| < max(τ, [`ZENO_GRAZE`])·|∇g||f⁻|,
+//! established, the run stops when an event grazes (its crossing cosine
+//! |dg/dt| / (|∇g||f⁻| + |∂g/∂t|) is below max(τ, [`ZENO_GRAZE`]),
 //! independent of a user's τ = 0, since ever smaller hops would eventually be lost in
-//! rounding) or the estimated remaining time t* − t_k is below 1e-9·max(1, t*). Event time,
-//! post-event state, its total derivative, accumulated cost and gradient are then
-//! extrapolated to the accumulation point t* by iterated Aitken Δ² over the last
-//! [`ZENO_SNAPS`] snapshots (the geometric tail). If T > t* the state is held at its limit x*
+//! rounding) or the estimated remaining time t* − t_k is below 1e-9·max(1, t*).
+//!
+//! ## The tail as a geometric series, and its derivative
+//! A quantity a_k read after event k (the event time t_k, the post-event state x_k⁺, the cost
+//! accumulated so far C_k) changes by a_k − a_{k−1} = B ρ_aᵏ per event in a geometric tail
+//! (for the bouncing ball with restitution e: t_k and v_k⁺ with ρ = e, C_k = Σ ∫h over bounces
+//! with ρ = e³). Its limit is the sum of the series,
+//!
+//! ```text
+//!   a_∞ = a_k + (a_k − a_{k−1}) (ρ + ρ² + …) = a_k + (a_k − a_{k−1}) ρ/(1 − ρ),
+//!   ρ = (a_k − a_{k−1}) / (a_{k−1} − a_{k−2})                        (Aitken's Δ²),
+//! ```
+//!
+//! applied twice over the last [`ZENO_SNAPS`] snapshots (the second pass removes a slowly
+//! drifting ratio). B and ρ both depend on θ, so the derivative of the limit is the derivative
+//! of this sum, by the chain rule through it:
+//!
+//! ```text
+//!   da_∞/dθ = Σ_i (∂a_∞/∂a_i) da_i/dθ,
+//!   ∂a_∞/∂a_k = 1/(1 − ρ)²,  ∂a_∞/∂a_{k−1} = −2ρ/(1 − ρ)²,  ∂a_∞/∂a_{k−2} = ρ²/(1 − ρ)²,
+//! ```
+//!
+//! with da_i/dθ what the run carries at event i: t_i', d x_i⁺/dθ = S⁺ + f⁺ t_i' and dC_i/dθ.
+//! This is exact whenever a_k is exactly geometric; extrapolating the sequence da_k/dθ
+//! instead is not, since da_k/dθ − da_∞/dθ = (B' + B k ρ'/ρ) ρᵏ has the factor k (for the
+//! ball, d/de of ∫v dt came out −3e-4 instead of 0 that way). If T > t* the state is held at its limit x*
 //! on [t*, T] with ∂x/∂θ = dx*/dθ, and ∫_{t*}^T ℓ(t, x*, θ) dt is added with its derivative
 //! −ℓ(t*, x*) dt*/dθ + ∫ (ℓ_x dx*/dθ + ℓ_θ) dt.
 
 use super::Driver;
 use crate::model::{HybridModel, ModelAlloc, Point};
-use crate::reduce::{aitken_iterated, FinalWork, GL8};
+use crate::reduce::{aitken_iterated_weights, FinalWork, GL8};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
 /// How many dwell ratios must agree before a Zeno accumulation is declared.
@@ -118,16 +141,31 @@ where
         (last, last - prev)
     }
 
-    /// The limit of a snapshot quantity: iterated Aitken Δ² over the last [`ZENO_SNAPS`]
-    /// snapshots, or the last snapshot itself when `hold_last` (a state stuck on its guard).
-    fn limit(&self, hold_last: bool, f: impl Fn(&Snapshot<M>) -> f64) -> f64 {
-        let s = |i: usize| &self.snaps[(self.count + i) % ZENO_SNAPS];
+    /// The limit of a snapshot quantity and its weights w over the snapshots (oldest first):
+    /// iterated Aitken Δ² over the last [`ZENO_SNAPS`] snapshots with w_i = ∂limit/∂value_i
+    /// ([`aitken_iterated_weights`]), or the last snapshot itself (w = (0, …, 0, 1)) when
+    /// `hold_last` (a state stuck on its guard).
+    fn limit(&self, hold_last: bool, f: impl Fn(&Snapshot<M>) -> f64) -> (f64, [f64; ZENO_SNAPS]) {
+        let mut w = [0.0; ZENO_SNAPS];
         if hold_last {
-            f(s(ZENO_SNAPS - 1))
-        } else {
-            let seq: [f64; ZENO_SNAPS] = std::array::from_fn(|i| f(s(i)));
-            aitken_iterated(&seq)
+            w[ZENO_SNAPS - 1] = 1.0;
+            return (f(self.snap(ZENO_SNAPS - 1)), w);
         }
+        let seq: [f64; ZENO_SNAPS] = std::array::from_fn(|i| f(self.snap(i)));
+        let (lim, wv) = aitken_iterated_weights(&seq);
+        w.copy_from_slice(&wv);
+        (lim, w)
+    }
+
+    /// The derivative of a limit with weights `w` ([`Zeno::limit`]): Σ_i w_i d_i, with d_i
+    /// the derivative the snapshot i carries.
+    fn limit_derivative(&self, w: &[f64; ZENO_SNAPS], d: impl Fn(&Snapshot<M>) -> f64) -> f64 {
+        (0..ZENO_SNAPS).map(|i| w[i] * d(self.snap(i))).sum()
+    }
+
+    /// Snapshot i of the last [`ZENO_SNAPS`], oldest first.
+    fn snap(&self, i: usize) -> &Snapshot<M> {
+        &self.snaps[(self.count + i) % ZENO_SNAPS]
     }
 
     /// The time of the last snapshot.
@@ -157,7 +195,7 @@ where
         t: f64,
         l_plus: f64,
         grazing: bool,
-        slope: f64,
+        cosine: f64,
     ) -> Option<(f64, f64)> {
         let c = self.y.q + self.c_ev.value();
         let snap = self.zeno.slot();
@@ -176,7 +214,7 @@ where
         let (tk, dk) = self.zeno.last_dwell();
         let t_star = tk + dk * r / (1.0 - r);
         let remaining = t_star - tk;
-        let zeno_graze = grazing || slope.abs() < ZENO_GRAZE * self.gx.norm() * self.f_minus.norm();
+        let zeno_graze = grazing || cosine < ZENO_GRAZE;
         (t_star < self.t_end && (zeno_graze || remaining <= 1e-9 * t_star.abs().max(1.0)))
             .then_some((t_star, r))
     }
@@ -237,23 +275,34 @@ where
         let z = &self.zeno;
         // Stuck on a guard: the limit is the last post-event state itself.
         let hold = self.stuck.is_some();
-        let t_star = Some(z.limit(hold, |s| s.t))
-            .filter(|a| a.is_finite() && *a >= z.last_time())
-            .unwrap_or(t_star_geo);
-        for i in 0..x_final.len() {
-            x_final[i] = z.limit(hold, |s| s.x[i]);
-        }
-        let mut cost = z.limit(hold, |s| s.c);
+        let (t_lim, wt) = z.limit(hold, |s| s.t);
         let mut dt_star = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
+        let t_star = if t_lim.is_finite() && t_lim >= z.last_time() {
+            if sens {
+                for j in 0..dt_star.len() {
+                    dt_star[j] = z.limit_derivative(&wt, |s| s.dt[j]);
+                }
+            }
+            t_lim
+        } else {
+            if sens {
+                dt_star.copy_from(&z.snap(ZENO_SNAPS - 1).dt);
+            }
+            t_star_geo
+        };
+        for i in 0..x_final.len() {
+            let (xi, wx) = z.limit(hold, |s| s.x[i]);
+            x_final[i] = xi;
+            if sens {
+                for j in 0..s_final.ncols() {
+                    s_final[(i, j)] = z.limit_derivative(&wx, |s| s.dx[(i, j)]);
+                }
+            }
+        }
+        let (mut cost, wc) = z.limit(hold, |s| s.c);
         if sens {
             for j in 0..grad.len() {
-                grad[j] = z.limit(hold, |s| s.g[j]);
-                dt_star[j] = z.limit(hold, |s| s.dt[j]);
-            }
-            for i in 0..s_final.nrows() {
-                for j in 0..s_final.ncols() {
-                    s_final[(i, j)] = z.limit(hold, |s| s.dx[(i, j)]);
-                }
+                grad[j] = z.limit_derivative(&wc, |s| s.g[j]);
             }
         }
         // Rest on [t*, T]: ∫ ℓ(t, x*) dt by 8-point Gauss–Legendre, and its derivative.

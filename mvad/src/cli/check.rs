@@ -75,6 +75,19 @@ where
             }),
         );
         m.insert("horizon".into(), horizon.map(num).unwrap_or(Value::Null));
+        let qps: Vec<Value> = model
+            .qps()
+            .iter()
+            .map(|q| {
+                serde_json::json!({
+                    "name": q.name,
+                    "variables": q.vars,
+                    "constraints": q.kinds.len(),
+                    "dynamic": q.dynamic,
+                })
+            })
+            .collect();
+        m.insert("qps".into(), Value::Array(qps));
         let mut sp = Map::new();
         for (mi, entries) in info.jacobian_sparsity.iter().enumerate() {
             let pairs: Vec<Value> = entries
@@ -137,7 +150,7 @@ where
         cost.push(format!("sum({})", e.name));
     }
     if info.has_final_cost {
-        cost.push("final".to_string());
+        cost.push("final / static".to_string());
     }
     s.push_str(&format!(
         "cost:             {}\n",
@@ -147,8 +160,32 @@ where
         "horizon:          {}\n",
         match horizon {
             Some(t) => g(t, 10),
+            None if info.states.is_empty() => "none (a model without states has no time)".into(),
             None => "none (pass --t-end T to run)".to_string(),
         }
+    ));
+    let qps: Vec<String> = model
+        .qps()
+        .iter()
+        .map(|q| {
+            format!(
+                "{}({}) with {} constraint{}, {}",
+                q.name,
+                q.vars.join(", "),
+                q.kinds.len(),
+                if q.kinds.len() == 1 { "" } else { "s" },
+                if q.dynamic {
+                    "solved along the trajectory"
+                } else {
+                    "static"
+                }
+            )
+        })
+        .collect();
+    s.push_str(&format!(
+        "qps ({}):          {}\n",
+        qps.len(),
+        join_or(&qps, "; ", "-")
     ));
     s.push_str(&format!(
         "switches:         {} (kinks of abs/min/max/sign/if in flows)\n",

@@ -3,16 +3,18 @@
 //! state and observable, and the atoms α_k = −J_k t_k'. `--json` prints the spec's object.
 
 use clap::Args;
+use mvad::json::grad_json;
+use mvad::qp::QpLayerInfo;
 use mvad::runtime::solution::Solution;
+use mvad::setup::check_mode;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::DefaultAllocator;
-use serde_json::{Map, Value};
 
 use super::output::{
-    by_name, diagnostics_json, diagnostics_text, event_json, g, json_text, more_events, num,
-    param_header, stats_json, Table, MAX_EVENT_ROWS,
+    diagnostics_text, g, json_text, more_events, param_header, Table, MAX_EVENT_ROWS,
 };
-use super::{setup, solve_listing, CliError, CmdResult, Common};
+use super::qp_output::qp_text;
+use super::{setup, setup_err, solve_listing, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
 #[derive(Args, Debug)]
@@ -32,46 +34,30 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let s = setup(model, &args.common)?;
-    if args.mode == "adjoint" {
-        return Err(CliError::Input(
-            "error: --mode adjoint is not yet supported; use --mode forward (the default)".into(),
-        ));
-    }
+    check_mode(&args.mode).map_err(setup_err)?;
     let sol = solve_listing(model, &s, &args.common)?;
     let info = model.info();
     if args.common.json {
-        Ok(json_text(&grad_json(info, &sol, &s.wrt, &args.mode)))
+        Ok(json_text(&grad_json(
+            info,
+            model.qps(),
+            &sol,
+            &s.wrt,
+            &args.mode,
+        )))
     } else {
-        Ok(grad_text(info, file, &sol, &s.wrt))
+        Ok(grad_text(info, model.qps(), file, &sol, &s.wrt))
     }
 }
 
-/// The spec's JSON object for a solution, derivatives restricted to `wrt`.
-pub fn grad_json(info: &ModelInfo, sol: &Solution, wrt: &[usize], mode: &str) -> Value {
-    let all: Vec<usize> = (0..info.params.len()).collect();
-    let mut m = Map::new();
-    m.insert("model".into(), Value::from(info.name.clone()));
-    m.insert("t_end".into(), num(sol.t_end));
-    m.insert("params".into(), by_name(&info.params, &all, &sol.params));
-    m.insert("cost".into(), num(sol.cost));
-    m.insert("gradient".into(), by_name(&info.params, wrt, &sol.gradient));
-    m.insert(
-        "events".into(),
-        Value::Array(
-            sol.events
-                .iter()
-                .map(|e| event_json(info, e, wrt))
-                .collect(),
-        ),
-    );
-    m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
-    m.insert("stats".into(), stats_json(&sol.stats));
-    m.insert("mode".into(), Value::from(mode));
-    Value::Object(m)
-}
-
 /// The readable form: cost, gradient table, event table, atom table, warnings, stats.
-pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) -> String {
+pub fn grad_text(
+    info: &ModelInfo,
+    qps: &[QpLayerInfo],
+    file: &str,
+    sol: &Solution,
+    wrt: &[usize],
+) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "model {} ({file}), T = {}\n",
@@ -80,15 +66,26 @@ pub fn grad_text(info: &ModelInfo, file: &str, sol: &Solution, wrt: &[usize]) ->
     ));
     s.push_str(&format!("cost C = {}\n\n", g(sol.cost, 15)));
 
-    let mut t = Table::new(&["param", "value", "dC/dθ"]);
+    let left = sol.gradient_left.as_deref();
+    let header: &[&str] = if left.is_some() {
+        &["param", "value", "dC/dθ (right)", "dC/dθ (left)"]
+    } else {
+        &["param", "value", "dC/dθ"]
+    };
+    let mut t = Table::new(header);
     for &k in wrt {
-        t.row(vec![
+        let mut row = vec![
             info.params[k].clone(),
             g(sol.params.get(k).copied().unwrap_or(f64::NAN), 10),
             g(sol.gradient.get(k).copied().unwrap_or(f64::NAN), 15),
-        ]);
+        ];
+        if let Some(l) = left {
+            row.push(g(l.get(k).copied().unwrap_or(f64::NAN), 15));
+        }
+        t.row(row);
     }
     s.push_str(&t.render());
+    s.push_str(&qp_text(qps, &sol.qp));
 
     s.push_str(&format!("\nevents ({}):\n", sol.stats.events));
     if !sol.events.is_empty() {
@@ -178,6 +175,7 @@ mod tests {
     use crate::cli::spec_keys::missing_spec_keys;
     use crate::cli::test_support::{json, on_ball, tight};
     use approx::assert_relative_eq;
+    use serde_json::Value;
 
     #[test]
     fn json_has_every_key_of_the_spec_and_the_e1_values() {

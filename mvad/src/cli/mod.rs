@@ -12,8 +12,9 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
-use mvad::runtime::solution::{Method, Options, Solution};
+use mvad::runtime::solution::{Method, Solution};
 use mvad::runtime::solve::solve_with;
+use mvad::setup::{params_with, resolve, Request, Setup, SetupError, Spelling};
 use mvad::FirstEvents;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
@@ -25,6 +26,8 @@ pub mod measure;
 pub mod output;
 pub mod plot;
 pub mod progress;
+pub mod qp_output;
+pub mod report;
 pub mod simulate;
 #[cfg(test)]
 pub mod spec_keys;
@@ -57,6 +60,8 @@ pub enum Command {
     Sweep(sweep::SweepArgs),
     /// Error against wall time over tolerances 1e-3 … 1e-12, for MV-AD and central FD.
     Workprec(workprec::WorkprecArgs),
+    /// Run a suite of cases across methods and tolerances: a markdown table and diagrams.
+    Report(report::ReportArgs),
 }
 
 /// Options every command takes.
@@ -169,7 +174,7 @@ pub type CmdResult = Result<String, CliError>;
 pub fn run<I, M, L>(args: I, load: L) -> ExitCode
 where
     I: IntoIterator<Item = OsString>,
-    M: HybridModel,
+    M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path, &[(String, PathBuf)]) -> Result<M, String>,
 {
@@ -191,7 +196,7 @@ where
             return ExitCode::from(status);
         }
     };
-    let json = cli.common().json;
+    let json = cli.common().is_some_and(|c| c.json);
     match dispatch(&cli, load) {
         Ok(out) => {
             if write_stdout(&out) {
@@ -218,16 +223,18 @@ where
 }
 
 impl Cli {
-    /// The common options of whichever command was given.
-    pub fn common(&self) -> &Common {
+    /// The common options of whichever command was given (`report` runs a suite, not one
+    /// model, and has none).
+    pub fn common(&self) -> Option<&Common> {
         match &self.command {
-            Command::Check(a) => &a.common,
-            Command::Simulate(a) => &a.common,
-            Command::Grad(a) => &a.common,
-            Command::Measure(a) => &a.common,
-            Command::Fdcheck(a) => &a.common,
-            Command::Sweep(a) => &a.common,
-            Command::Workprec(a) => &a.common,
+            Command::Check(a) => Some(&a.common),
+            Command::Simulate(a) => Some(&a.common),
+            Command::Grad(a) => Some(&a.common),
+            Command::Measure(a) => Some(&a.common),
+            Command::Fdcheck(a) => Some(&a.common),
+            Command::Sweep(a) => Some(&a.common),
+            Command::Workprec(a) => Some(&a.common),
+            Command::Report(_) => None,
         }
     }
 }
@@ -235,11 +242,16 @@ impl Cli {
 /// Runs the parsed command on the model `load` returns for the model path.
 fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
 where
-    M: HybridModel,
+    M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
     L: FnOnce(&Path, &[(String, PathBuf)]) -> Result<M, String>,
 {
-    let common = cli.common();
+    let Some(common) = cli.common() else {
+        return match &cli.command {
+            Command::Report(a) => report::run(a),
+            _ => Err(CliError::Input("error: no model given".into())),
+        };
+    };
     let tables = common.tables()?;
     let model = load(&common.model, &tables).map_err(CliError::Input)?;
     let file = common.model.display().to_string();
@@ -251,6 +263,7 @@ where
         Command::Fdcheck(a) => fdcheck::run(&model, &file, a),
         Command::Sweep(a) => sweep::run(&model, &file, a),
         Command::Workprec(a) => workprec::run(&model, &file, a),
+        Command::Report(a) => report::run(a),
     }
 }
 
@@ -269,20 +282,6 @@ pub fn write_stderr(text: &str) {
     let _ = err.flush();
 }
 
-/// Everything a run needs, resolved from the common options: the parameter vector
-/// (declared values with `--set` applied), the solver options, the `--wrt` selection.
-pub struct Setup<M: HybridModel>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    /// θ.
-    pub params: OVector<f64, M::P>,
-    /// Solver options (tolerances, method, horizon override, grazing τ).
-    pub opts: Options,
-    /// Indices of the parameters to report derivatives for (`--wrt`, default all).
-    pub wrt: Vec<usize>,
-}
-
 /// Parses a finite number.
 pub fn parse_number(text: &str, what: &str) -> Result<f64, CliError> {
     match text.trim().parse::<f64>() {
@@ -294,89 +293,69 @@ pub fn parse_number(text: &str, what: &str) -> Result<f64, CliError> {
     }
 }
 
-/// The list of parameter names, for error messages.
-pub fn known_params(names: &[String]) -> String {
-    if names.is_empty() {
-        "the model has no parameters".to_string()
-    } else {
-        format!("known parameters: {}", names.join(", "))
+/// How the command line spells an option: `--t-end`, `--t-end T`; an option given already
+/// spelled (`--over`) is kept as it is.
+pub struct Flags;
+
+impl Spelling for Flags {
+    fn option(&self, name: &str) -> String {
+        if name.starts_with("--") {
+            name.to_string()
+        } else {
+            format!("--{}", name.replace('_', "-"))
+        }
+    }
+    fn assign(&self, name: &str, value: &str) -> String {
+        format!("{} {value}", self.option(name))
     }
 }
 
-/// Index of parameter `name`, or a bad-input error listing the known ones.
-pub fn param_index(names: &[String], name: &str, option: &str) -> Result<usize, CliError> {
-    names.iter().position(|p| p == name).ok_or_else(|| {
-        CliError::Input(format!(
-            "error: unknown parameter `{name}` in {option}; {}",
-            known_params(names)
-        ))
-    })
+/// A request that cannot run, as bad input (exit status 2) in the command line's words.
+pub fn setup_err(e: SetupError) -> CliError {
+    CliError::Input(format!("error: {}", e.message(&Flags)))
 }
 
-/// Resolves the common options against a model.
+/// Index of parameter `name`, or a bad-input error listing the known ones.
+pub fn param_index(names: &[String], name: &str, option: &'static str) -> Result<usize, CliError> {
+    mvad::setup::param_index(names, name, option).map_err(setup_err)
+}
+
+/// Resolves the common options against a model (`mvad::setup::resolve`).
 pub fn setup<M: HybridModel>(model: &M, common: &Common) -> Result<Setup<M>, CliError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let info = model.info();
-    let params = setup_params_only(model, common)?;
-    let wrt = parse_wrt(&info.params, common.wrt.as_deref())?;
-
-    let mut opts = Options {
+    let req = Request {
+        set: parse_set(common)?,
+        wrt: common
+            .wrt
+            .as_deref()
+            .map(|list| list.split(',').map(String::from).collect()),
+        t_end: common.t_end,
+        rtol: common.rtol,
+        atol: common.atol,
         method: Method::from_name(&common.method).unwrap_or_default(),
-        ..Options::default()
+        grazing_tol: common.grazing_tol,
     };
-    if let Some(r) = common.rtol {
-        if !(r.is_finite() && r > 0.0 && r < 1.0) {
-            return Err(CliError::Input(format!(
-                "error: --rtol must be in (0, 1), got {r}"
-            )));
-        }
-        opts.rtol = r;
-    }
-    if let Some(a) = common.atol {
-        if !(a.is_finite() && a > 0.0) {
-            return Err(CliError::Input(format!(
-                "error: --atol must be positive and finite, got {a}"
-            )));
-        }
-        opts.atol = a;
-    }
-    if let Some(tau) = common.grazing_tol {
-        if !(tau.is_finite() && (0.0..1.0).contains(&tau)) {
-            return Err(CliError::Input(format!(
-                "error: --grazing-tol must be in [0, 1), got {tau}"
-            )));
-        }
-        opts.grazing_tol = tau;
-    }
-    match common.t_end {
-        Some(t) => {
-            if !(t.is_finite() && t > 0.0) {
+    resolve(model, &req).map_err(setup_err)
+}
+
+/// The `--set NAME=VALUE` items as (name, value) pairs.
+fn parse_set(common: &Common) -> Result<Vec<(String, f64)>, CliError> {
+    common
+        .set
+        .iter()
+        .map(|item| {
+            let Some((name, value)) = item.split_once('=') else {
                 return Err(CliError::Input(format!(
-                    "error: --t-end must be positive and finite, got {t}"
+                    "error: --set expects NAME=VALUE, got `{item}`"
                 )));
-            }
-            opts.t_end = Some(t);
-        }
-        None => match model.horizon(&params) {
-            None => {
-                return Err(CliError::Input(format!(
-                    "error: model `{}` declares no horizon; give one with --t-end T",
-                    info.name
-                )))
-            }
-            Some(t) if !(t.is_finite() && t > 0.0) => {
-                return Err(CliError::Input(format!(
-                    "error: the horizon of model `{}` evaluates to {t} at these parameters; \
-                     it must be positive and finite (or pass --t-end T)",
-                    info.name
-                )))
-            }
-            Some(_) => {}
-        },
-    }
-    Ok(Setup { params, opts, wrt })
+            };
+            let name = name.trim();
+            let value = parse_number(value, &format!("error: --set {name}"))?;
+            Ok((name.to_string(), value))
+        })
+        .collect()
 }
 
 /// θ: the declared parameter values with every `--set NAME=VALUE` applied.
@@ -387,22 +366,7 @@ pub fn setup_params_only<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let info = model.info();
-    let mut values = info.param_defaults.clone();
-    for item in &common.set {
-        let Some((name, value)) = item.split_once('=') else {
-            return Err(CliError::Input(format!(
-                "error: --set expects NAME=VALUE, got `{item}`"
-            )));
-        };
-        let k = param_index(&info.params, name.trim(), "--set")?;
-        values[k] = parse_number(value, &format!("error: --set {}", name.trim()))?;
-    }
-    Ok(OVector::<f64, M::P>::from_iterator_generic(
-        model.nparams(),
-        Const::<1>,
-        values.iter().copied(),
-    ))
+    params_with(model, &parse_set(common)?).map_err(setup_err)
 }
 
 /// Index of observable `name`, or a bad-input error listing the known ones.
@@ -456,16 +420,10 @@ pub fn solve_err(e: SolveError) -> CliError {
         SolveError::MaxSteps { .. } => " (--method auto or --method rosenbrock)",
         _ => "",
     };
-    match e {
-        SolveError::NoHorizon
-        | SolveError::BadHorizon { .. }
-        | SolveError::ParamCount { .. }
-        | SolveError::BadParam { .. }
-        | SolveError::BadOption { .. }
-        | SolveError::BadSchedule { .. }
-        | SolveError::NoSuchObservable { .. }
-        | SolveError::NoSuchParam { .. } => CliError::Input(format!("error: {e}{hint}")),
-        _ => CliError::Run(format!("error: the run failed: {e}{hint}")),
+    if e.is_bad_input() {
+        CliError::Input(format!("error: {e}{hint}"))
+    } else {
+        CliError::Run(format!("error: the run failed: {e}{hint}"))
     }
 }
 
@@ -475,30 +433,6 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     OVector::<f64, M::N>::from_iterator_generic(model.nstates(), Const::<1>, values.iter().copied())
-}
-
-/// Parses `--wrt a,b`: known names, duplicates dropped, declaration order kept as given.
-pub fn parse_wrt(names: &[String], wrt: Option<&str>) -> Result<Vec<usize>, CliError> {
-    let Some(list) = wrt else {
-        return Ok((0..names.len()).collect());
-    };
-    let mut out = Vec::new();
-    for name in list.split(',').map(str::trim) {
-        if name.is_empty() {
-            continue;
-        }
-        let k = param_index(names, name, "--wrt")?;
-        if !out.contains(&k) {
-            out.push(k);
-        }
-    }
-    if out.is_empty() {
-        return Err(CliError::Input(format!(
-            "error: --wrt names no parameter; {}",
-            known_params(names)
-        )));
-    }
-    Ok(out)
 }
 
 /// Helpers the commands' unit tests share.

@@ -1,99 +1,9 @@
-//! Output helpers: number formatting, plain-text tables, and the JSON pieces several
-//! commands share (params by name, event records, diagnostics, stats).
+//! Output helpers: number formatting and plain-text tables; the JSON pieces several
+//! commands share come from the library's [`mvad::json`] (one builder for every front end).
 
-use mvad::runtime::solution::{Diagnostic, EventRecord, Stats};
-use mvad::ModelInfo;
-use serde_json::{Map, Value};
-
-/// A JSON number, or `null` for NaN/∞ (JSON has no such numbers).
-pub fn num(x: f64) -> Value {
-    serde_json::Number::from_f64(x)
-        .map(Value::Number)
-        .unwrap_or(Value::Null)
-}
-
-/// `{name: value}` over the selected indices, in the given order.
-pub fn by_name(names: &[String], idx: &[usize], values: &[f64]) -> Value {
-    let mut m = Map::new();
-    for &k in idx {
-        if let (Some(n), Some(&v)) = (names.get(k), values.get(k)) {
-            m.insert(n.clone(), num(v));
-        }
-    }
-    Value::Object(m)
-}
-
-/// One event as the spec's JSON object: index, name, t, modes, guard slope,
-/// transversality, t_k' per param, the jump per state and observable, and the atoms
-/// α_k = −J_k t_k' per observable and param (params restricted to `wrt`).
-pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
-    let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
-    let name = info
-        .events
-        .get(ev.event)
-        .map(|e| e.name.clone())
-        .unwrap_or_else(|| format!("event_{}", ev.event));
-    let mut jump = Map::new();
-    for (i, s) in info.states.iter().enumerate() {
-        jump.insert(
-            s.clone(),
-            num(ev.jump_states.get(i).copied().unwrap_or(f64::NAN)),
-        );
-    }
-    for (i, o) in info.observables.iter().enumerate() {
-        jump.insert(
-            o.clone(),
-            num(ev.jump_observables.get(i).copied().unwrap_or(f64::NAN)),
-        );
-    }
-    let mut atoms = Map::new();
-    for (i, o) in info.observables.iter().enumerate() {
-        let row = ev.atoms.get(i).map(Vec::as_slice).unwrap_or(&[]);
-        atoms.insert(o.clone(), by_name(&info.params, wrt, row));
-    }
-    let mut m = Map::new();
-    m.insert("index".into(), Value::from(ev.index));
-    m.insert("name".into(), Value::from(name));
-    m.insert("t".into(), num(ev.t));
-    m.insert("mode_before".into(), Value::from(mode_name(ev.mode_before)));
-    m.insert("mode_after".into(), Value::from(mode_name(ev.mode_after)));
-    m.insert("guard_slope".into(), num(ev.guard_slope));
-    m.insert("transversal".into(), Value::from(ev.transversal));
-    m.insert("dt".into(), by_name(&info.params, wrt, &ev.dt));
-    m.insert("jump".into(), Value::Object(jump));
-    m.insert("atoms".into(), Value::Object(atoms));
-    Value::Object(m)
-}
-
-/// Diagnostics as `[{kind, t, message}]`.
-pub fn diagnostics_json(diags: &[Diagnostic]) -> Value {
-    Value::Array(
-        diags
-            .iter()
-            .map(|d| {
-                let mut m = Map::new();
-                m.insert("kind".into(), Value::from(d.kind.name()));
-                m.insert("t".into(), num(d.t));
-                m.insert("message".into(), Value::from(d.message.clone()));
-                Value::Object(m)
-            })
-            .collect(),
-    )
-}
-
-/// Stats as `{steps, rejected_steps, events, wall_seconds}` plus the other counters.
-pub fn stats_json(s: &Stats) -> Value {
-    let mut m = Map::new();
-    m.insert("steps".into(), Value::from(s.steps));
-    m.insert("rejected_steps".into(), Value::from(s.rejected_steps));
-    m.insert("events".into(), Value::from(s.events));
-    m.insert("wall_seconds".into(), num(s.wall_seconds));
-    m.insert("switch_crossings".into(), Value::from(s.switch_crossings));
-    m.insert("rhs_evals".into(), Value::from(s.rhs_evals));
-    m.insert("jac_evals".into(), Value::from(s.jac_evals));
-    m.insert("factorizations".into(), Value::from(s.factorizations));
-    Value::Object(m)
-}
+pub use mvad::json::{diagnostics_json, num, stats_json};
+use mvad::runtime::solution::Diagnostic;
+use serde_json::Value;
 
 /// Pretty JSON text with a final newline.
 pub fn json_text(v: &Value) -> String {
@@ -335,12 +245,5 @@ mod tests {
         assert_eq!(cosine(&[0.0], &[0.0]), 1.0);
         assert_eq!(cosine(&[0.0], &[2.0]), 0.0);
         assert_relative_eq!(cosine(&[2.0, -1.0], &[-4.0, 2.0]), -1.0);
-    }
-
-    #[test]
-    fn nonfinite_numbers_are_null() {
-        assert_eq!(num(f64::NAN), Value::Null);
-        assert_eq!(num(f64::INFINITY), Value::Null);
-        assert_eq!(num(1.5), serde_json::json!(1.5));
     }
 }

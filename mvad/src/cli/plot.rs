@@ -548,7 +548,16 @@ impl Picture for WorkPrec<'_> {
             )
             .map_err(e)?;
         let areas = root.split_evenly((1, self.panels.len().max(1)));
-        let colors = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+        let colors = [
+            BLUE,
+            RED,
+            GREEN,
+            MAGENTA,
+            CYAN,
+            BLACK,
+            RGBColor(230, 140, 0),
+            RGBColor(120, 60, 160),
+        ];
         for ((name, curves), area) in self.panels.iter().zip(areas.iter()) {
             let kept = |c: &Curve| -> Vec<(f64, f64)> {
                 c.points

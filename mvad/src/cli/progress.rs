@@ -30,6 +30,13 @@ impl Progress {
         }
     }
 
+    /// `n` steps done.
+    pub fn inc_by(&self, n: usize) {
+        if let Some(b) = &self.0 {
+            b.inc(n as u64);
+        }
+    }
+
     /// Removes the bar.
     pub fn finish(&self) {
         if let Some(b) = &self.0 {

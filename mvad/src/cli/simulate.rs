@@ -15,6 +15,8 @@ use mvad::{HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
+use mvad::json::trajectory_event_json;
+
 use super::output::{
     diagnostics_json, diagnostics_text, g, json_text, more_events, num, stats_json, Table,
     MAX_EVENT_ROWS,
@@ -83,17 +85,7 @@ where
             .events
             .iter()
             .take(args.common.event_limit())
-            .map(|e| {
-                serde_json::json!({
-                    "index": e.index,
-                    "name": info.events.get(e.event).map(|x| x.name.clone()),
-                    "t": num(e.t),
-                    "mode_before": mode_name(info, e.mode_before),
-                    "mode_after": mode_name(info, e.mode_after),
-                    "x_before": e.x_before.iter().map(|&z| num(z)).collect::<Vec<_>>(),
-                    "x_after": e.x_after.iter().map(|&z| num(z)).collect::<Vec<_>>(),
-                })
-            })
+            .map(|e| trajectory_event_json(info, e))
             .collect();
         m.insert("events".into(), Value::Array(events));
         m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));

@@ -3,20 +3,23 @@
 //! the guard slope |∇ₓg·f| of the first event, whether it is transversal, the atom
 //! magnitude ‖α‖ (over the `--wrt` parameters) of `--observable` (default: the first
 //! observable) and the event time; plus dt/dNAME, C and dC/dNAME. `--json` gives every
-//! event of every run.
+//! event of every run. The runs go across cores (`mvad::batch::par_map`), in input order,
+//! identical to a serial loop; a progress bar is drawn only on a terminal.
 
 use clap::Args;
+use mvad::batch::par_map;
 use mvad::runtime::solve::solve;
 use mvad::{HybridModel, ModelAlloc};
-use nalgebra::DefaultAllocator;
+use nalgebra::{Const, DefaultAllocator, OVector};
 use serde_json::{Map, Value};
 
-use super::grad::grad_json;
-use super::output::{g, json_text, num, Table};
+use super::output::{diagnostics_json, g, json_text, num, Table};
 use super::progress::Progress;
 use super::{
     observable_index, param_index, parse_number, setup, solve_err, CliError, CmdResult, Common,
 };
+use mvad::json::grad_json;
+use mvad::json::qp_json;
 
 /// Arguments of `mvad sweep`.
 #[derive(Args, Debug)]
@@ -73,7 +76,7 @@ pub fn parse_over(names: &[String], text: &str) -> Result<Over, CliError> {
 }
 
 /// Runs `mvad sweep`.
-pub fn run<M: HybridModel>(model: &M, file: &str, args: &SweepArgs) -> CmdResult
+pub fn run<M: HybridModel + Clone + Send>(model: &M, file: &str, args: &SweepArgs) -> CmdResult
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
@@ -87,17 +90,33 @@ where
     let k = over.param;
     let pname = &info.params[k];
     let progress = Progress::new(over.values.len(), &format!("sweep {pname}"));
+    // One run per value across cores; the first failure in input order is reported, as a
+    // serial loop would.
+    let base: Vec<f64> = s.params.iter().copied().collect();
+    let opts = &s.opts;
+    let results = par_map(
+        model,
+        &over.values,
+        |m, &value| {
+            let mut p = OVector::<f64, M::P>::from_iterator_generic(
+                m.nparams(),
+                Const::<1>,
+                base.iter().copied(),
+            );
+            p[k] = value;
+            solve(m, &p, opts)
+        },
+        &|| progress.inc(),
+    );
+    progress.finish();
     let mut runs = Vec::with_capacity(over.values.len());
-    for &value in &over.values {
-        let mut p = s.params.clone();
-        p[k] = value;
-        let sol = solve(model, &p, &s.opts).map_err(|e| {
-            solve_err(e).map_message(|m| format!("{m} (at {pname} = {})", g(value, 10)))
-        })?;
-        progress.inc();
+    for (&value, result) in over.values.iter().zip(results) {
+        let at = |m: &str| format!("{m} (at {pname} = {})", g(value, 10));
+        let sol = result
+            .map_err(|e| CliError::Run(format!("error: {}", at(&e.to_string()))))?
+            .map_err(|e| solve_err(e).map_message(at))?;
         runs.push((value, sol));
     }
-    progress.finish();
 
     let atom_norm = |atoms: &[Vec<f64>]| -> f64 {
         atoms
@@ -135,7 +154,14 @@ where
                     "event_time".into(),
                     first.map(|e| num(e.t)).unwrap_or(Value::Null),
                 );
-                m.insert("run".into(), grad_json(info, sol, &s.wrt, "forward"));
+                if !model.qps().is_empty() {
+                    m.insert("qp".into(), qp_json(model.qps(), &sol.qp));
+                }
+                m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
+                m.insert(
+                    "run".into(),
+                    grad_json(info, model.qps(), sol, &s.wrt, "forward"),
+                );
                 Value::Object(m)
             })
             .collect();

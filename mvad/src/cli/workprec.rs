@@ -21,6 +21,7 @@ use clap::Args;
 use mvad::runtime::error::SolveError;
 use mvad::runtime::solution::{Options, Solution};
 use mvad::runtime::solve::solve;
+use mvad::suite::{grad_error, rel_error};
 use mvad::{HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
 use serde_json::{Map, Value};
@@ -64,20 +65,21 @@ struct Row {
     fd: Point,
 }
 
+/// One point of the diagram: wall time, C, dC/dθ and their errors against the reference.
 #[derive(Clone, Debug)]
-struct Point {
-    seconds: f64,
+pub(super) struct Point {
+    pub(super) seconds: f64,
     cost: f64,
-    cost_err: f64,
+    pub(super) cost_err: f64,
     grad: Vec<f64>,
-    grad_err: f64,
+    pub(super) grad_err: f64,
     step: f64,
 }
 
 /// The reference values the errors are measured against: C and dC/dθ over `--wrt`.
-struct Reference {
-    cost: f64,
-    grad: Vec<f64>,
+pub(super) struct Reference {
+    pub(super) cost: f64,
+    pub(super) grad: Vec<f64>,
 }
 
 impl Point {
@@ -95,7 +97,9 @@ impl Point {
 }
 
 /// Mean wall time of `f` over enough repetitions, and its last result.
-fn timed<T>(mut f: impl FnMut() -> Result<T, SolveError>) -> Result<(f64, T), SolveError> {
+pub(super) fn timed<T>(
+    mut f: impl FnMut() -> Result<T, SolveError>,
+) -> Result<(f64, T), SolveError> {
     let start = Instant::now();
     let mut out = f()?;
     let mut reps = 1u32;
@@ -104,29 +108,6 @@ fn timed<T>(mut f: impl FnMut() -> Result<T, SolveError>) -> Result<(f64, T), So
         reps += 1;
     }
     Ok((start.elapsed().as_secs_f64() / f64::from(reps), out))
-}
-
-/// The error measure of a gradient: max_i |a_i − r_i| / max_i |r_i|.
-fn grad_error(a: &[f64], r: &[f64]) -> f64 {
-    let diff = a
-        .iter()
-        .zip(r)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
-    let scale = r.iter().map(|y| y.abs()).fold(0.0, f64::max);
-    if scale > 0.0 {
-        diff / scale
-    } else {
-        diff
-    }
-}
-
-fn rel_error(a: f64, r: f64) -> f64 {
-    if r != 0.0 {
-        (a - r).abs() / r.abs()
-    } else {
-        (a - r).abs()
-    }
 }
 
 /// Runs `mvad workprec`.
@@ -349,7 +330,8 @@ where
     Ok(Point::scored(seconds, sol.cost, grad, 0.0, reference))
 }
 
-fn fd_point<M: HybridModel>(
+/// Central differences of primal runs (relative step `rel_step`) over `wrt`, timed.
+pub(super) fn fd_point<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
     opts: &Options,
@@ -438,12 +420,5 @@ mod tests {
             let err = on_ball(run, bad).err();
             assert_eq!(err.map(|e| e.status()), Some(2), "{bad:?}");
         }
-    }
-
-    #[test]
-    fn gradient_error_measure() {
-        assert_eq!(grad_error(&[1.0, 2.0], &[1.0, 4.0]), 0.5);
-        assert_eq!(grad_error(&[1.0], &[0.0]), 1.0);
-        assert_eq!(rel_error(1.1, 1.0), 0.10000000000000009);
     }
 }

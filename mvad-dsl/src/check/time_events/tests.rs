@@ -104,3 +104,46 @@ fn two_tables_in_one_event_are_errors() {
         ]
     );
 }
+
+#[test]
+fn dotted_names_resolve_to_a_table_column_or_a_qp_variable() {
+    // One model reads a column and a qp's solution with the same syntax.
+    let ok = "model M { param k = 1; state x = 0; table arr = \"a.csv\";\n\
+              qp q(u) { minimize (u - x)^2; }\n\
+              flow { der(x) = -q.u; } event e at each arr.t { x = x + arr.s * q.u; } }";
+    assert_eq!(errors(ok), vec![], "{ok}");
+    let m = crate::compile(ok).expect("compiles");
+    assert_eq!(m.columns, vec![(0, "t".to_string()), (0, "s".to_string())]);
+    assert_eq!(m.qps.len(), 1);
+    let cases: &[(&str, (usize, usize, &str))] = &[
+        // A name that is neither: the message names both kinds the model declares.
+        (
+            "qp q(u) { minimize u^2; } flow { der(x) = 1; } event e at each arr.t { x = r.s; } }",
+            (2, 76, "unknown table or qp `r`"),
+        ),
+        // A name that is both.
+        (
+            "qp arr(u) { minimize u^2; } flow { der(x) = 1; } event e at each arr.t; }",
+            (2, 66, "`arr.t` is ambiguous: `arr` is a table and a qp"),
+        ),
+        // A param is neither.
+        (
+            "flow { der(x) = 1; } event e at each arr.t { x = k.s; } }",
+            (2, 50, "param `k` is not a table: `k.s` names nothing"),
+        ),
+        // A qp's solution is not a row value: an event time cannot read it.
+        (
+            "qp q(u) { minimize (u - k)^2; } flow { der(x) = 1; } event e at each arr.t + q.u; }",
+            (
+                2,
+                78,
+                "the time of event `e` cannot depend on the solution of qp `q`",
+            ),
+        ),
+    ];
+    for (body, want) in cases {
+        let got = errors(&format!("{HEAD}{body}"));
+        let want = vec![(want.0, want.1, want.2.to_string())];
+        assert_eq!(got, want, "{body}");
+    }
+}

@@ -1,0 +1,90 @@
+//! The stiff relay (`models/stiff_relay.hyb`, τ = 1e-8, θ = (tau, rate, lo, hi), T = 3, three
+//! switches) under `auto` (which runs Rodas5P: one factorisation of W = I − hγ f_x per
+//! attempt) at rtol 1e-8, with the default atol:
+//! - `relay_compiled_gradient`: the `hybrid!` model (static sizes), C and dC/dθ;
+//! - `relay_loaded_gradient`: the same file loaded at run time (interpreted, `Dyn` sizes).
+//!
+//! For instruction counts (stable on a shared machine) run the bench binary under
+//! `valgrind --tool=callgrind` with `RELAY_PROFILE=compiled|loaded`: it then runs 200
+//! evaluations of that case only, without criterion, and prints the work counters.
+
+use criterion::{criterion_group, Criterion};
+use models::stiff_relay::{StiffRelay, StiffRelayParams};
+use mvad::solution::Options;
+use mvad::solve::solve;
+use std::hint::black_box;
+
+/// The compiled relay, the loaded one, their parameters and the options.
+struct Relay {
+    compiled: StiffRelay,
+    p: nalgebra::SVector<f64, 4>,
+    loaded: mvad::interp::InterpretedModel,
+    pl: nalgebra::DVector<f64>,
+    opts: Options,
+}
+
+fn setup() -> Relay {
+    let p = StiffRelayParams::default().to_vector();
+    let loaded = mvad::load::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/stiff_relay.hyb"
+    )))
+    .expect("stiff_relay.hyb loads");
+    Relay {
+        compiled: StiffRelay::new(),
+        pl: nalgebra::DVector::from_column_slice(p.as_slice()),
+        p,
+        loaded,
+        opts: Options {
+            rtol: 1e-8,
+            ..Options::default()
+        },
+    }
+}
+
+fn relay(c: &mut Criterion) {
+    let r = setup();
+    c.bench_function("relay_compiled_gradient", |b| {
+        b.iter(|| {
+            solve(&r.compiled, black_box(&r.p), &r.opts)
+                .unwrap()
+                .gradient[0]
+        })
+    });
+    c.bench_function("relay_loaded_gradient", |b| {
+        b.iter(|| {
+            solve(&r.loaded, black_box(&r.pl), &r.opts)
+                .unwrap()
+                .gradient[0]
+        })
+    });
+}
+
+criterion_group!(benches, relay);
+
+fn main() {
+    if let Ok(which) = std::env::var("RELAY_PROFILE") {
+        let r = setup();
+        let mut acc = 0.0;
+        for i in 0..200 {
+            let sol = if which == "compiled" {
+                solve(&r.compiled, black_box(&r.p), &r.opts)
+            } else {
+                solve(&r.loaded, black_box(&r.pl), &r.opts)
+            }
+            .unwrap();
+            if i == 0 {
+                let s = &sol.stats;
+                println!(
+                    "{which}: steps {} rejected {} jac_evals {} factorizations {} cost {} gradient {:?}",
+                    s.steps, s.rejected_steps, s.jac_evals, s.factorizations, sol.cost, sol.gradient
+                );
+            }
+            acc += sol.cost;
+        }
+        black_box(acc);
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -1,0 +1,77 @@
+"""The numpy kernels behind ``mvad.jax`` and ``mvad.torch``: a model, the parameters to
+differentiate by (``wrt``, the order of theta) and the run options, applied to parameter
+arrays of any leading batch shape ``(..., len(wrt))``. Batches run across cores in Rust
+(``Model.cost_batch``, ``Model.observe_batch``, ``Model.observe_vjp_batch``).
+
+The backward passes are Rust's: ``c̄ · dC/dθ`` with dC/dθ from the same run as C, and
+``Model.observe_vjp_batch``, i.e. ``mvad::runtime::vjp::observe_vjp``, the one function that
+decides how a vector-Jacobian product is computed (forward sensitivities today).
+"""
+
+import numpy as np
+
+
+def _rows(theta, width):
+    theta = np.asarray(theta, dtype=np.float64)
+    if theta.ndim == 0 or theta.shape[-1] != width:
+        raise ValueError(
+            f"theta must end in an axis of length {width} (one entry per wrt parameter), "
+            f"got shape {theta.shape}"
+        )
+    return np.ascontiguousarray(theta.reshape(-1, width)), theta.shape[:-1]
+
+
+class Cost:
+    """C(theta) and dC/dtheta for the parameters ``wrt``."""
+
+    def __init__(self, model, wrt, params=None, options=None):
+        self.model = model
+        self.wrt = list(wrt)
+        self.params = params
+        self.options = dict(options or {})
+        if not self.wrt:
+            raise ValueError("wrt names no parameter")
+
+    def value(self, theta):
+        rows, batch = _rows(theta, len(self.wrt))
+        c, _ = self.model.cost_batch(
+            rows, wrt=self.wrt, params=self.params, gradient=False, **self.options
+        )
+        return c.reshape(batch)
+
+    def value_and_grad(self, theta):
+        rows, batch = _rows(theta, len(self.wrt))
+        c, g = self.model.cost_batch(
+            rows, wrt=self.wrt, params=self.params, gradient=True, **self.options
+        )
+        return c.reshape(batch), g.reshape(batch + (len(self.wrt),))
+
+
+class Observe:
+    """The observables at ``times`` (shape ``(len(times), n_observables)``) and their VJP."""
+
+    def __init__(self, model, times, wrt, params=None, options=None):
+        self.model = model
+        self.times = np.ascontiguousarray(np.asarray(times, dtype=np.float64).ravel())
+        self.wrt = list(wrt)
+        self.params = params
+        self.options = dict(options or {})
+        self.shape = (len(self.times), len(model.observables))
+        if not self.wrt:
+            raise ValueError("wrt names no parameter")
+
+    def value(self, theta):
+        rows, batch = _rows(theta, len(self.wrt))
+        y = self.model.observe_batch(
+            rows, self.times, wrt=self.wrt, params=self.params, **self.options
+        )
+        return y.reshape(batch + self.shape)
+
+    def vjp(self, theta, cotangent):
+        rows, batch = _rows(theta, len(self.wrt))
+        cot = np.asarray(cotangent, dtype=np.float64)
+        cot = np.ascontiguousarray(np.broadcast_to(cot, batch + self.shape).reshape((-1,) + self.shape))
+        v = self.model.observe_vjp_batch(
+            rows, self.times, cot, wrt=self.wrt, params=self.params, **self.options
+        )
+        return v.reshape(batch + (len(self.wrt),))

@@ -1,0 +1,113 @@
+//! Python values in and out: keyword options into a `mvad::setup::Request`, parameter
+//! batches into parameter vectors, `serde_json` values into Python objects, flat vectors into
+//! numpy arrays.
+
+use std::collections::BTreeMap;
+
+use mvad::runtime::solution::Method;
+use mvad::setup::Request;
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use serde_json::Value;
+
+use crate::errors::value_error;
+
+/// The keyword options every run takes.
+pub const OPTION_NAMES: [&str; 5] = ["rtol", "atol", "method", "t_end", "grazing_tol"];
+
+/// A request from `params` (overrides by name), `wrt` and the keyword `options`
+/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`; `None` values keep the defaults).
+pub fn request(
+    params: Option<BTreeMap<String, f64>>,
+    wrt: Option<Vec<String>>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Request> {
+    let mut req = Request {
+        set: params.unwrap_or_default().into_iter().collect(),
+        wrt,
+        ..Request::default()
+    };
+    let Some(options) = options else {
+        return Ok(req);
+    };
+    for (key, value) in options.iter() {
+        let key: String = key.extract()?;
+        if value.is_none() {
+            continue;
+        }
+        let number = || -> PyResult<Option<f64>> { Ok(Some(value.extract::<f64>()?)) };
+        match key.as_str() {
+            "rtol" => req.rtol = number()?,
+            "atol" => req.atol = number()?,
+            "t_end" => req.t_end = number()?,
+            "grazing_tol" => req.grazing_tol = number()?,
+            "method" => {
+                let name: String = value.extract()?;
+                req.method = Method::from_name(&name).ok_or_else(|| {
+                    let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+                    value_error(format!(
+                        "unknown method `{name}`; use one of {}",
+                        known.join(", ")
+                    ))
+                })?;
+            }
+            other => {
+                return Err(PyTypeError::new_err(format!(
+                    "unexpected keyword argument `{other}`; the run options are {}",
+                    OPTION_NAMES.join(", ")
+                )))
+            }
+        }
+    }
+    Ok(req)
+}
+
+/// A JSON value as the Python object `json.loads` would make of it (`null` → `None`).
+pub fn json_to_py<'py>(py: Python<'py>, value: &Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
+        Value::Number(n) => match (n.as_u64(), n.as_i64(), n.as_f64()) {
+            (Some(u), _, _) => u.into_pyobject(py)?.into_any(),
+            (_, Some(i), _) => i.into_pyobject(py)?.into_any(),
+            (_, _, f) => f.unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
+        },
+        Value::String(s) => s.into_pyobject(py)?.into_any(),
+        Value::Array(items) => {
+            let list = pyo3::types::PyList::empty(py);
+            for item in items {
+                list.append(json_to_py(py, item)?)?;
+            }
+            list.into_any()
+        }
+        Value::Object(map) => {
+            let dict = PyDict::new(py);
+            for (k, v) in map {
+                dict.set_item(k, json_to_py(py, v)?)?;
+            }
+            dict.into_any()
+        }
+    })
+}
+
+/// A flat row-major vector as a numpy array of the given shape.
+pub fn array<'py>(py: Python<'py>, data: Vec<f64>, shape: &[usize]) -> PyResult<Bound<'py, PyAny>> {
+    let flat = PyArray1::from_vec(py, data);
+    Ok(match shape {
+        [_] => flat.into_any(),
+        [a, b] => flat.reshape([*a, *b])?.into_any(),
+        [a, b, c] => flat.reshape([*a, *b, *c])?.into_any(),
+        _ => return Err(value_error(format!("unsupported array shape {shape:?}"))),
+    })
+}
+
+/// Column `col` of a row-major table with `ncols` columns.
+pub fn column(data: &[f64], ncols: usize, col: usize) -> Vec<f64> {
+    data.iter()
+        .skip(col)
+        .step_by(ncols.max(1))
+        .copied()
+        .collect()
+}

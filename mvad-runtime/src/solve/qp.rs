@@ -1,0 +1,98 @@
+//! The run's view of a model's qps: a failed qp named in the error, the `kink`
+//! diagnostics, the qps' states at T, and the derivative from the left at a kink.
+//!
+//! A weakly active constraint at (T, x(T), θ) makes the cost's dependence on θ one-sided:
+//! the run's `gradient` (the qps' default side) is the derivative from the right, and a
+//! second run with every qp on the left side gives `gradient_left`.
+
+use super::Driver;
+use crate::error::SolveError;
+use crate::model::{HybridModel, ModelAlloc};
+use crate::qp::Side;
+use crate::sink::EventSink;
+use crate::solution::{Diagnostic, DiagnosticKind, Options, Solution};
+use nalgebra::{Const, DefaultAllocator, OVector};
+
+/// One run from t = 0 to `t_end`: the driver's loop and its end.
+pub(super) fn run<M: HybridModel, K: EventSink>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    t_end: f64,
+    sink: &mut K,
+) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut d = Driver::new(model, params, opts, t_end);
+    d.run(sink).map_err(|e| explain(model, e))?;
+    d.finish().map_err(|e| explain(model, e))
+}
+
+/// A non-finite value that a failed qp produced becomes that qp's error.
+fn explain<M: HybridModel>(model: &M, e: SolveError) -> SolveError
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    match (e, model.qp_failure()) {
+        (SolveError::NonFinite { t, .. }, Some((q, error))) => SolveError::Qp {
+            t,
+            qp: model.qps()[q].name.clone(),
+            error,
+        },
+        (e, _) => e,
+    }
+}
+
+/// The qps' states at T into `sol.qp`, a `kink` diagnostic per weakly active constraint,
+/// and at a kink the derivative from the left (a second run).
+pub(super) fn report<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sol: &mut Solution,
+) -> Result<(), SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    if model.qps().is_empty() {
+        return Ok(());
+    }
+    let t = sol.t_end;
+    let x = OVector::<f64, M::N>::from_iterator_generic(
+        model.nstates(),
+        Const::<1>,
+        sol.x_final.iter().copied(),
+    );
+    let states = model
+        .qp_states(t, &x, params)
+        .map_err(|(q, error)| SolveError::Qp {
+            t,
+            qp: model.qps()[q].name.clone(),
+            error,
+        })?;
+    let mut kink = false;
+    for (info, state) in model.qps().iter().zip(&states) {
+        for i in state.weakly_active() {
+            kink = true;
+            sol.diagnostics.push(Diagnostic {
+                kind: DiagnosticKind::Kink,
+                t,
+                message: format!(
+                    "qp `{}`, constraint {i}: weakly active (slack and multiplier both zero), \
+                     so the solution is a kink of the parameters; `gradient` is the derivative \
+                     from the right, `gradient_left` the one from the left",
+                    info.name
+                ),
+            });
+        }
+    }
+    sol.qp = states;
+    if kink && opts.sensitivities {
+        model.set_qp_side(Side::Left);
+        let left = run(model, params, opts, t, &mut ());
+        model.set_qp_side(Side::Right);
+        sol.gradient_left = Some(left?.gradient);
+    }
+    Ok(())
+}

@@ -1,0 +1,335 @@
+//! The capability products of a loaded model, from the same kernels `hybrid!` compiles:
+//! the vector–Jacobian products of [`ModelAdjoint`] and the exact second-order products of
+//! [`ModelSecondOrder`].
+//!
+//! Each product runs one tape into the shared registers and walks only the tape's non-zero
+//! outputs: λᵀG sums λ_r·G_{rk} into column k over the non-zero entries (r, k), and
+//! A S + b adds b's entries, then a_e·S_{k·} for each non-zero entry e = (r, k) of A. The
+//! sums run in entry order, starting from b, exactly as the generated code writes them, so
+//! the two doors agree to rounding. A call allocates nothing (scratch is the model's) and
+//! costs the number of non-zeros plus the size of its outputs, never n·p unless S is read.
+
+use mvad_dsl::eval::Tape;
+use mvad_dsl::ir::ExprArena;
+use mvad_dsl::schedule::SecondOrderKernels;
+use mvad_runtime::model::differences;
+use mvad_runtime::{ModelAdjoint, ModelSecondOrder, Point, Switches};
+
+use super::{at_sw, pt0, pt_theta, At, InterpretedModel, Scratch, M, X};
+
+/// The tapes of [`SecondOrderKernels`], with their entry tables.
+#[derive(Clone, Debug)]
+pub(super) struct SecondTapes {
+    rows: usize,
+    x_entries: Vec<(usize, usize)>,
+    p_entries: Vec<(usize, usize)>,
+    dx: Tape,
+    dx_terms: Vec<(usize, usize)>,
+    /// Whether G_x entry e has any term in `dx` (entries without one are skipped, as the
+    /// generated code skips them).
+    has_dx: Vec<bool>,
+    dt: Tape,
+}
+
+impl SecondTapes {
+    pub(super) fn new(ar: &ExprArena, so: &SecondOrderKernels) -> Self {
+        let mut has_dx = vec![false; so.x_entries.len()];
+        for &(e, _) in &so.dx_terms {
+            if let Some(h) = has_dx.get_mut(e) {
+                *h = true;
+            }
+        }
+        SecondTapes {
+            rows: so.rows,
+            x_entries: so.x_entries.clone(),
+            p_entries: so.p_entries.clone(),
+            dx: Tape::new(ar, &so.dx),
+            dx_terms: so.dx_terms.clone(),
+            has_dx,
+            dt: Tape::new(ar, &so.dt),
+        }
+    }
+
+    /// out += a·S_{k·} into row r of `out` (`rows`×p, column-major) for entry (r, k); S is
+    /// n×p column-major.
+    fn add_row(&self, (r, k): (usize, usize), a: f64, s: &[f64], n: usize, out: &mut [f64]) {
+        let rows = self.rows;
+        for (c, o) in out.iter_mut().skip(r).step_by(rows).enumerate() {
+            *o += a * s[k + c * n];
+        }
+    }
+
+    /// out = ∂ₓ(G_x S + G_θ)·v = (Σᵢ vᵢ ∂G_x/∂xᵢ) S + Σᵢ vᵢ ∂G_θ/∂xᵢ (`rows`×p, column-major),
+    /// `w` scratch for the G_x entries. NaN when the tape cannot run.
+    #[allow(clippy::too_many_arguments)]
+    fn dir_x(
+        &self,
+        model: &InterpretedModel,
+        at: &At<'_>,
+        sc: &mut Scratch,
+        s: &[f64],
+        v: &[f64],
+        out: &mut [f64],
+    ) {
+        let n = model.n;
+        let Scratch { regs, w, .. } = sc;
+        let nx = self.x_entries.len();
+        if !model.run(&self.dx, at, regs) || w.len() < nx {
+            out.fill(f64::NAN);
+            return;
+        }
+        out.fill(0.0);
+        w[..nx].fill(0.0);
+        for ((_, reg), &(e, i)) in self.dx.outputs().zip(&self.dx_terms) {
+            let term = regs[reg] * v[i];
+            if e < nx {
+                w[e] += term;
+            } else {
+                let (r, c) = self.p_entries[e - nx];
+                out[r + c * self.rows] += term;
+            }
+        }
+        for e in (0..nx).filter(|&e| self.has_dx[e]) {
+            self.add_row(self.x_entries[e], w[e], s, n, out);
+        }
+    }
+
+    /// out = ∂ₜ(G_x S + G_θ) (`rows`×p, column-major); returns ∂ₜG₀ when the kernel has it
+    /// (ℓ), else 0. NaN when the tape cannot run.
+    fn dt(
+        &self,
+        model: &InterpretedModel,
+        at: &At<'_>,
+        regs: &mut [f64],
+        s: &[f64],
+        out: &mut [f64],
+    ) -> f64 {
+        let n = model.n;
+        if !model.run(&self.dt, at, regs) {
+            out.fill(f64::NAN);
+            return f64::NAN;
+        }
+        let nx = self.x_entries.len();
+        let ne = nx + self.p_entries.len();
+        out.fill(0.0);
+        let mut dt_row = 0.0;
+        for (slot, reg) in self.dt.outputs() {
+            if slot >= nx && slot < ne {
+                let (r, c) = self.p_entries[slot - nx];
+                out[r + c * self.rows] = regs[reg];
+            } else if slot >= ne {
+                dt_row = regs[reg];
+            }
+        }
+        for (slot, reg) in self.dt.outputs().take_while(|&(slot, _)| slot < nx) {
+            self.add_row(self.x_entries[slot], regs[reg], s, n, out);
+        }
+        dt_row
+    }
+}
+
+/// vx_k = Σ_{(i,k)} w_i·a over the (row, column, value) triples, in order, after a zero fill.
+fn transposed(w: &[f64], triples: impl Iterator<Item = (usize, usize, f64)>, out: &mut [f64]) {
+    out.fill(0.0);
+    for (i, k, a) in triples {
+        out[k] += w[i] * a;
+    }
+}
+
+impl InterpretedModel {
+    /// Whether `s` is n×p and `out` n×p (or, for ℓ, `out` has p entries).
+    fn sens_shapes(&self, s: &M, out_len: usize, rows: usize) -> bool {
+        s.nrows() == self.n && s.ncols() == self.p && out_len == rows * self.p
+    }
+}
+
+impl ModelAdjoint for InterpretedModel {
+    fn rhs_vjp(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, vx: &mut X, vp: &mut X) {
+        let Point { mode, sw, t, x, p } = pt;
+        let (n, np) = (self.n, self.p);
+        let sizes = lambda.len() == n && vx.len() == n && vp.len() == np;
+        let mut sc = self.scratch.borrow_mut();
+        let at = at_sw(t, x, p, sw);
+        let m = self.mode(mode).filter(|_| sizes);
+        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
+            vx.fill(f64::NAN);
+            vp.fill(f64::NAN);
+            return;
+        };
+        let (xe, pe) = (&m.second.x_entries, &m.second.p_entries);
+        let nx = xe.len();
+        let regs = &sc.regs;
+        let lam = lambda.as_slice();
+        let vals = || m.jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
+        transposed(
+            lam,
+            vals()
+                .take_while(|&(slot, _)| slot < nx)
+                .map(|(slot, a)| (xe[slot].0, xe[slot].1, a)),
+            vx.as_mut_slice(),
+        );
+        transposed(
+            lam,
+            vals()
+                .skip_while(|&(slot, _)| slot < nx)
+                .map(|(slot, a)| (pe[slot - nx].0, pe[slot - nx].1, a)),
+            vp.as_mut_slice(),
+        );
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn reset_vjp(
+        &self,
+        event: usize,
+        j: usize,
+        t: f64,
+        x: &X,
+        p: &X,
+        mu: &X,
+        vx: &mut X,
+        vp: &mut X,
+    ) -> f64 {
+        let (n, np) = (self.n, self.p);
+        let sizes = mu.len() == n && vx.len() == n && vp.len() == np;
+        let row = self.tables.row(event, j);
+        let mut sc = self.scratch.borrow_mut();
+        let at = At {
+            row: &row,
+            ..pt0(t, x, p)
+        };
+        let e = self.events.get(event).filter(|_| sizes);
+        let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
+            vx.fill(f64::NAN);
+            vp.fill(f64::NAN);
+            return f64::NAN;
+        };
+        let regs = &sc.regs;
+        let mu = mu.as_slice();
+        let vals = || e.reset_jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
+        let (nn, nnp) = (n * n, n * n + n * np);
+        transposed(
+            mu,
+            vals()
+                .filter(|&(s, _)| s < nn)
+                .map(|(s, a)| (s / n, s % n, a)),
+            vx.as_mut_slice(),
+        );
+        transposed(
+            mu,
+            vals()
+                .filter(|&(s, _)| s >= nn && s < nnp)
+                .map(|(s, a)| ((s - nn) / np, (s - nn) % np, a)),
+            vp.as_mut_slice(),
+        );
+        vals()
+            .filter(|&(s, _)| s >= nnp)
+            .fold(0.0, |acc, (s, a)| acc + mu[s - nnp] * a)
+    }
+
+    fn initial_state_vjp(&self, p: &X, mu: &X, vp: &mut X) {
+        let (n, np) = (self.n, self.p);
+        let mut sc = self.scratch.borrow_mut();
+        let at = pt_theta(p);
+        if mu.len() != n || vp.len() != np || !self.run(&self.x0_jac, &at, &mut sc.regs) {
+            vp.fill(f64::NAN);
+            return;
+        }
+        let regs = &sc.regs;
+        let vals = self.x0_jac.outputs();
+        transposed(
+            mu.as_slice(),
+            vals.map(|(s, reg)| (s / np, s % np, regs[reg])),
+            vp.as_mut_slice(),
+        );
+    }
+}
+
+/// A flow or ℓ that reads a qp of the state has no symbolic second derivatives (the qp's
+/// KKT derivatives are first derivatives): its products are the defaults' difference
+/// quotients, `mvad_runtime::model::differences`.
+impl ModelSecondOrder for InterpretedModel {
+    fn rhs_sens_dir_x(&self, pt: Point<'_, Self::N, Self::P>, s: &M, v: &X, out: &mut M) {
+        if self.second_by_differences {
+            return differences::rhs_sens_dir_x(self, pt, s, v, out);
+        }
+        let Point { mode, sw, t, x, p } = pt;
+        let ok = v.len() == self.n && self.sens_shapes(s, out.len(), self.n);
+        match self.mode(mode).filter(|_| ok) {
+            Some(m) => {
+                let mut sc = self.scratch.borrow_mut();
+                let at = at_sw(t, x, p, sw);
+                let (s, v) = (s.as_slice(), v.as_slice());
+                m.second.dir_x(self, &at, &mut sc, s, v, out.as_mut_slice());
+            }
+            None => out.fill(f64::NAN),
+        }
+    }
+
+    fn rhs_sens_dt(&self, pt: Point<'_, Self::N, Self::P>, s: &M, out: &mut M) {
+        if self.second_by_differences {
+            return differences::rhs_sens_dt(self, pt, s, out);
+        }
+        let Point { mode, sw, t, x, p } = pt;
+        let ok = self.sens_shapes(s, out.len(), self.n);
+        match self.mode(mode).filter(|_| ok) {
+            Some(m) if m.depends_on_t => {
+                let mut sc = self.scratch.borrow_mut();
+                let at = at_sw(t, x, p, sw);
+                let o = out.as_mut_slice();
+                m.second.dt(self, &at, &mut sc.regs, s.as_slice(), o);
+            }
+            Some(_) => out.fill(0.0),
+            None => out.fill(f64::NAN),
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_sens_dir_x(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &X,
+        p: &X,
+        s: &M,
+        v: &X,
+        out: &mut X,
+    ) {
+        if self.second_by_differences {
+            return differences::running_cost_sens_dir_x(self, sw, t, x, p, s, v, out);
+        }
+        if v.len() != self.n || !self.sens_shapes(s, out.len(), 1) {
+            out.fill(f64::NAN);
+            return;
+        }
+        match &self.running_cost_second {
+            Some(so) => {
+                let mut sc = self.scratch.borrow_mut();
+                let at = at_sw(t, x, p, sw);
+                let (s, v) = (s.as_slice(), v.as_slice());
+                so.dir_x(self, &at, &mut sc, s, v, out.as_mut_slice());
+            }
+            None => out.fill(0.0),
+        }
+    }
+
+    fn running_cost_sens_dt(&self, sw: &Switches, t: f64, x: &X, p: &X, s: &M, out: &mut X) -> f64 {
+        if self.second_by_differences {
+            return differences::running_cost_sens_dt(self, sw, t, x, p, s, out);
+        }
+        if !self.sens_shapes(s, out.len(), 1) {
+            out.fill(f64::NAN);
+            return f64::NAN;
+        }
+        match &self.running_cost_second {
+            Some(so) => {
+                let mut sc = self.scratch.borrow_mut();
+                let at = at_sw(t, x, p, sw);
+                so.dt(self, &at, &mut sc.regs, s.as_slice(), out.as_mut_slice())
+            }
+            None => {
+                out.fill(0.0);
+                0.0
+            }
+        }
+    }
+}
