@@ -88,6 +88,9 @@ pub struct ModeKernels {
     pub dt: Kernel,
     /// Whether f depends on t explicitly.
     pub depends_on_t: bool,
+    /// Whether f is a function of θ alone (it reads no state, no t, no switch bit and no qp
+    /// solution): along a segment x and S are then linear in t.
+    pub constant: bool,
     /// Structurally non-zero entries (row, col) of ∂f/∂x.
     pub sparsity: Vec<(usize, usize)>,
     /// Fused sensitivity kernel: slots `[0, n)` f, then one slot per entry of
@@ -510,12 +513,26 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 || ft
                     .iter()
                     .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::QpDeriv(_, Wrt::Time))));
+            let constant = !m.flow.iter().any(|&e| {
+                ar.depends_on(e, |nd| {
+                    matches!(
+                        nd,
+                        Node::State(_)
+                            | Node::Time
+                            | Node::Switch(..)
+                            | Node::QpSol(_)
+                            | Node::QpDeriv(..)
+                            | Node::Column(_)
+                    )
+                })
+            });
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
                 jac_p: Kernel::new(&ar, &fp),
                 dt: Kernel::new(&ar, &ft),
                 depends_on_t,
+                constant,
                 sparsity,
                 sens: Kernel::new(&ar, &sens),
                 jac: Kernel::new(&ar, &jac),

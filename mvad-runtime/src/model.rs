@@ -360,6 +360,13 @@ where
     fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut OVector<f64, Self::N>);
     /// Whether f_m depends on t explicitly.
     fn rhs_depends_on_t(&self, mode: usize) -> bool;
+    /// Whether f_m is a function of θ alone (it reads no state, no t, no switch bit, no qp):
+    /// then x(t) = x₀ + (t − t₀) f and S(t) = S₀ + (t − t₀) f_θ along a segment, and the
+    /// integrator takes the segment in one exact step. The default, `false`, is always safe.
+    fn flow_is_constant(&self, mode: usize) -> bool {
+        let _ = mode;
+        false
+    }
 
     // ---- events -----------------------------------------------------------------------
 

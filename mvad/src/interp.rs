@@ -48,6 +48,7 @@ struct ModeTapes {
     second: SecondTapes,
     sparsity: Vec<(usize, usize)>,
     depends_on_t: bool,
+    constant: bool,
 }
 
 #[derive(Clone, Debug)]
@@ -205,6 +206,7 @@ impl InterpretedModel {
                     second: second(&m.second),
                     sparsity: m.sparsity.clone(),
                     depends_on_t: m.depends_on_t,
+                    constant: m.constant,
                 })
                 .collect(),
             events: k
@@ -509,6 +511,9 @@ impl HybridModel for InterpretedModel {
     }
     fn rhs_depends_on_t(&self, mode: usize) -> bool {
         self.mode(mode).is_some_and(|m| m.depends_on_t)
+    }
+    fn flow_is_constant(&self, mode: usize) -> bool {
+        self.mode(mode).is_some_and(|m| m.constant)
     }
 
     fn guard(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {

@@ -11,15 +11,16 @@
 //! No input makes these functions panic or recurse without bound: nesting depth is
 //! limited by the front end before any recursive pass runs.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use mvad_dsl::diag::{render, Diagnostic};
 use mvad_dsl::Span;
 
 use crate::interp::InterpretedModel;
-use crate::table::{Table, TableError};
+use crate::table::{Table, TableError, TableSource};
 
 /// The largest model file [`load`] reads (16 MiB).
 pub const MAX_FILE_BYTES: u64 = 16 << 20;
@@ -92,11 +93,12 @@ pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
     load_with_tables(path, &[])
 }
 
-/// [`load`], with the files of some tables replaced: `(NAME, FILE)` reads table NAME from
-/// FILE (relative to the working directory) instead of the file the model names.
+/// [`load`], with some tables replaced: `(NAME, source)` takes table NAME from `source` (a
+/// file relative to the working directory, or data in memory) instead of the file the model
+/// names.
 pub fn load_with_tables(
     path: &Path,
-    tables: &[(String, PathBuf)],
+    tables: &[(String, TableSource)],
 ) -> Result<InterpretedModel, LoadError> {
     let mut model = read_model(path)?;
     let dir = path.parent().unwrap_or(Path::new(""));
@@ -104,12 +106,12 @@ pub fn load_with_tables(
     Ok(model)
 }
 
-/// Reads the tables `model` declares (files relative to `dir`, or those of `overrides`)
-/// and binds them.
+/// Reads the tables `model` declares (files relative to `dir`, or the sources `overrides`
+/// gives, the last one for a name given twice) and binds them.
 pub fn bind_tables(
     model: &mut InterpretedModel,
     dir: &Path,
-    overrides: &[(String, PathBuf)],
+    overrides: &[(String, TableSource)],
 ) -> Result<(), LoadError> {
     let decls = model.table_decls().to_vec();
     if let Some((name, _)) = overrides
@@ -124,15 +126,25 @@ pub fn bind_tables(
     if decls.is_empty() {
         return Ok(());
     }
-    let mut tables = Vec::with_capacity(decls.len());
-    for (name, file) in &decls {
-        let path = match overrides.iter().rev().find(|(n, _)| n == name) {
-            Some((_, p)) => p.clone(),
-            None => dir.join(file),
-        };
-        tables.push(Table::read_csv(&path).map_err(LoadError::Table)?);
-    }
-    let refs: Vec<&Table> = tables.iter().collect();
+    let source = |name: &str| {
+        overrides
+            .iter()
+            .rev()
+            .find(|(n, _)| n == name)
+            .map(|(_, s)| s)
+    };
+    let tables = decls
+        .iter()
+        .map(|(name, file)| {
+            Ok(match source(name) {
+                Some(TableSource::Data(t)) => Cow::Borrowed(t),
+                Some(TableSource::File(p)) => Cow::Owned(Table::read_csv(p)?),
+                None => Cow::Owned(Table::read_csv(&dir.join(file))?),
+            })
+        })
+        .collect::<Result<Vec<Cow<'_, Table>>, TableError>>()
+        .map_err(LoadError::Table)?;
+    let refs: Vec<&Table> = tables.iter().map(|t| t.as_ref()).collect();
     model.bind_tables(&refs).map_err(LoadError::Table)
 }
 

@@ -13,7 +13,7 @@
 //! on any data.
 
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use mvad_dsl::diag::{render, Diagnostic};
 use mvad_dsl::Span;
@@ -27,6 +27,16 @@ struct Source {
     /// Byte offset of each data row's line, and of the header (`header`).
     row_starts: Vec<usize>,
     header: usize,
+}
+
+/// Where a table's data come from when a caller replaces the file its declaration names
+/// (`--table NAME=FILE`, or `tables=` in Python).
+#[derive(Clone, Debug, PartialEq)]
+pub enum TableSource {
+    /// A CSV file (relative to the working directory).
+    File(PathBuf),
+    /// Columns already in memory.
+    Data(Table),
 }
 
 /// A data table: named columns of equal length.

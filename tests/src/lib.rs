@@ -129,6 +129,9 @@ where
     fn rhs_depends_on_t(&self, mode: usize) -> bool {
         self.0.rhs_depends_on_t(mode)
     }
+    fn flow_is_constant(&self, mode: usize) -> bool {
+        self.0.flow_is_constant(mode)
+    }
     fn guard(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
         self.0.guard(k, t, x, p)
     }

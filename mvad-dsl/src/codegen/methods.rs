@@ -155,18 +155,19 @@ impl Gen<'_> {
         } else {
             quote!(ft.fill(0.0);)
         };
-        let dep_t: Vec<Literal> = k
-            .modes
-            .iter()
-            .enumerate()
-            .filter(|(_, m)| m.depends_on_t)
-            .map(|(i, _)| usize_lit(i))
-            .collect();
-        let dep_t = if dep_t.is_empty() {
-            quote!(false)
-        } else {
-            quote!(matches!(mode, #(#dep_t)|*))
+        let modes_where = |pred: &dyn Fn(&crate::schedule::ModeKernels) -> bool| {
+            let ms: Vec<Literal> = (k.modes.iter().enumerate())
+                .filter(|(_, m)| pred(m))
+                .map(|(i, _)| usize_lit(i))
+                .collect();
+            if ms.is_empty() {
+                quote!(false)
+            } else {
+                quote!(matches!(mode, #(#ms)|*))
+            }
         };
+        let dep_t = modes_where(&|m| m.depends_on_t);
+        let constant = modes_where(&|m| m.constant);
         let sens = per_mode(&|m| self.sens_body(k, m), quote!(f));
         self.frozen.set(false);
 
@@ -379,6 +380,7 @@ impl Gen<'_> {
             fn rhs_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, ft: &mut #xv) {
         let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
+            fn flow_is_constant(&self, mode: usize) -> bool { #constant }
             fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
             fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
             fn reset(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #row #reset }

@@ -2,7 +2,7 @@
 //!
 //! After a step from (t_prev, Y₀) to (t, Y₁) of signed length h = t − t_prev, Y(t_prev + θh)
 //! for θ ∈ [0, 1] is the continuous extension of the scheme that took the step: 4th order for
-//! Tsit5 and Rodas5P, 9th for Verner (or, while Verner's interpolation stages are pending,
+//! Tsit5 and Rodas5P, the line Y₀ + θh·F₀ (exact) for an exact step, 9th for Verner (or, while Verner's interpolation stages are pending,
 //! the cubic Hermite interpolant of (Y₀, F₀, Y₁, F₁)). Works for either direction of time.
 
 use super::explicit::Tableau;
@@ -27,6 +27,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             Scheme::Tsit5 => TSIT5.dense_primary(k, y0, h, theta, out),
             Scheme::Verner9 => VERNER9.dense_primary(k, y0, h, theta, out),
             Scheme::Rodas5P => rosenbrock::dense_primary(k, y0, y1, theta, out),
+            Scheme::Exact => Sys::Vector::combine_primary(out, y0, h, &[theta], &k[..1]),
         }
     }
 
@@ -149,5 +150,6 @@ fn dense_into<V: StageVector>(
         Scheme::Tsit5 => TSIT5.dense(k, y0, h, theta, all, out),
         Scheme::Verner9 => VERNER9.dense(k, y0, h, theta, all, out),
         Scheme::Rodas5P => rosenbrock::dense(k, y0, y1, theta, all, out),
+        Scheme::Exact => out.combine(y0, h, &[theta], &k[..1], all),
     }
 }

@@ -13,9 +13,8 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
 use mvad::runtime::solution::{Method, Solution};
-use mvad::runtime::solve::solve_with;
 use mvad::setup::{params_with, resolve, Request, Setup, SetupError, Spelling};
-use mvad::FirstEvents;
+use mvad::table::TableSource;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
@@ -108,13 +107,14 @@ pub struct Common {
 
 impl Common {
     /// The `--table NAME=FILE` replacements.
-    pub fn tables(&self) -> Result<Vec<(String, PathBuf)>, CliError> {
+    pub fn tables(&self) -> Result<Vec<(String, TableSource)>, CliError> {
         self.table
             .iter()
             .map(|item| match item.split_once('=') {
-                Some((name, file)) if !name.trim().is_empty() && !file.trim().is_empty() => {
-                    Ok((name.trim().to_string(), PathBuf::from(file.trim())))
-                }
+                Some((name, file)) if !name.trim().is_empty() && !file.trim().is_empty() => Ok((
+                    name.trim().to_string(),
+                    TableSource::File(PathBuf::from(file.trim())),
+                )),
                 _ => Err(CliError::Input(format!(
                     "error: --table expects NAME=FILE, got `{item}`"
                 ))),
@@ -127,7 +127,7 @@ impl Common {
         if self.all_events {
             usize::MAX
         } else {
-            output::MAX_JSON_EVENTS
+            mvad::json::MAX_JSON_EVENTS
         }
     }
 }
@@ -176,7 +176,7 @@ where
     I: IntoIterator<Item = OsString>,
     M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
-    L: FnOnce(&Path, &[(String, PathBuf)]) -> Result<M, String>,
+    L: FnOnce(&Path, &[(String, TableSource)]) -> Result<M, String>,
 {
     let cli = match Cli::try_parse_from(args) {
         Ok(cli) => cli,
@@ -244,7 +244,7 @@ fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
 where
     M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
-    L: FnOnce(&Path, &[(String, PathBuf)]) -> Result<M, String>,
+    L: FnOnce(&Path, &[(String, TableSource)]) -> Result<M, String>,
 {
     let Some(common) = cli.common() else {
         return match &cli.command {
@@ -336,6 +336,7 @@ where
         atol: common.atol,
         method: Method::from_name(&common.method).unwrap_or_default(),
         grazing_tol: common.grazing_tol,
+        tables: common.tables()?,
     };
     resolve(model, &req).map_err(setup_err)
 }
@@ -395,7 +396,7 @@ pub fn check_step(step: f64) -> Result<(), CliError> {
 }
 
 /// Solves at the setup's parameters, keeping the first `common.event_limit()` events only
-/// (a large run streams: `stats.events` counts all of them).
+/// (`mvad::json::solve_listing`).
 pub fn solve_listing<M: HybridModel>(
     model: &M,
     s: &Setup<M>,
@@ -404,10 +405,7 @@ pub fn solve_listing<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let mut first = FirstEvents::new(common.event_limit());
-    let mut sol = solve_with(model, &s.params, &s.opts, &mut first).map_err(solve_err)?;
-    sol.events = first.records;
-    Ok(sol)
+    mvad::json::solve_listing(model, &s.params, &s.opts, common.event_limit()).map_err(solve_err)
 }
 
 /// Maps a runtime failure to an exit status: bad input (options, parameters, horizon)

@@ -130,9 +130,6 @@ pub fn join_or<S: AsRef<str>>(items: &[S], sep: &str, empty: &str) -> String {
 /// The most event rows a human-readable table shows (`--json` always prints them all).
 pub const MAX_EVENT_ROWS: usize = 20;
 
-/// The most events a JSON object lists without `--all-events`.
-pub const MAX_JSON_EVENTS: usize = 1000;
-
 /// The most event times a one-line list shows (`fdcheck`).
 pub const MAX_LISTED_TIMES: usize = 5;
 
