@@ -198,6 +198,35 @@ pub struct EventMeta {
     pub has_cost: bool,
     /// `Some` for a time event.
     pub time: Option<TimeKind>,
+    /// Whether the guard is affine in (x, t) (its derivatives in x and t are functions of θ
+    /// alone): along a segment of a constant flow it is then affine in t.
+    pub affine_guard: bool,
+}
+
+/// Whether a leaf can change along a segment at fixed θ (a state, t, a switch bit, a qp
+/// solution or its derivative, a table row).
+fn varies_in_time(nd: &Node) -> bool {
+    matches!(
+        nd,
+        Node::State(_)
+            | Node::Time
+            | Node::Switch(..)
+            | Node::QpSol(_)
+            | Node::QpDeriv(..)
+            | Node::Column(_)
+    )
+}
+
+/// Whether `e` is affine in (x, t): its derivatives in every state and in t are functions of
+/// θ alone ([`varies_in_time`] reads none of them).
+fn affine_in_state_and_time(ar: &mut ExprArena, e: ExprId, n: usize) -> bool {
+    if ar.depends_on(e, |nd| matches!(nd, Node::Switch(..) | Node::Column(_))) {
+        return false;
+    }
+    (0..n).map(Var::State).chain([Var::Time]).all(|v| {
+        let d = diff(ar, e, v);
+        !ar.depends_on(d, varies_in_time)
+    })
 }
 
 /// The kernels of one qp: its data and their derivatives, which the back ends hand to the
@@ -513,19 +542,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 || ft
                     .iter()
                     .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::QpDeriv(_, Wrt::Time))));
-            let constant = !m.flow.iter().any(|&e| {
-                ar.depends_on(e, |nd| {
-                    matches!(
-                        nd,
-                        Node::State(_)
-                            | Node::Time
-                            | Node::Switch(..)
-                            | Node::QpSol(_)
-                            | Node::QpDeriv(..)
-                            | Node::Column(_)
-                    )
-                })
-            });
+            let constant = !m.flow.iter().any(|&e| ar.depends_on(e, varies_in_time));
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
@@ -541,6 +558,9 @@ pub fn kernels(program: &Program) -> ModelKernels {
         })
         .collect();
 
+    let affine_guards: Vec<bool> = (program.events.iter())
+        .map(|ev| ev.schedule.is_none() && affine_in_state_and_time(&mut ar, ev.guard, n))
+        .collect();
     let events = program
         .events
         .iter()
@@ -636,10 +656,8 @@ pub fn kernels(program: &Program) -> ModelKernels {
         param_defaults: program.param_defaults.clone(),
         mode_names: program.modes.iter().map(|m| m.name.clone()).collect(),
         initial_mode: program.initial_mode,
-        event_meta: program
-            .events
-            .iter()
-            .map(|e| EventMeta {
+        event_meta: (program.events.iter().zip(affine_guards))
+            .map(|(e, affine_guard)| EventMeta {
                 name: e.name.clone(),
                 direction: e.direction,
                 mode: e.mode,
@@ -651,6 +669,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
                     Schedule::Every { .. } => TimeKind::Every,
                     Schedule::Each { table, .. } => TimeKind::Each { table },
                 }),
+                affine_guard,
             })
             .collect(),
         observables: program.observables.iter().map(|(n, _)| n.clone()).collect(),

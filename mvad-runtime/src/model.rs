@@ -378,6 +378,14 @@ where
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
     ) -> f64;
+    /// Whether the guard of event k is affine in (x, t) (its derivatives in x and t are
+    /// functions of θ alone): on a segment of a constant flow
+    /// ([`HybridModel::flow_is_constant`]) it is then affine in t and the event loop samples
+    /// it only at the ends of a step. The default, `false`, is always safe.
+    fn guard_is_affine(&self, event: usize) -> bool {
+        let _ = event;
+        false
+    }
     /// ∇ₓg_k into `gx`, ∂θg_k into `gp`; returns ∂ₜg_k.
     fn guard_grad(
         &self,

@@ -54,6 +54,7 @@ struct ModeTapes {
 #[derive(Clone, Debug)]
 struct EventTapes {
     guard: GradTapes,
+    affine_guard: bool,
     reset: Tape,
     reset_jac: Tape,
     cost: Option<GradTapes>,
@@ -209,11 +210,10 @@ impl InterpretedModel {
                     constant: m.constant,
                 })
                 .collect(),
-            events: k
-                .events
-                .iter()
-                .map(|e| EventTapes {
+            events: (k.events.iter().zip(&k.event_meta))
+                .map(|(e, meta)| EventTapes {
                     guard: grad(&e.guard),
+                    affine_guard: meta.affine_guard,
                     reset: tape(&e.reset),
                     reset_jac: tape(&e.reset_jac),
                     cost: e.cost.as_ref().map(grad),
@@ -521,6 +521,9 @@ impl HybridModel for InterpretedModel {
             Some(e) => self.scalar(&e.guard.value, &pt0(t, x, p)),
             None => f64::NAN,
         }
+    }
+    fn guard_is_affine(&self, event: usize) -> bool {
+        self.events.get(event).is_some_and(|e| e.affine_guard)
     }
     fn guard_grad(&self, event: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
         match self.events.get(event) {

@@ -135,6 +135,9 @@ where
     fn guard(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
         self.0.guard(k, t, x, p)
     }
+    fn guard_is_affine(&self, k: usize) -> bool {
+        self.0.guard_is_affine(k)
+    }
     fn guard_grad(
         &self,
         k: usize,

@@ -26,6 +26,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     assert!(m.flow_is_constant(0), "{name}: ẋ = a is constant");
+    assert!(m.guard_is_affine(0), "{name}: x − h is affine");
     let p =
         OVector::<f64, M::P>::from_iterator_generic(m.nparams(), nalgebra::Const::<1>, [1.3, 2.0]);
     // Loose tolerances: an exact step has no error to control.
@@ -55,6 +56,25 @@ fn a_constant_flow_takes_one_exact_step_per_segment_through_both_doors() {
     let src = include_str!("sawtooth.hyb");
     let loaded = InterpretedModel::from_source(src).expect("loads");
     check(&loaded, "loaded");
+}
+
+#[test]
+fn guards_that_are_not_affine_in_the_state_and_t_are_not_flagged() {
+    for (guard, affine) in [
+        ("x >= h", true),
+        ("2 * x + t >= h * h", true),
+        ("h * x >= 1", true),
+        ("x * x >= h", false),
+        ("x >= t * t", false),
+        ("sin(x) >= 0.5", false),
+    ] {
+        let src = format!(
+            "model M {{ param h = 2; state x = 0; flow {{ der(x) = 1; }} \
+             event e when {guard} {{ x = 0; }} horizon 1; }}"
+        );
+        let m = InterpretedModel::from_source(&src).expect("loads");
+        assert_eq!(m.guard_is_affine(0), affine, "{guard}");
+    }
 }
 
 #[test]

@@ -168,6 +168,15 @@ impl Gen<'_> {
         };
         let dep_t = modes_where(&|m| m.depends_on_t);
         let constant = modes_where(&|m| m.constant);
+        let affine: Vec<Literal> = (k.event_meta.iter().enumerate())
+            .filter(|(_, e)| e.affine_guard)
+            .map(|(i, _)| usize_lit(i))
+            .collect();
+        let affine = if affine.is_empty() {
+            quote!(false)
+        } else {
+            quote!(matches!(event, #(#affine)|*))
+        };
         let sens = per_mode(&|m| self.sens_body(k, m), quote!(f));
         self.frozen.set(false);
 
@@ -381,6 +390,7 @@ impl Gen<'_> {
         let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             fn flow_is_constant(&self, mode: usize) -> bool { #constant }
+            fn guard_is_affine(&self, event: usize) -> bool { #affine }
             fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
             fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
             fn reset(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #row #reset }

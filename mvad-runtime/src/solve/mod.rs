@@ -33,7 +33,7 @@ mod zeno;
 
 use crate::error::SolveError;
 use crate::event::{Crossing, Scanner, Watch};
-use crate::integrate::{AugState, Forward, Integrator};
+use crate::integrate::{AugState, Forward, Integrator, Scheme};
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::reduce::CompensatedSum;
 use crate::sink::EventSink;
@@ -183,6 +183,9 @@ where
     /// Scratch: switching functions at exactly zero when the bits are first decided.
     sw_undecided: Switches,
     scanner: Scanner,
+    /// Every watched function active since the last restart is an affine guard (see
+    /// [`HybridModel::guard_is_affine`]): on an exact step the scanner needs only its ends.
+    affine_watch: bool,
     xs: OVector<f64, M::N>,
     xe: OVector<f64, M::N>,
     x_plus: OVector<f64, M::N>,
@@ -255,6 +258,7 @@ where
             sw_next: Switches::new(info.switches),
             sw_undecided: Switches::new(info.switches),
             scanner: Scanner::new(nev, info.switches),
+            affine_watch: false,
             xs: vn(),
             xe: vn(),
             x_plus: vn(),
@@ -382,10 +386,12 @@ where
     fn restart(&mut self, t: f64) -> Result<(), SolveError> {
         let info = self.model.info();
         let nev = info.events.len();
+        self.affine_watch = true;
         for w in 0..self.scanner.len() {
             // Time events are not watched: the loop steps onto their times.
             let active =
                 w >= nev || (info.events[w].armed_in(self.mode) && !info.events[w].is_time_event());
+            self.affine_watch &= !active || (w < nev && self.model.guard_is_affine(w));
             let v = if active {
                 Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
             } else {
@@ -454,6 +460,7 @@ where
             }
             let (t0, t1) = (self.integ.t_prev(), self.integ.t());
             let sim_tol = self.simultaneity(t1);
+            let linear = self.affine_watch && self.integ.scheme() == Scheme::Exact;
             let sw = &self.sw;
             {
                 let integ = &self.integ;
@@ -475,7 +482,7 @@ where
                     integ.dense_x(t, xe);
                     Self::signed(model, p, nev, sw, w, t, xe)
                 };
-                let res = self.scanner.scan(t0, t1, sample, eval, sim_tol);
+                let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
                 if let Err((w, t)) = res {
                     return Err(self.guard_nonfinite(w, t));
                 }
