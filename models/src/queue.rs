@@ -150,6 +150,14 @@ pub fn exact(t: &[f64], s: &[f64], mu: f64, scale: f64) -> (f64, f64, f64) {
     )
 }
 
+/// The exact C and dC/dμ of the plain queue on (t, s) at μ, as the JSON object
+/// `{"mu": μ, "cost": C, "gradient": {"mu": dC/dμ}}` (numbers that read back as the same
+/// `f64`): the reference the command-line tests compare `mvad grad --json` against.
+pub fn exact_json(t: &[f64], s: &[f64], mu: f64) -> String {
+    let (c, g, _) = exact(t, s, mu, 1.0);
+    format!("{{\"mu\": {mu:?}, \"cost\": {c:?}, \"gradient\": {{\"mu\": {g:?}}}}}")
+}
+
 /// x = m·2^e with m odd (x ≠ 0 finite); (0, 0) for zero.
 fn odd_mantissa(x: f64) -> (i64, i32) {
     if x == 0.0 {
@@ -208,6 +216,17 @@ mod tests {
         for (x, y) in [(c, ce), (dmu, dmue), (dsc, dsce)] {
             assert!(((x - y) / y).abs() < 1e-12, "{x} vs exact {y}");
         }
+    }
+
+    #[test]
+    fn the_stored_reference_of_queue_csv_is_its_exact_recursion() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let table = Table::read_csv(&dir.join("queue.csv")).expect("queue.csv");
+        let stored = std::fs::read_to_string(dir.join("queue_exact.json")).expect("stored");
+        let (t, s) = (table.column("t").expect("t"), table.column("s").expect("s"));
+        assert_eq!(stored.trim(), exact_json(t, s, 1.25));
+        let text = std::fs::read_to_string(dir.join("queue.csv")).expect("queue.csv");
+        assert_eq!(Arrivals::generate(1000, 1).to_csv(), text);
     }
 
     #[test]

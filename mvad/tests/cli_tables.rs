@@ -62,6 +62,27 @@ fn table_replaces_the_data_and_the_answer_is_the_lindley_recursion() {
 }
 
 #[test]
+fn grad_with_a_table_matches_the_exact_lindley_recursion() {
+    // models/queue_exact.json: C and dC/dμ of models/queue.csv (1000 customers) by the
+    // recursion in integer arithmetic (`queue_table --exact`, checked by the models crate).
+    let text = std::fs::read_to_string(root().join("models/queue_exact.json")).expect("stored");
+    let exact: Value = serde_json::from_str(&text).expect("JSON");
+    let v = json(&[
+        "grad",
+        QUEUE,
+        "--table",
+        "arrivals=models/queue.csv",
+        "--json",
+    ]);
+    let rel = |key: &str, got: &Value, want: &Value| {
+        let (g, w) = (got.as_f64().expect(key), want.as_f64().expect(key));
+        assert!(((g - w) / w).abs() < 1e-12, "{key}: {g} vs exact {w}");
+    };
+    rel("cost", &v["cost"], &exact["cost"]);
+    rel("dC/dmu", &v["gradient"]["mu"], &exact["gradient"]["mu"]);
+}
+
+#[test]
 fn json_lists_1000_events_unless_all_events_is_given() {
     let v = json(&["grad", QUEUE, "--json"]);
     let total = v["stats"]["events"].as_u64().expect("count");

@@ -164,6 +164,40 @@ fn the_queue_matches_the_exact_lindley_recursion_through_both_doors() {
 }
 
 #[test]
+fn the_queue_at_1e6_customers_streams_and_matches_the_exact_recursion_through_both_doors() {
+    // No event table (the `()` sink); about 4 s in the test profile. 10⁷ customers and the
+    // command line are run by the release example `queue_scale`, which checks the same bound.
+    let a = Arrivals::generate(1_000_000, 3);
+    let mu = 1.25;
+    let (c, dmu, _) = queue::exact(&a.t, &a.s, mu, 1.0);
+    let opts = Options::default();
+    let compiled = solve_with(
+        &compiled_queue(&a),
+        &nalgebra::SVector::<f64, 1>::new(mu),
+        &opts,
+        &mut (),
+    )
+    .expect("runs");
+    let loaded = solve_with(
+        &loaded_queue("queue.hyb", &a),
+        &nalgebra::DVector::from_vec(vec![mu]),
+        &opts,
+        &mut (),
+    )
+    .expect("runs");
+    for (door, sol) in [("compiled", compiled), ("loaded", loaded)] {
+        assert!(sol.events.is_empty(), "{door}");
+        assert!(sol.stats.events > 1_000_000, "{door}");
+        assert!(rel(sol.cost, c) < 1e-12, "{door}: C = {} vs {c}", sol.cost);
+        assert!(
+            rel(sol.gradient[0], dmu) < 1e-12,
+            "{door}: {} vs {dmu}",
+            sol.gradient[0]
+        );
+    }
+}
+
+#[test]
 fn the_stretched_queue_matches_the_exact_ipa_derivative_and_finite_differences() {
     let a = Arrivals::generate(1000, 5);
     let (mu, scale) = (1.25, 0.9);
