@@ -1,7 +1,10 @@
 //! The queue (E4) from 10³ to 10⁷ customers: C and dC/dμ of the compiled and the loaded model
 //! (streaming: no event table) against the exact Lindley recursion (integer arithmetic on the
-//! same data), with the wall time of each and of the hand-written Lindley-IPA loop; with
-//! `--cli`, also `mvad grad --table` as a whole process (the release binary must be built).
+//! same data), with the wall time of each and of the hand-written Lindley-IPA loop, the
+//! compiled model's time per event and its ratio to the Lindley loop, and how much the peak
+//! resident memory of the process grew during the two runs (`VmHWM` of /proc/self/status:
+//! 0 when the runs stream); with `--cli`, also `mvad grad --table` as a whole process (the
+//! release binary must be built).
 //!
 //! ```text
 //! cargo run --release -p models --example queue_scale -- [N ...] [--cli]
@@ -34,18 +37,21 @@ fn main() -> std::process::ExitCode {
     let src = include_str!("../queue.hyb");
     let mut worst: f64 = 0.0;
     println!(
-        "{:>9} {:>11} {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
+        "{:>9} {:>11} {:>9} {:>9} {:>9} | {:>9} {:>8} {:>7} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>8}",
         "N",
         "events",
         "lindley",
         "err C",
         "exact",
         "compiled",
+        "ns/event",
+        "×lindl",
         "err C",
         "err dC",
         "loaded",
         "err C",
-        "err dC"
+        "err dC",
+        "ΔHWM KB"
     );
     for &n in &sizes {
         let a = Arrivals::generate(n, 1);
@@ -70,9 +76,11 @@ fn main() -> std::process::ExitCode {
         let mut loaded = InterpretedModel::from_source(src).expect("model");
         loaded.bind_tables(&[&table]).expect("binds");
         let pl = nalgebra::DVector::from_vec(vec![mu]);
+        let hwm_before = peak_rss_kb();
         let t0 = Instant::now();
         let sol_l = solve_with(&loaded, &pl, &opts, &mut ()).expect("runs");
         let t_loaded = t0.elapsed().as_secs_f64();
+        let hwm_growth = peak_rss_kb().zip(hwm_before).map(|(a, b)| a - b);
 
         let errs = [
             rel(sol.cost, c),
@@ -81,18 +89,21 @@ fn main() -> std::process::ExitCode {
             rel(sol_l.gradient[0], g),
         ];
         worst = errs.iter().copied().fold(worst, f64::max);
+        let events = sol.stats.events;
         println!(
-            "{n:>9} {:>11} {:>8.4}s {:>9.1e} {:>8.3}s | {:>8.4}s {:>9.1e} {:>9.1e} | {:>8.4}s {:>9.1e} {:>9.1e}",
-            sol.stats.events,
+            "{n:>9} {events:>11} {:>8.4}s {:>9.1e} {:>8.3}s | {:>8.4}s {:>8.1} {:>7.1} {:>9.1e} {:>9.1e} | {:>8.4}s {:>9.1e} {:>9.1e} | {:>8}",
             t_lindley,
             rel(c_l, c),
             t_exact,
             t_compiled,
+            t_compiled * 1e9 / events as f64,
+            t_compiled / t_lindley,
             errs[0],
             errs[1],
             t_loaded,
             errs[2],
-            errs[3]
+            errs[3],
+            hwm_growth.map_or("?".to_string(), |g| g.to_string())
         );
         if cli {
             worst = worst.max(run_cli(&a, c, g));
@@ -104,6 +115,13 @@ fn main() -> std::process::ExitCode {
     } else {
         std::process::ExitCode::from(1)
     }
+}
+
+/// The peak resident set size of this process so far (`VmHWM`, KB), where /proc has it.
+fn peak_rss_kb() -> Option<i64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// `mvad grad models/queue.hyb --table arrivals=FILE --json` as a whole process; returns the

@@ -70,12 +70,21 @@ impl EventView<'_> {
 pub trait EventSink {
     /// Called once per user event, after its reset and sensitivity jump are known.
     fn event(&mut self, ev: &EventView<'_>);
+    /// Whether the sink looks at the next event at all: when it does not, the loop neither
+    /// builds the view (the observables on both sides) nor calls [`EventSink::event`].
+    fn wants_events(&self) -> bool {
+        true
+    }
 }
 
 /// Keeps nothing.
 impl EventSink for () {
     #[inline]
     fn event(&mut self, _ev: &EventView<'_>) {}
+    #[inline]
+    fn wants_events(&self) -> bool {
+        false
+    }
 }
 
 /// Keeps the full event table.
@@ -111,6 +120,9 @@ impl EventSink for FirstEvents {
         if self.records.len() < self.limit {
             self.records.push(ev.to_record());
         }
+    }
+    fn wants_events(&self) -> bool {
+        self.records.len() < self.limit
     }
 }
 
@@ -151,5 +163,8 @@ impl<F: FnMut(&EventView<'_>)> EventSink for Stream<F> {
 impl<S: EventSink + ?Sized> EventSink for &mut S {
     fn event(&mut self, ev: &EventView<'_>) {
         (**self).event(ev)
+    }
+    fn wants_events(&self) -> bool {
+        (**self).wants_events()
     }
 }

@@ -152,7 +152,7 @@ impl Table {
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)
             .comment(Some(b'#'))
-            .trim(csv::Trim::All)
+            // Fields are trimmed here, not by the reader (its trimming allocates per record).
             .flexible(true)
             .from_reader(src.text.as_bytes());
         let mut record = csv::StringRecord::new();
@@ -171,12 +171,12 @@ impl Table {
                 break;
             }
             let start = record.position().map_or(0, |p| p.byte() as usize);
-            if record.len() == 1 && record[0].is_empty() {
+            if record.len() == 1 && record[0].trim().is_empty() {
                 continue; // a blank line
             }
             if names.is_empty() {
                 src.header = start;
-                for (i, field) in record.iter().enumerate() {
+                for (i, field) in record.iter().map(str::trim).enumerate() {
                     if !is_identifier(field) {
                         let span = field_span(&src.text, start, i);
                         let msg = format!(
@@ -204,7 +204,7 @@ impl Table {
                 );
                 return Err(TableError::located(&src, span, msg));
             }
-            for (i, field) in record.iter().enumerate() {
+            for (i, field) in record.iter().map(str::trim).enumerate() {
                 match field.parse::<f64>() {
                     Ok(v) if v.is_finite() => columns[i].push(v),
                     _ => {

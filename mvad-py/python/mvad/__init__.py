@@ -14,7 +14,9 @@ observable as a density on a grid plus atoms at the events (numpy arrays). ``Mod
 array whose backward pass is mvad's own derivative.
 
 Every method takes ``params`` (overrides by name) and the run options ``rtol``, ``atol``,
-``method`` (``auto``, ``tsit5``, ``verner9``, ``rosenbrock``), ``t_end`` and ``grazing_tol``.
+``method`` (``auto``, ``tsit5``, ``verner9``, ``rosenbrock``), ``t_end``, ``grazing_tol`` and
+``tables``: data tables replacing those the model declares, ``{"NAME": "FILE.csv"}`` or
+``{"NAME": {"COL": array, ...}}`` (``mvad.load(path, tables=...)`` binds them once).
 
 Errors: ``mvad.ModelError`` (a ``ValueError``) for a model that does not compile, its message
 holding ``FILE:LINE:COL: error: ...``; ``ValueError`` for a bad request; ``mvad.SolveError``

@@ -282,7 +282,8 @@ where
         Ok(l_plus)
     }
 
-    /// Hands the event to the sink, with the observables on both sides of the jump.
+    /// Hands the event to the sink, with the observables on both sides of the jump (nothing is
+    /// built for a sink that does not want it).
     fn emit_event(
         &mut self,
         k: usize,
@@ -292,6 +293,10 @@ where
         sink: &mut impl EventSink,
     ) {
         let (model, p) = (self.model, self.p);
+        if !sink.wants_events() {
+            self.nevents += 1;
+            return;
+        }
         model.observe(t, &self.y.x, p, &mut self.obs_minus);
         model.observe(t, &self.x_plus, p, &mut self.obs_plus);
         sink.event(&EventView {

@@ -3,7 +3,7 @@
 //! current row handed to the methods of an `at each` event, and the times τ_kj(θ) of time
 //! events with their gradients.
 
-use std::cell::{Ref, RefCell};
+use std::cell::{Cell, Ref, RefCell};
 
 use mvad_dsl::eval::Tape;
 use mvad_dsl::schedule::{ModelKernels, TimeKind};
@@ -30,6 +30,8 @@ pub(super) struct Tables {
     values: Vec<Vec<f64>>,
     /// The current row's values of every column (scratch of the event methods).
     row: RefCell<Vec<f64>>,
+    /// The (event, row) `row` holds (the methods of one event read the same row in turn).
+    filled: Cell<Option<(usize, usize)>>,
 }
 
 impl Tables {
@@ -52,13 +54,15 @@ impl Tables {
                 .collect(),
             values: Vec::new(),
             row: RefCell::new(vec![f64::NAN; k.columns.len()]),
+            filled: Cell::new(None),
         }
     }
 
     /// Row `j` of the table of event `event`: every column of that table at row j, NaN in the
     /// columns of other tables (and for any other event).
     pub(super) fn row(&self, event: usize, j: usize) -> Ref<'_, Vec<f64>> {
-        {
+        if self.filled.get() != Some((event, j)) {
+            self.filled.set(Some((event, j)));
             let mut row = self.row.borrow_mut();
             let table = self.each.get(event).copied().flatten();
             for (c, v) in row.iter_mut().enumerate() {
@@ -99,6 +103,7 @@ impl InterpretedModel {
             }
         }
         self.tables.values = values;
+        self.tables.filled.set(None);
         Ok(())
     }
 
