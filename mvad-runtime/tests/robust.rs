@@ -8,7 +8,6 @@ use mvad_runtime::error::SolveError;
 use mvad_runtime::model::ModelInfo;
 use mvad_runtime::solution::{DiagnosticKind, Method, Options};
 use mvad_runtime::solve::solve;
-use std::time::Instant;
 
 /// A stiff lag coupled to a slow state: ẏ = (u − y)/τ, u̇ = −u, τ = 1e-8, u(0) = 1, y(0) = 0,
 /// C = ∫ y dt over [0, 1]. Tsit5's stability bound forces h ≈ 3.3 τ, i.e. ~3e8 steps.
@@ -51,9 +50,7 @@ fn explicit_method_on_a_stiff_model_stops_at_max_steps() {
         max_steps: 20_000,
         ..Options::default()
     };
-    let start = Instant::now();
     let err = solve(&m, &p, &opts).unwrap_err();
-    assert!(start.elapsed().as_secs_f64() < 10.0);
     match &err {
         SolveError::MaxSteps { t, steps } => {
             assert_eq!(*steps, 20_000);
@@ -149,9 +146,7 @@ fn nonfinite_flow(kind: u8, sens: bool) {
         sensitivities: sens,
         ..Options::default()
     };
-    let start = Instant::now();
     let err = solve(&m, &m.defaults(), &opts).unwrap_err();
-    assert!(start.elapsed().as_secs_f64() < 5.0);
     match &err {
         SolveError::NonFinite { t, what } => {
             assert!(what.contains("mode `rising`"), "kind {kind}: {what}");

@@ -332,3 +332,78 @@ fn occurrences_before_zero_or_outside_their_mode_are_skipped() {
         .filter(|e| e.event == 0)
         .all(|e| e.dt == vec![1.0]));
 }
+
+/// Adjoint mode on time events: the dose, the sampled controller, the queue and the stretched
+/// queue, through both doors, against forward mode and the exact recursion.
+#[test]
+fn time_events_in_adjoint_mode_match_forward_mode_through_both_doors() {
+    use mvad::GradientMode;
+    let mode = |m: GradientMode| Options {
+        gradient_mode: m,
+        ..tight()
+    };
+    let check = |what: &str, f: Solution, a: Solution| {
+        assert_eq!(a.stats.mode, GradientMode::Adjoint, "{what}");
+        assert_relative_eq!(a.cost, f.cost, max_relative = 1e-11);
+        for (x, y) in a.gradient.iter().zip(&f.gradient) {
+            assert!(
+                (x - y).abs() <= 1e-9 * y.abs().max(1.0),
+                "{what}: adjoint {:?} forward {:?}",
+                a.gradient,
+                f.gradient
+            );
+        }
+    };
+    let dose = [0.7, 2.0, 0.4];
+    let sampled = [2.0, 0.1, 1.5];
+    for (what, p, interp) in [
+        ("dose", &dose[..], loaded("dose.hyb")),
+        ("sampled", &sampled[..], loaded("sampled.hyb")),
+    ] {
+        let f = run(&interp, p, &mode(GradientMode::Forward));
+        let a = run(&interp, p, &mode(GradientMode::Adjoint));
+        check(&format!("{what} loaded"), f, a);
+    }
+    let f = run(&Dose::new(), &dose, &mode(GradientMode::Forward));
+    let a = run(&Dose::new(), &dose, &mode(GradientMode::Adjoint));
+    check("dose compiled", f, a);
+    let f = run(&Sampled::new(), &sampled, &mode(GradientMode::Forward));
+    let a = run(&Sampled::new(), &sampled, &mode(GradientMode::Adjoint));
+    check("sampled compiled", f, a);
+    // The queues: every arrival an `at each` event with a row value in its reset and cost.
+    let a = Arrivals::generate(1000, 6);
+    let (mu, scale) = (1.25, 0.9);
+    let (c, dmu, _) = queue::exact(&a.t, &a.s, mu, 1.0);
+    let (cs, dmus, dscs) = queue::exact(&a.t, &a.s, mu, scale);
+    let opts = Options {
+        gradient_mode: GradientMode::Adjoint,
+        ..Options::default()
+    };
+    let plain = [
+        run(&compiled_queue(&a), &[mu], &opts),
+        run(&loaded_queue("queue.hyb", &a), &[mu], &opts),
+    ];
+    for sol in plain {
+        assert_eq!(sol.stats.mode, GradientMode::Adjoint);
+        assert!(
+            rel(sol.cost, c) < 1e-12 && rel(sol.gradient[0], dmu) < 1e-12,
+            "{sol:?}"
+        );
+    }
+    let stretched = queue::stretched::StretchedQueue::new(queue::stretched::StretchedQueueTables {
+        arrivals: a.table().expect("table"),
+    })
+    .expect("binds");
+    for sol in [
+        run(&stretched, &[mu, scale], &opts),
+        run(
+            &loaded_queue("queue_stretched.hyb", &a),
+            &[mu, scale],
+            &opts,
+        ),
+    ] {
+        assert!(rel(sol.cost, cs) < 1e-12, "{}", sol.cost);
+        assert!(rel(sol.gradient[0], dmus) < 1e-12, "{:?}", sol.gradient);
+        assert!(rel(sol.gradient[1], dscs) < 1e-12, "{:?}", sol.gradient);
+    }
+}

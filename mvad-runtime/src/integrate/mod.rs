@@ -53,6 +53,7 @@
 //! the Jacobian, the step-size history. The driver calls it at the start and after every event,
 //! mode switch or switch flip, so the first stage after a jump is always F at the new state.
 
+mod adjoint;
 mod aug;
 mod control;
 mod dense;
@@ -63,6 +64,7 @@ pub mod system;
 mod tsit5;
 mod verner;
 
+pub use adjoint::{AdjState, Backward};
 pub use aug::AugState;
 pub use forward::Forward;
 pub use system::{ImplicitSystem, OdeSystem, StageVector};

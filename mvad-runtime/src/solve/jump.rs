@@ -3,6 +3,7 @@
 //! switch crossing of a kink (identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump).
 
 use super::Driver;
+use crate::adjoint::record::JumpKind;
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::sens;
@@ -70,6 +71,19 @@ where
         if approach.grazing && zeno_stop.is_none() && !stuck {
             self.report_grazing(k, t, approach);
         }
+        if let Some(rec) = &mut self.rec {
+            let modes = (mode_before, mode_after);
+            let (x, xp) = (&self.y.x, &self.x_plus);
+            rec.jump(
+                JumpKind::Event(k, j),
+                t,
+                x,
+                xp,
+                modes,
+                &self.sw,
+                &self.sw_next,
+            );
+        }
         // The new state.
         self.y.x.copy_from(&self.x_plus);
         if self.sens {
@@ -103,14 +117,7 @@ where
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
         let timed = info.events[k].is_time_event();
-        let gt = if timed {
-            self.gx.fill(0.0);
-            model.event_time_grad(k, j, p, &mut self.gp);
-            self.gp.neg_mut();
-            1.0
-        } else {
-            model.guard_grad(k, t, &self.y.x, p, &mut self.gx, &mut self.gp)
-        };
+        let gt = sens::event_guard_grad(model, k, j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
         if !(gt.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
             && self.gp.iter().all(|v| v.is_finite())
@@ -379,6 +386,10 @@ where
                 let l_plus = model.running_cost(&self.sw_next, t, &self.y.x, p);
                 self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
             }
+        }
+        if let Some(rec) = &mut self.rec {
+            let (x, modes) = (&self.y.x, (self.mode, self.mode));
+            rec.jump(JumpKind::Switch(j), t, x, x, modes, &self.sw, &self.sw_next);
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.switch_crossings += 1;

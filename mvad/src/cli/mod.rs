@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
-use mvad::runtime::solution::{Method, Solution};
+use mvad::runtime::solution::{GradientMode, Method, Solution};
 use mvad::setup::{params_with, resolve, Request, Setup, SetupError, Spelling};
 use mvad::table::TableSource;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
@@ -337,6 +337,8 @@ where
         method: Method::from_name(&common.method).unwrap_or_default(),
         grazing_tol: common.grazing_tol,
         tables: common.tables()?,
+        // `grad` sets its own `--mode`; every other command is forward mode's.
+        mode: GradientMode::Forward,
     };
     resolve(model, &req).map_err(setup_err)
 }
