@@ -3,6 +3,8 @@
 //! [`Ball`] is the seed paper's E1 bouncing ball: ḣ = v, v̇ = −g, event `impact` when
 //! h ≤ 0 with v⁺ = −e v⁻, C = ∫₀ᵀ h dt, T = 2. Parameters θ = (e, g, h0, v0).
 
+pub mod counting;
+
 use crate::model::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
     ModelSens, Point, Switches,

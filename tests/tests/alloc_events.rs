@@ -1,7 +1,7 @@
 //! A run that asks only for C and dC/dθ (the `()` sink) builds no event table, no trajectory
 //! and no measure: its allocation count does not grow with the number of events. Counted on
 //! the queue (E4) through both doors at 10³ and 2·10⁴ customers (about 1.2 events each), with
-//! a global allocator wrapper per thread. A sink keeping the first N events
+//! `fixtures::counting` (per thread). A sink keeping the first N events
 //! (`FirstEvents`) allocates for those N only.
 
 use models::queue::{self, Arrivals};
@@ -9,38 +9,11 @@ use mvad::interp::InterpretedModel;
 use mvad::runtime::solution::Options;
 use mvad::runtime::solve::solve_with;
 use mvad::{EventSink, FirstEvents, HybridModel, ModelAlloc};
+use mvad_runtime::fixtures::counting::{allocations, Counting};
 use nalgebra::{DefaultAllocator, OVector};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: forwards to the system allocator; the counter is a const-initialised thread-local
-// `Cell` (touching it never allocates).
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
-
-fn allocations() -> usize {
-    ALLOCATIONS.with(|c| c.get())
-}
+static GLOBAL: Counting = Counting;
 
 /// (allocations of the solve, events) with `sink`.
 fn count<M: HybridModel>(m: &M, p: &OVector<f64, M::P>, sink: &mut impl EventSink) -> (usize, usize)
