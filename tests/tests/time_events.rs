@@ -6,7 +6,7 @@
 use approx::assert_relative_eq;
 use models::queue::{self, Arrivals};
 use mvad::interp::InterpretedModel;
-use mvad::runtime::solution::{Options, Solution};
+use mvad::runtime::solution::{GradientMode, Options, Solution};
 use mvad::runtime::solve::{solve, solve_with};
 use mvad::table::Table;
 use mvad::{fd_gradient, HybridModel, ModelAlloc, Trigger};
@@ -14,6 +14,7 @@ use nalgebra::{DefaultAllocator, OVector};
 
 mvad::hybrid!(include "tests/dose.hyb");
 mvad::hybrid!(include "tests/sampled.hyb");
+mvad::hybrid!(include "tests/late_dose.hyb");
 
 fn tight() -> Options {
     Options {
@@ -77,6 +78,33 @@ fn a_single_dose_matches_its_closed_form_through_both_doors() {
 }
 
 /// The sampled loop in closed form: x_j = x0 (1 − K h)^j at t = j h (j = 0..N, N h ≤ T),
+/// Step sizes are not tied to t = 0: a segment starting at t = 10⁹ with a zero state (the
+/// flow before the dose, and the backward sweep's λ = 0 at T) is integrated like one at
+/// t = 0. T − t_d = 3 for every tdose, so C is the dose's closed form over 3 time units and
+/// dC/dtdose = 0, in both modes and through both doors.
+#[test]
+fn a_dose_at_t_1e9_matches_its_closed_form_in_both_modes() {
+    let p = [0.7, 2.0, 5e8];
+    let (c, g) = dose_closed_form(p[0], p[1], 0.0);
+    let interp = loaded("late_dose.hyb");
+    for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+        let opts = Options {
+            gradient_mode: mode,
+            ..tight()
+        };
+        for sol in [run(&LateDose::new(), &p, &opts), run(&interp, &p, &opts)] {
+            assert_relative_eq!(sol.cost, c, max_relative = 1e-10);
+            assert_relative_eq!(sol.gradient[0], g[0], max_relative = 1e-9);
+            assert_relative_eq!(sol.gradient[1], g[1], max_relative = 1e-9);
+            assert!(
+                sol.gradient[2].abs() <= 1e-9,
+                "{mode:?}: dC/dtdose {}",
+                sol.gradient[2]
+            );
+        }
+    }
+}
+
 /// u_j = −K x_j held until the next sample; C = x(T) + ∫₀ᵀ x dt.
 fn sampled_closed_form(gain: f64, h: f64, x0: f64) -> f64 {
     let t_end = 1.05;

@@ -440,6 +440,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             let landing = h * 1.01 >= span;
             if landing {
                 h = span;
+            } else {
+                // The step the time grid takes: t + h is rounded to a double, so the step is
+                // (t + h) − t (exact by Sterbenz). Far from t = 0 (t = 10⁹: ulp 1.2e-7) the
+                // requested h and the grid's differ, and stepping the state by one while the
+                // clock moves by the other loses accuracy in every step.
+                h = ((self.t + dir * h) - self.t).abs();
             }
             if h.is_nan() || h <= 10.0 * f64::EPSILON * self.t.abs() || h < 1e-300 {
                 // Shrinking towards a point where the flow stops being defined (√ of a
