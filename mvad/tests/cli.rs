@@ -637,7 +637,9 @@ fn every_semantic_error_class_is_located() {
 #[test]
 fn guard_slope_is_the_total_rate_so_a_pure_time_guard_has_slope_one() {
     // dg/dt = ∇ₓg·f + ∂g/∂t at t_k⁻: `t >= tdose` has ∇ₓg = 0 and ∂g/∂t = 1; a guard on a
-    // state x with ẋ = 2 moving as t (x − t >= 0.5, crossed where 2t − t = 0.5) has 2 − 1 = 1.
+    // state x with ẋ = 2 moving as t (x − t >= c + 1.2: after the dose x − t = t + 1, crossed
+    // at t = 0.7) has 2 − 1 = 1. (With c + 1 the guard sat exactly at 0 right after the dose's
+    // reset, and whether it fired there was decided by the rounding of x.)
     let (_dir, p) = scratch(
         "dose.hyb",
         b"model Dose {
@@ -645,7 +647,7 @@ fn guard_slope_is_the_total_rate_so_a_pure_time_guard_has_slope_one() {
             state x = 0;
             flow { der(x) = 2; }
             event dose when t >= tdose { x = x + 1; }
-            event moving when x - t >= c + 1 { x = x - 10; }
+            event moving when x - t >= c + 1.2 { x = x - 10; }
             cost = integral(x);
             horizon 2;
         }",
