@@ -109,13 +109,16 @@ fn assert_stiff_lag_s(y: &AugState<Dyn, Dyn>, s: &[[f64; 2]; 2], rel: f64) {
     }
 }
 
-/// With S under error control, `auto` gets S of the stiff lag to 6e-7. Column j of S is
+/// With S under error control, `auto` gets S of the stiff lag to 2e-6. Column j of S is
 /// controlled as θ_j·S_j (CVODES's parameter scaling), so S_τ, of size 1 here, is held to
-/// ~atol/τ absolute rather than atol: ∂y/∂τ comes out 5.0e-7 relative (2e-7 with unscaled
-/// control, which in turn cannot run the stiff relay, whose S_τ reaches 1/τ).
+/// ~atol/τ absolute rather than atol: ∂y/∂τ comes out 1.55e-6 relative (5.0e-7 before steps
+/// were put on the time grid, (t + h) − t, which at τ-sized steps near t = 1 changes h by up
+/// to 1e-8 relative and so the step sequence; 2e-7 with unscaled control, which in turn
+/// cannot run the stiff relay, whose S_τ reaches 1/τ). Both are far inside what the scaled
+/// control promises (atol/τ = 1e-2 absolute).
 #[test]
-fn auto_with_sensitivity_error_control_gets_s_of_the_stiff_lag_to_6e_7() {
+fn auto_with_sensitivity_error_control_gets_s_of_the_stiff_lag_to_2e_6() {
     let (y, _) = stiff_lag_auto(true, 3000);
     let (_, s) = stiff_lag_exact(1e-8, 0.5, 3.0);
-    assert_stiff_lag_s(&y, &s, 6e-7);
+    assert_stiff_lag_s(&y, &s, 2e-6);
 }
