@@ -37,6 +37,7 @@ pub use qp::{QpError, QpSolver};
 pub use sample::{sample, Samples};
 pub use sink::{EventCounts, EventSink, EventView, Stream};
 pub use solution::{
-    Diagnostic, DiagnosticKind, EventRecord, Method, Options, Segment, Solution, Stats, Trajectory,
+    Diagnostic, DiagnosticKind, ErrorEstimate, EventRecord, Method, Options, Segment, Solution,
+    Stats, Trajectory,
 };
 pub use solve::{solve, solve_with};

@@ -53,13 +53,16 @@ mod control;
 mod dense;
 mod explicit;
 mod forward;
+mod global_error;
 mod rosenbrock;
 pub mod system;
 mod tsit5;
 mod verner;
 
+pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
+pub use global_error::{GlobalError, Saltation};
 pub use system::{ImplicitSystem, OdeSystem, StageVector};
 
 use crate::solution::{Method, Options, Stats};
@@ -233,6 +236,9 @@ pub struct Integrator<Sys: OdeSystem> {
     r: Sys::Vector,
     /// Stage derivatives k_i (and for Verner, the interpolation stages).
     k: Vec<Sys::Vector>,
+    /// Signed length of the last accepted step while the system's global error estimate has
+    /// not been carried over it (see [`Integrator::carry_global_error`]).
+    carry_pending: Option<f64>,
     /// k[0] = F(t, y) holds (computed or taken over from the FSAL stage).
     k0_valid: bool,
     /// The last accepted step left F(t, y) in this stage slot (Tsit5: k₇; Verner: the first
@@ -283,6 +289,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             r: zero(),
             k: (0..slots).map(|_| zero()).collect(),
             k0_valid: false,
+            carry_pending: None,
             fsal_slot: None,
             ctrl: Controller::new(),
             lazy_dense: false,
@@ -302,6 +309,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at
     /// (t, y). The scheme in use is kept.
     pub fn restart_at(&mut self, t: f64, y: &Sys::Vector) {
+        self.carry_global_error();
         self.t = t;
         self.t_prev = t;
         self.dense_h = 0.0;
@@ -393,6 +401,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             return Ok(());
         }
         let dir = if t_stop > self.t { 1.0 } else { -1.0 };
+        self.carry_global_error();
         self.ensure_k0()?;
         if self.h == 0.0 {
             self.h = self.initial_step(t_stop - self.t);
@@ -441,6 +450,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             if err <= 1.0 {
                 let fac = self.ctrl.accepted(err, k);
                 self.accept(dir * h, landing, t_stop);
+                self.carry_pending = Some(dir * h);
                 self.h = h * fac;
                 self.update_stiffness();
                 return Ok(());
@@ -468,6 +478,18 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let t_end = self.t + h;
         self.accept(h, true, t_end);
         Ok(err)
+    }
+
+    /// Carries the system's global error estimate over the last accepted step, if that is
+    /// still pending. A step is carried once it is known where it ends: when the next step
+    /// starts, when [`Integrator::truncate`] cuts it (over the cut length), at a restart, or
+    /// when the caller asks before reading the estimate (at the end of a run). Until then
+    /// t_prev, y_prev, k[0] = F(t_prev, y_prev) and the local error estimate are the step's.
+    pub fn carry_global_error(&mut self) {
+        if let Some(h) = self.carry_pending.take() {
+            self.sys
+                .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
+        }
     }
 
     /// Makes k[0] = F(t, y): from the FSAL stage of the last explicit step, or by evaluating.

@@ -42,6 +42,7 @@ where
         let mode_before = self.mode;
         self.event_reset(k, t)?;
         let l_plus = self.event_costs(k, t)?;
+        self.error_through_event(k, t, approach.rate, l_plus);
         let zeno_stop = self.zeno_verdict(t, l_plus, approach.grazing, approach.cosine);
         self.emit_event(k, t, mode_before, approach, sink);
         let mode_after = self.mode;
@@ -311,6 +312,7 @@ where
                 self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
             }
         }
+        self.error_through_switch(j, t);
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.switch_crossings += 1;
         Ok(())
