@@ -395,8 +395,9 @@ where
         imp.base_valid = false;
         let tols = (self.atol, self.rtol);
         let autonomous = !model.rhs_depends_on_t(rhs.mode);
+        let pattern = &model.info().jacobian_sparsity[rhs.mode];
         ge.carry(
-            le, f0, y0, tols, &mut imp.w, &imp.lx0, h, *sens_err, autonomous,
+            le, f0, y0, tols, &mut imp.w, pattern, &imp.lx0, h, *sens_err, autonomous,
         );
     }
 

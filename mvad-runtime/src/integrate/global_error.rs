@@ -13,16 +13,17 @@
 //! ```
 //!
 //! with δ the local error estimates of the steps (per unit time). Per accepted step [t₀, t₀ + h]
-//! with local error estimate le, by linearly implicit Euler where the step is stiff (L-stable:
-//! it damps stiff modes as the flow does, at one factorisation of W = I − h f_x(t₀, x₀)) and
-//! explicit Euler, M = I + h f_x, where |h| n max|∂fᵢ/∂xⱼ| ≤ 1/2 (as accurate, stable there,
-//! and cheap):
+//! with local error estimate le: r ← r + le, then up to 8 explicit Euler substeps of h/m with
+//! |h/m|‖f_x‖∞ ≤ 1/2 (stable and first-order accurate there, at the cost of products over
+//! f_x's structural non-zeros, like the capability products), or, for a stiff step, one
+//! linearly implicit Euler step (L-stable: it damps stiff modes as the flow does, at one
+//! factorisation of W = I − h f_x(t₀, x₀), as a Rosenbrock step does):
 //!
 //! ```text
-//!   r ← r + le,   r_x ← M r_x,   r_S ← M r_S,   r_q ← r_q + h ℓ_x·r_x,   r_qθ ← r_qθ + h r_Sᵀ ℓ_x
+//!   r_x ← M r_x,   r_S ← M r_S,   r_q ← r_q + h ℓ_x·r_x,   r_qθ ← r_qθ + h r_Sᵀ ℓ_x
 //! ```
 //!
-//! with M = W⁻¹ or I + h f_x.
+//! with M = I + (h/m) f_x per substep, or W⁻¹.
 //!
 //! The direction of the flow is carried exactly: for an autonomous flow the variational flow
 //! maps f(t₀) to f(t₁), so a time shift α (e_x = α f, e_q = α ℓ) and an error β_j of t'
@@ -58,6 +59,44 @@ use super::aug::AugState;
 use super::rosenbrock::WMatrix;
 use crate::model::ModelAlloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
+
+/// Explicit Euler substeps a step may take before the estimate is carried by one implicit
+/// step instead (|h|‖f_x‖∞ > 4: a stiff step).
+pub const EXPLICIT_SUBSTEPS: f64 = 8.0;
+
+/// Calls `f(i, j)` for every structurally non-zero entry (i, j) of an n × n Jacobian listed
+/// in `pattern`, or for every entry when `pattern` is empty (a model that does not give it).
+#[inline]
+fn for_each_entry(n: usize, pattern: &[(usize, usize)], mut f: impl FnMut(usize, usize)) {
+    if pattern.is_empty() {
+        for j in 0..n {
+            for i in 0..n {
+                f(i, j);
+            }
+        }
+    } else {
+        for &(i, j) in pattern {
+            f(i, j);
+        }
+    }
+}
+
+/// out += J v over the entries (i, j) of `pattern`.
+#[inline]
+fn sparse_product<N: Dim>(
+    jac: &OMatrix<f64, N, N>,
+    pattern: &[(usize, usize)],
+    v: &[f64],
+    out: &mut [f64],
+) where
+    DefaultAllocator: nalgebra::allocator::Allocator<N, N>,
+{
+    let n = jac.nrows();
+    let j_entries = jac.as_slice();
+    for &(i, j) in pattern {
+        out[i] += j_entries[i + j * n] * v[j];
+    }
+}
 
 /// The global error estimate of a forward run (see the module doc): e_x = α f + r_x,
 /// e_q = α ℓ + r_q, e_S = f βᵀ + r_S, e_qθ = β ℓ + r_qθ; plus the errors of the event costs
@@ -131,17 +170,19 @@ where
     }
 
     /// Carries the estimate over the accepted step from (t₀, Y₀) of signed length h with local
-    /// error estimate `le`, F(t₀, Y₀) = `f0`, J = f_x(t₀, x₀) in `w.jac` and ℓ_x(t₀) in `lx`;
-    /// with `sens` the sensitivity parts too (their local errors are then estimated).
+    /// error estimate `le`, F(t₀, Y₀) = `f0`, J = f_x(t₀, x₀) in `w.jac` (structurally
+    /// non-zero at `pattern`, every entry when it is empty) and ℓ_x(t₀) in `lx`; with `sens`
+    /// the sensitivity parts too (their local errors are then estimated).
     ///
-    /// r += le; then r_x, r_S ← M r_x, M r_S, r_q += h ℓ_x·r_x, r_qθ += h r_Sᵀ ℓ_x. M is
-    /// explicit Euler, I + hJ, where |h| n max|J_ij| ≤ 1/2 (which bounds |h|‖J‖∞: as accurate
-    /// as an implicit step and stable there, without a factorisation); linearly implicit
-    /// Euler, (I − hJ)⁻¹, elsewhere (L-stable for stiff steps; a singular I − hJ leaves r_x,
-    /// r_S as they are). Before an implicit step of a flow that does not depend on t
-    /// (`autonomous`), the components of r_x and of r_S's columns along f₀ move into α and β,
-    /// which the step carries exactly: an implicit step of a stiff transient is where a
-    /// first-order transport of the flow direction goes wrong.
+    /// r += le; then, with m = ⌈2|h|‖J‖∞⌉: where m ≤ [`EXPLICIT_SUBSTEPS`], m explicit Euler
+    /// substeps of h/m, each r_x, r_S ← (I + (h/m)J) r_x, r_S (stable and first-order accurate
+    /// at |h/m|‖J‖∞ ≤ 1/2, at the cost of products over J's non-zeros) with r_q, r_qθ by the
+    /// trapezoidal rule over each substep; elsewhere (a stiff step) linearly implicit Euler,
+    /// r_x, r_S ← (I − hJ)⁻¹ r_x, r_S (L-stable; one factorisation; a singular I − hJ leaves
+    /// them as they are) with r_q += h ℓ_x·r_x, r_qθ += h r_Sᵀ ℓ_x. Before an implicit step of a
+    /// flow that does not depend on t (`autonomous`), the components of r_x and of r_S's
+    /// columns along f₀ move into α and β, which the step carries exactly: an implicit step of
+    /// a stiff transient is where a first-order transport of the flow direction goes wrong.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn carry(
         &mut self,
@@ -150,6 +191,7 @@ where
         y0: &AugState<N, P>,
         (atol, rtol): (f64, f64),
         w: &mut WMatrix<N>,
+        pattern: &[(usize, usize)],
         lx: &OVector<f64, N>,
         h: f64,
         sens: bool,
@@ -162,32 +204,74 @@ where
             r.s += &le.s;
             r.qp += &le.qp;
         }
-        let explicit = h.abs() * w.jac.amax() * w.jac.nrows() as f64 <= 0.5;
-        if explicit {
-            self.xs.gemv(1.0, &w.jac, &r.x, 0.0);
-            r.x.axpy(h, &self.xs, 1.0);
-            if sens {
-                self.ss.gemm(1.0, &w.jac, &r.s, 0.0);
-                r.s.zip_apply(&self.ss, |a, b| *a += h * b);
+        // ‖J‖∞ from the row sums of |J_ij| over the non-zeros.
+        let (n, jac) = (w.jac.nrows(), w.jac.as_slice());
+        self.w.fill(0.0);
+        for_each_entry(n, pattern, |i, j| self.w[i] += jac[i + j * n].abs());
+        let m = (2.0 * h.abs() * self.w.amax()).ceil().max(1.0);
+        if m <= EXPLICIT_SUBSTEPS {
+            let dt = h / m;
+            // The quadratures by the trapezoidal rule (r_x is linear across a substep).
+            for _ in 0..m as usize {
+                self.quadrature(lx, 0.5 * dt, sens);
+                self.explicit_euler(&w.jac, pattern, dt, sens);
+                self.quadrature(lx, 0.5 * dt, sens);
             }
-        } else {
-            if autonomous {
-                self.move_along_flow(f0, y0, (atol, rtol), sens);
-            }
-            let r = &mut self.r;
-            if w.factorise(h) {
-                w.solve_mut(&mut r.x);
-                if sens {
-                    w.solve_mut(&mut r.s);
-                }
-            }
-            // The factors are for h, not a Rosenbrock step's hγ.
-            w.invalidate();
+            return;
+        }
+        if autonomous {
+            self.move_along_flow(f0, y0, (atol, rtol), sens);
         }
         let r = &mut self.r;
-        r.q += h * lx.dot(&r.x);
+        if w.factorise(h) {
+            w.solve_mut(&mut r.x);
+            if sens {
+                w.solve_mut(&mut r.s);
+            }
+        }
+        // The factors are for h, not a Rosenbrock step's hγ.
+        w.invalidate();
+        self.quadrature(lx, h, sens);
+    }
+
+    /// r_x += dt J r_x and r_S += dt J r_S, over J's non-zeros (`pattern`; every entry, by
+    /// nalgebra's products, when it is empty).
+    fn explicit_euler(
+        &mut self,
+        jac: &OMatrix<f64, N, N>,
+        pattern: &[(usize, usize)],
+        dt: f64,
+        sens: bool,
+    ) {
+        if pattern.is_empty() {
+            self.xs.gemv(1.0, jac, &self.r.x, 0.0);
+            if sens {
+                self.ss.gemm(1.0, jac, &self.r.s, 0.0);
+            }
+        } else {
+            let n = self.r.x.len();
+            self.xs.fill(0.0);
+            sparse_product(jac, pattern, self.r.x.as_slice(), self.xs.as_mut_slice());
+            if sens {
+                self.ss.fill(0.0);
+                let src = self.r.s.as_slice().chunks_exact(n);
+                let dst = self.ss.as_mut_slice().chunks_exact_mut(n);
+                for (v, out) in src.zip(dst) {
+                    sparse_product(jac, pattern, v, out);
+                }
+            }
+        }
+        self.r.x.axpy(dt, &self.xs, 1.0);
         if sens {
-            r.qp.gemv_tr(h, &r.s, lx, 1.0);
+            super::aug::axpy_slice(self.r.s.as_mut_slice(), dt, self.ss.as_slice());
+        }
+    }
+
+    /// r_q += dt ℓ_x·r_x and r_qθ += dt r_Sᵀ ℓ_x.
+    fn quadrature(&mut self, lx: &OVector<f64, N>, dt: f64, sens: bool) {
+        self.r.q += dt * lx.dot(&self.r.x);
+        if sens {
+            self.r.qp.gemv_tr(dt, &self.r.s, lx, 1.0);
         }
     }
 
