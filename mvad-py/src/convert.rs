@@ -5,20 +5,21 @@
 use std::collections::BTreeMap;
 
 use mvad::runtime::solution::Method;
-use mvad::setup::Request;
+use mvad::setup::{check_mode, Request};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde_json::Value;
 
-use crate::errors::value_error;
+use crate::errors::{setup_error, value_error};
 
 /// The keyword options every run takes.
-pub const OPTION_NAMES: [&str; 5] = ["rtol", "atol", "method", "t_end", "grazing_tol"];
+pub const OPTION_NAMES: [&str; 6] = ["rtol", "atol", "method", "t_end", "grazing_tol", "mode"];
 
 /// A request from `params` (overrides by name), `wrt` and the keyword `options`
-/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`; `None` values keep the defaults).
+/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`, `mode`; `None` values keep the
+/// defaults). `mode` (`forward`, `adjoint` or `auto`) says how derivatives are computed.
 pub fn request(
     params: Option<BTreeMap<String, f64>>,
     wrt: Option<Vec<String>>,
@@ -43,6 +44,7 @@ pub fn request(
             "atol" => req.atol = number()?,
             "t_end" => req.t_end = number()?,
             "grazing_tol" => req.grazing_tol = number()?,
+            "mode" => req.mode = check_mode(&value.extract::<String>()?).map_err(setup_error)?,
             "method" => {
                 let name: String = value.extract()?;
                 req.method = Method::from_name(&name).ok_or_else(|| {

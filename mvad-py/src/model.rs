@@ -1,8 +1,11 @@
 //! `mvad.Model`: a loaded `.hyb` model and what Python asks of it.
 //!
 //! Every method takes `params` (a dict of overrides by name) and the keyword run options
-//! `rtol`, `atol`, `method`, `t_end`, `grazing_tol`, resolved by `mvad::setup::resolve`
-//! exactly as the command line resolves its flags. Solves run with the GIL released; the
+//! `rtol`, `atol`, `method`, `t_end`, `grazing_tol`, `mode`, resolved by `mvad::setup::resolve`
+//! exactly as the command line resolves its flags. Derivatives (`grad`, `cost_batch`,
+//! `observe_vjp_batch`) are computed in the mode `mode` names (`forward`, `adjoint`, `auto`):
+//! `grad` through `mvad::runtime::solve`, the batches through `mvad::runtime::vjp`, the one
+//! VJP entry point. Solves run with the GIL released; the
 //! batch methods (`cost_batch`, `observe_batch`, `observe_vjp_batch`: one row of `thetas`
 //! per run, θ ordered as `wrt`) run across cores with `mvad::batch::par_map`, results in
 //! row order.
@@ -214,7 +217,7 @@ impl Model {
     }
 
     /// The cost C, dC/dθ for `wrt` (default all) and the event table: the JSON object of
-    /// `mvad grad --json` as a dict.
+    /// `mvad grad --json --mode MODE` as a dict (`forward`, `adjoint` or `auto`).
     #[pyo3(signature = (params=None, wrt=None, mode="forward", **options))]
     fn grad<'py>(
         &self,
@@ -224,13 +227,13 @@ impl Model {
         mode: &str,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        check_mode(mode).map_err(setup_error)?;
-        let req = request(params, wrt, options)?;
+        let mut req = request(params, wrt, options)?;
+        req.mode = check_mode(mode).map_err(setup_error)?;
         let info = &self.info;
         let value = py.detach(|| {
             self.run(&req, |m, s| {
                 let sol = solve(m, &s.params, &s.opts)?;
-                Ok(grad_json(info, m.qps(), &sol, &s.wrt, mode))
+                Ok(grad_json(info, m.qps(), &sol, &s.wrt))
             })
         })?;
         json_to_py(py, &value)

@@ -126,8 +126,10 @@ def test_bad_requests_are_value_errors(ball):
         ball.grad(wrt=["x"])
     with pytest.raises(ValueError, match="rtol must be in"):
         ball.grad(rtol=0.0)
-    with pytest.raises(ValueError, match="mode=adjoint is not yet supported"):
-        ball.grad(mode="adjoint")
+    with pytest.raises(ValueError, match="unknown mode `backward`; use forward, adjoint or auto"):
+        ball.grad(mode="backward")
+    with pytest.raises(ValueError, match="unknown mode `reverse`"):
+        ball.cost_batch(np.array([[0.8]]), wrt=["e"], mode="reverse")
     with pytest.raises(ValueError, match="unknown method"):
         ball.grad(method="euler")
     with pytest.raises(TypeError, match="unexpected keyword argument `rtl`"):

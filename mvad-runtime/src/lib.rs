@@ -3,8 +3,9 @@
 //! Simulates hybrid models, locates their events, carries forward sensitivities
 //! S = ∂x/∂θ through every jump and returns the parameter derivative of a trajectory
 //! as a measure — a density on the smooth segments plus Dirac atoms at the events —
-//! and reduced to dC/dθ for the model's cost. Knows nothing of parsing: models come in
-//! through the [`HybridModel`] trait.
+//! and reduced to dC/dθ for the model's cost; or computes dC/dθ and vector–Jacobian
+//! products by one backward (adjoint) sweep ([`adjoint`], [`vjp`]). Knows nothing of
+//! parsing: models come in through the [`HybridModel`] trait.
 
 #[cfg(any(test, feature = "test-fixtures"))]
 #[doc(hidden)]
@@ -16,6 +17,7 @@ pub use model::{
     ModelSecondOrder, ModelSens, Point, Switches,
 };
 
+pub mod adjoint;
 pub mod error;
 pub mod event;
 pub mod fd;
@@ -37,7 +39,8 @@ pub use qp::{QpError, QpSolver};
 pub use sample::{sample, Samples};
 pub use sink::{EventCounts, EventSink, EventView, Stream};
 pub use solution::{
-    Diagnostic, DiagnosticKind, ErrorEstimate, EventRecord, Method, Options, Segment, Solution,
-    Stats, Trajectory,
+    Diagnostic, DiagnosticKind, ErrorEstimate, EventRecord, GradientMode, Method, Options, Segment,
+    Solution, Stats, Trajectory,
 };
 pub use solve::{solve, solve_with};
+pub use vjp::{vjp, Cotangents, Vjp};

@@ -582,6 +582,49 @@ where
         mu.dot(&rt)
     }
 
+    /// The derivative of [`ModelAdjoint::rhs_vjp`] along the direction (1, v) of (t, x) at
+    /// fixed λ: vx = d/dε λᵀf_x(t + ε, x + εv), vp = d/dε λᵀf_θ(t + ε, x + εv) at ε = 0. With
+    /// v = f it is the time derivative of the adjoint's right-hand side along the trajectory,
+    /// the F_t of its Rosenbrock stages (`integrate::adjoint`). Both outputs are overwritten.
+    /// The default is a central difference of `rhs_vjp` with step ε = min(h_v, h_t) — h_v the
+    /// step of the [`ModelSecondOrder`] defaults along v, h_t theirs in t — and allocates
+    /// scratch; a model with symbolic second derivatives can give it exactly.
+    #[allow(clippy::too_many_arguments)]
+    fn rhs_vjp_dir(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        lambda: &OVector<f64, Self::N>,
+        v: &OVector<f64, Self::N>,
+        vx: &mut OVector<f64, Self::N>,
+        vp: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        differences::rhs_vjp_dir(self, pt, lambda, v, vx, vp);
+    }
+
+    /// The derivative of the running cost's gradient along (1, v) of (t, x), with the frozen
+    /// branches `sw`: lx = d/dε ℓ_x(t + ε, x + εv), lp = d/dε ℓ_θ(t + ε, x + εv); returns
+    /// dℓ/dε (zeros and 0 without a running cost). The default is the central difference of
+    /// [`HybridModel::running_cost_value_grad`] with the step of
+    /// [`ModelAdjoint::rhs_vjp_dir`]; it allocates scratch.
+    #[allow(clippy::too_many_arguments)]
+    fn running_cost_grad_dir(
+        &self,
+        sw: &Switches,
+        t: f64,
+        x: &OVector<f64, Self::N>,
+        p: &OVector<f64, Self::P>,
+        v: &OVector<f64, Self::N>,
+        lx: &mut OVector<f64, Self::N>,
+        lp: &mut OVector<f64, Self::P>,
+    ) -> f64
+    where
+        Self: HybridModel,
+    {
+        differences::running_cost_grad_dir(self, sw, t, x, p, v, lx, lp)
+    }
+
     /// μᵀ∂x₀/∂θ into `vp` (p), overwritten: the initial state's share of an adjoint
     /// gradient. The default forms ∂x₀/∂θ densely (it allocates it).
     fn initial_state_vjp(

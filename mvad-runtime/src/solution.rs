@@ -42,6 +42,57 @@ impl Method {
     }
 }
 
+/// How dC/dθ is computed: forward sensitivities carried along the run, or one backward
+/// (adjoint) sweep after a primal run (see [`crate::adjoint`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum GradientMode {
+    /// Forward sensitivities S = ∂x/∂θ: O(n·p) work per step; every forward quantity
+    /// (t_k', atoms, S(T), the measure) is available.
+    #[default]
+    Forward,
+    /// A primal run that records the trajectory, then λ integrated from T down to 0: work per
+    /// step O(n² + p) (with sparse vector–Jacobian products), memory O(steps · n).
+    Adjoint,
+    /// Adjoint when the model has at least [`GradientMode::AUTO_ADJOINT_MIN_PARAMS`]
+    /// parameters, forward otherwise.
+    Auto,
+}
+
+impl GradientMode {
+    /// `auto` picks the adjoint from this many parameters on: where the adjoint overtook
+    /// forward mode in the `adjoint` benchmark (`models/benches/adjoint.rs`) on the model
+    /// whose flow does not grow with p (between p = 20 and 50 at rtol 1e-8; on a model whose
+    /// flow sums p terms it did not overtake up to p = 1000, where it is 1.1× slower).
+    pub const AUTO_ADJOINT_MIN_PARAMS: usize = 50;
+
+    /// The name used on the command line and in `stats.mode`.
+    pub fn name(self) -> &'static str {
+        match self {
+            GradientMode::Forward => "forward",
+            GradientMode::Adjoint => "adjoint",
+            GradientMode::Auto => "auto",
+        }
+    }
+    /// Parses a command-line name.
+    pub fn from_name(name: &str) -> Option<GradientMode> {
+        [
+            GradientMode::Forward,
+            GradientMode::Adjoint,
+            GradientMode::Auto,
+        ]
+        .into_iter()
+        .find(|m| m.name() == name)
+    }
+    /// The mode a run with `p` parameters uses: `Auto` resolved, the others as they are.
+    pub fn resolve(self, p: usize) -> GradientMode {
+        match self {
+            GradientMode::Auto if p >= Self::AUTO_ADJOINT_MIN_PARAMS => GradientMode::Adjoint,
+            GradientMode::Auto => GradientMode::Forward,
+            m => m,
+        }
+    }
+}
+
 /// Options of one run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
@@ -77,6 +128,10 @@ pub struct Options {
     pub record: bool,
     /// Events closer than this (relative to the horizon) count as simultaneous.
     pub simultaneous_tol: f64,
+    /// How dC/dθ is computed (when `sensitivities` is set); [`Stats::mode`] says which mode
+    /// a run used. Adjoint runs leave out the forward quantities: the events' `dt` (and so
+    /// their atoms), [`Solution::s_final`], and S in a recorded trajectory.
+    pub gradient_mode: GradientMode,
 }
 
 impl Default for Options {
@@ -94,6 +149,7 @@ impl Default for Options {
             sensitivities: true,
             record: false,
             simultaneous_tol: 1e-12,
+            gradient_mode: GradientMode::Forward,
         }
     }
 }
@@ -177,7 +233,8 @@ pub struct EventRecord {
     pub guard_dt: f64,
     /// Whether the crossing passed the transversality (cosine) test.
     pub transversal: bool,
-    /// t_k' = dt_k/dθ, one per parameter.
+    /// t_k' = dt_k/dθ, one per parameter (empty without forward sensitivities: a primal run
+    /// or an adjoint one).
     pub dt: Vec<f64>,
     /// x(t_k⁻).
     pub x_before: Vec<f64>,
@@ -187,7 +244,8 @@ pub struct EventRecord {
     pub jump_states: Vec<f64>,
     /// J_k per observable: y(t_k⁺) − y(t_k⁻).
     pub jump_observables: Vec<f64>,
-    /// α_k = −J_k t_k': `atoms[i][j]` for observable i and parameter j.
+    /// α_k = −J_k t_k': `atoms[i][j]` for observable i and parameter j (rows empty when `dt`
+    /// is).
     pub atoms: Vec<Vec<f64>>,
 }
 
@@ -225,6 +283,12 @@ pub struct Stats {
     pub factorizations: usize,
     /// Wall time of the run in seconds.
     pub wall_seconds: f64,
+    /// How the gradient was computed (an adjoint run that falls back says `Forward`). The
+    /// counters of an adjoint run add the backward sweep's steps to the primal run's.
+    pub mode: GradientMode,
+    /// Bytes of the forward record an adjoint run kept for its sweep (0 in forward mode);
+    /// see [`crate::adjoint::record`] for what a step and a jump cost.
+    pub record_bytes: usize,
 }
 
 /// The result of [`crate::solve::solve`]: cost, dC/dθ, the event table (with the measure's
@@ -247,7 +311,7 @@ pub struct Solution {
     pub qp: Vec<crate::qp::QpState>,
     /// x(T) (after a Zeno accumulation: the limit state x*).
     pub x_final: Vec<f64>,
-    /// ∂x(T)/∂θ, column-major n×p (empty without sensitivities).
+    /// ∂x(T)/∂θ, column-major n×p (empty without forward sensitivities).
     pub s_final: Vec<f64>,
     /// The mode at T.
     pub mode_final: usize,

@@ -1,30 +1,157 @@
-//! What a differentiable layer (a JAX `custom_vjp`, a PyTorch `autograd.Function`) asks of a
-//! run: the value on the way forward, the vector–Jacobian product on the way back.
+//! The vector–Jacobian product of a run: what a reverse-mode caller (a JAX `custom_vjp`, a
+//! PyTorch `autograd.Function`, the Python package's batches) asks of it. This module is the
+//! one entry point: every backward pass goes through [`vjp`], which picks the method from
+//! `Options::gradient_mode`.
 //!
-//! - the cost: C(θ) alone ([`cost`]), or with dC/dθ ([`cost_gradient`]); the layer's
-//!   backward pass is θ̄ = c̄ · dC/dθ;
-//! - observables at sample times tᵢ: yᵢₒ = hₒ(tᵢ, x(tᵢ), θ) ([`observe`], a run without
-//!   sensitivities) and, for a cotangent ȳ of the same shape, ([`observe_vjp`])
+//! The forward map is θ ↦ (C(θ), y(t_1), …, y(t_m)) with y = h(t, x, θ) the observables at
+//! sample times t_s. Given cotangents w_C and w_s, [`vjp`] returns
 //!
 //! ```text
-//!   θ̄_j = Σᵢ Σₒ ȳᵢₒ (h_x S(tᵢ) + h_θ)ₒⱼ ,
+//!   w_C dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ ,    dy(t_s)/dθ = h_x S(t_s) + h_θ ,
 //! ```
 //!
-//!   the density of each observable's measure at tᵢ contracted with ȳ ([`crate::sample`]).
+//! with the primal values. **Sampling is right-continuous**, as the trajectory record
+//! (`Trajectory::sample`, what `simulate` and the measure sample) is: at an event time t_k
+//! the sample is y(t_k⁺), after every jump at t_k, and its derivative is the density
+//! h_x S(t_k⁺) + h_θ of the observable's measure ([`crate::sample`]); the atom −J_k t_k' that
+//! the measure puts there is not part of it (y(t_k) itself jumps as t_k moves with θ: it has
+//! no derivative, only one-sided ones). At T the sample is x(T) after any event at T.
 //!
-//! This module is the one place that decides how the backward passes are computed. Today they
-//! carry the forward sensitivities S = ∂x/∂θ along the run (cost ∝ number of params); an
-//! adjoint pass (one backward sweep whose cost does not grow with the number of params)
-//! replaces the bodies of [`cost_gradient`] and [`observe_vjp`] and no caller changes.
+//! How it is computed (`Options::gradient_mode`, resolved by the number of parameters for
+//! `Auto`):
+//! - **forward**: one run carrying S = ∂x/∂θ (O(n·p) per step), recorded when there are sample
+//!   times, read at them by [`crate::sample::sample`];
+//! - **adjoint**: a primal run and one backward sweep ([`crate::adjoint`]); a sample adds
+//!   h_xᵀw_s to λ and h_θᵀw_s to the gradient where the sweep passes t_s. A run the adjoint
+//!   does not sweep (an accumulation, a stuck state, a qp at a kink; see [`crate::adjoint`])
+//!   is computed forwards instead, and `solution.stats.mode` and a diagnostic say so.
+//!
+//! [`cost`], [`cost_gradient`], [`observe`] and [`observe_vjp`] are the shapes the Python
+//! layers use: [`cost_gradient`] and [`observe_vjp`] are [`vjp`] with w_s = 0 and w_C = 0.
 
+use crate::adjoint;
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc};
 use crate::sample::{check_times, sample};
-use crate::solution::Options;
+use crate::solution::{GradientMode, Options, Solution};
 use crate::solve::solve;
-use nalgebra::{DefaultAllocator, OVector};
+use nalgebra::{DefaultAllocator, Dim, OVector};
+use std::time::Instant;
 
-/// C(θ) and dC/dθ (one entry per parameter).
+/// The cotangents pulled back by [`vjp`].
+#[derive(Clone, Copy, Debug)]
+pub struct Cotangents<'a> {
+    /// w_C, the cotangent of the cost C.
+    pub cost: f64,
+    /// The sample times t_s, each in [0, T], in any order (repeats allowed).
+    pub times: &'a [f64],
+    /// w_s for every sample, row-major: `times.len() × nobservables` (empty when there are
+    /// no times).
+    pub observables: &'a [f64],
+}
+
+/// What [`vjp`] returns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vjp {
+    /// C(θ).
+    pub cost: f64,
+    /// y(t_s), row-major `times.len() × nobservables`, in the order of the times given.
+    pub observables: Vec<f64>,
+    /// w_C dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ, one entry per parameter.
+    pub gradient: Vec<f64>,
+    /// The run: events, diagnostics, `stats.mode`; its `gradient` is this one's, and at a qp
+    /// kink at T its `gradient_left` is w_C dC/dθ from the left.
+    pub solution: Solution,
+}
+
+/// The vector–Jacobian product of C and of the observables at `cot.times` (see the module
+/// doc), computed as `opts.gradient_mode` says (`opts.sensitivities` and `opts.record` are
+/// not looked at).
+///
+/// Errors: those of [`crate::solve::solve`], and `BadOption` for a non-finite cotangent, a
+/// sample time outside [0, T], or a cotangent array of the wrong length.
+pub fn vjp<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    cot: &Cotangents<'_>,
+) -> Result<Vjp, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let start = Instant::now();
+    check_cotangents(cot, model.info().nobservables())?;
+    if let Some(t_end) = opts.t_end {
+        check_times(cot.times, t_end)?;
+    }
+    let mode = opts.gradient_mode.resolve(model.nparams().value());
+    if mode == GradientMode::Adjoint {
+        let mut events = Vec::new();
+        match adjoint::pull_back(model, params, opts, &mut events, cot)? {
+            Ok((mut solution, observables)) => {
+                solution.events = events;
+                return Ok(Vjp {
+                    cost: solution.cost,
+                    gradient: solution.gradient.clone(),
+                    observables,
+                    solution,
+                });
+            }
+            Err(reason) => {
+                let mut out = forward_vjp(model, params, opts, cot)?;
+                adjoint::note_fallback(&mut out.solution, reason);
+                out.solution.stats.wall_seconds = start.elapsed().as_secs_f64();
+                return Ok(out);
+            }
+        }
+    }
+    forward_vjp(model, params, opts, cot)
+}
+
+/// The product in forward mode: dC/dθ from the run, and dy(t_s)/dθ = h_x S(t_s) + h_θ read
+/// from its record ([`crate::sample::sample`]).
+fn forward_vjp<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    cot: &Cotangents<'_>,
+) -> Result<Vjp, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let fwd = Options {
+        sensitivities: true,
+        record: !cot.times.is_empty(),
+        gradient_mode: GradientMode::Forward,
+        ..opts.clone()
+    };
+    let mut solution = solve(model, params, &fwd)?;
+    let mut gradient: Vec<f64> = solution.gradient.iter().map(|g| cot.cost * g).collect();
+    if let Some(left) = solution.gradient_left.as_mut() {
+        left.iter_mut().for_each(|g| *g *= cot.cost);
+    }
+    let mut observables = Vec::new();
+    if !cot.times.is_empty() {
+        let smp = sample(model, params, &solution, cot.times)?;
+        let p = smp.nparams.max(1);
+        for (row, &w) in smp.jacobian.chunks_exact(p).zip(cot.observables) {
+            for (g, d) in gradient.iter_mut().zip(row) {
+                *g += w * d;
+            }
+        }
+        observables = smp.observables;
+    }
+    solution.gradient.clone_from(&gradient);
+    Ok(Vjp {
+        cost: solution.cost,
+        observables,
+        gradient,
+        solution,
+    })
+}
+
+/// C(θ) and dC/dθ (one entry per parameter), in the mode `opts.gradient_mode` says: [`vjp`]
+/// with w_C = 1 and no samples.
 pub fn cost_gradient<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
@@ -33,12 +160,13 @@ pub fn cost_gradient<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let opts = Options {
-        sensitivities: true,
-        ..opts.clone()
+    let cot = Cotangents {
+        cost: 1.0,
+        times: &[],
+        observables: &[],
     };
-    let sol = solve(model, params, &opts)?;
-    Ok((sol.cost, sol.gradient))
+    let out = vjp(model, params, opts, &cot)?;
+    Ok((out.cost, out.gradient))
 }
 
 /// C(θ) alone, from a run without sensitivities.
@@ -78,7 +206,7 @@ where
 }
 
 /// ȳᵀ ∂y/∂θ for the observables at `times` and a cotangent ȳ laid out like [`observe`]'s
-/// result (row-major (time, observable)); one entry per parameter.
+/// result (row-major (time, observable)); one entry per parameter: [`vjp`] with w_C = 0.
 pub fn observe_vjp<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
@@ -89,35 +217,32 @@ pub fn observe_vjp<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let m = model.info().nobservables();
-    if cotangent.len() != times.len() * m {
-        return Err(SolveError::BadOption {
-            what: format!(
-                "the cotangent has {} entries; {} sample times × {m} observables need {}",
-                cotangent.len(),
-                times.len(),
-                times.len() * m
-            ),
-        });
-    }
-    if let Some(t_end) = opts.t_end {
-        check_times(times, t_end)?;
-    }
-    let opts = Options {
-        sensitivities: true,
-        record: true,
-        ..opts.clone()
+    let cot = Cotangents {
+        cost: 0.0,
+        times,
+        observables: cotangent,
     };
-    let sol = solve(model, params, &opts)?;
-    let smp = sample(model, params, &sol, times)?;
-    let p = smp.nparams;
-    let mut vjp = vec![0.0; p];
-    for (row, &w) in smp.jacobian.chunks_exact(p.max(1)).zip(cotangent) {
-        for (v, d) in vjp.iter_mut().zip(row) {
-            *v += w * d;
-        }
+    Ok(vjp(model, params, opts, &cot)?.gradient)
+}
+
+/// Finite cotangents of the right length.
+fn check_cotangents(cot: &Cotangents<'_>, nobs: usize) -> Result<(), SolveError> {
+    let bad = |what: String| Err(SolveError::BadOption { what });
+    if !cot.cost.is_finite() {
+        return bad(format!("cost cotangent {} is not finite", cot.cost));
     }
-    Ok(vjp)
+    if cot.observables.len() != cot.times.len() * nobs {
+        return bad(format!(
+            "the cotangent has {} entries; {} sample times × {nobs} observables need {}",
+            cot.observables.len(),
+            cot.times.len(),
+            cot.times.len() * nobs
+        ));
+    }
+    if let Some(w) = cot.observables.iter().find(|w| !w.is_finite()) {
+        return bad(format!("observable cotangent {w} is not finite"));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -141,7 +266,7 @@ mod tests {
     }
 
     /// The VJP against central differences of ȳ·y(θ) (a loss whose gradient it is), at sample
-    /// times on both sides of the two impacts.
+    /// times on both sides of the two impacts, in both modes.
     #[test]
     fn observe_vjp_against_central_differences() {
         let (ball, p, opts) = setup();
@@ -149,28 +274,40 @@ mod tests {
         let cot: Vec<f64> = (0..times.len() * 2)
             .map(|k| ((k * 7) % 5) as f64 - 2.0)
             .collect();
-        let vjp = observe_vjp(&ball, &p, &opts, &times, &cot).expect("runs");
         let loss = |q: &OVector<f64, U4>| -> f64 {
             let y = observe(&ball, q, &opts, &times).expect("runs");
             y.iter().zip(&cot).map(|(a, b)| a * b).sum()
         };
-        for j in 0..4 {
-            let h = 1e-6 * p[j].abs().max(1.0);
-            let (mut up, mut down) = (p, p);
-            up[j] += h;
-            down[j] -= h;
-            let fd = (loss(&up) - loss(&down)) / (2.0 * h);
-            assert_relative_eq!(vjp[j], fd, epsilon = 1e-6, max_relative = 1e-6);
+        for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+            let opts = Options {
+                gradient_mode: mode,
+                ..opts.clone()
+            };
+            let vjp = observe_vjp(&ball, &p, &opts, &times, &cot).expect("runs");
+            for j in 0..4 {
+                let h = 1e-6 * p[j].abs().max(1.0);
+                let (mut up, mut down) = (p, p);
+                up[j] += h;
+                down[j] -= h;
+                let fd = (loss(&up) - loss(&down)) / (2.0 * h);
+                assert_relative_eq!(vjp[j], fd, epsilon = 1e-6, max_relative = 1e-6);
+            }
         }
     }
 
     #[test]
     fn cost_gradient_is_the_solution_gradient_and_bad_cotangents_are_refused() {
         let (ball, p, opts) = setup();
-        let (c, g) = cost_gradient(&ball, &p, &opts).expect("runs");
-        assert_relative_eq!(c, 1.8905137123173506, max_relative = 1e-9);
-        assert_relative_eq!(g[0], 2.8314408141470055, max_relative = 1e-8);
-        let e = observe_vjp(&ball, &p, &opts, &[0.5], &[1.0]).expect_err("one short");
-        assert!(matches!(e, SolveError::BadOption { .. }), "{e:?}");
+        for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+            let opts = Options {
+                gradient_mode: mode,
+                ..opts.clone()
+            };
+            let (c, g) = cost_gradient(&ball, &p, &opts).expect("runs");
+            assert_relative_eq!(c, 1.8905137123173506, max_relative = 1e-9);
+            assert_relative_eq!(g[0], 2.8314408141470055, max_relative = 1e-8);
+            let e = observe_vjp(&ball, &p, &opts, &[0.5], &[1.0]).expect_err("one short");
+            assert!(matches!(e, SolveError::BadOption { .. }), "{e:?}");
+        }
     }
 }

@@ -9,7 +9,7 @@ mod common;
 
 use approx::assert_relative_eq;
 use common::ball::flights;
-use common::cases::{cases, flights_dual, known, run};
+use common::cases::{cases, flights_dual, run_matrix};
 use common::check::close;
 use common::models::thermostat_closed;
 use common::D;
@@ -21,24 +21,7 @@ use nalgebra::DVector;
 /// failures are reported at once.
 #[test]
 fn closed_forms_under_every_method() {
-    let mut failures = vec![];
-    let mut runs = 0;
-    for case in cases() {
-        for &method in case.methods {
-            if known(&case.name, method) {
-                continue;
-            }
-            failures.extend(run(&case, method));
-            runs += 1;
-        }
-    }
-    assert!(runs >= 40 * 4, "{runs} runs");
-    assert!(
-        failures.is_empty(),
-        "{} failures:\n{}",
-        failures.len(),
-        failures.join("\n")
-    );
+    run_matrix(cases(), 40 * 4);
 }
 
 /// The closed form reproduces DESIGN.md's reference values of E1 (at the fixture's θ).

@@ -8,14 +8,9 @@ use mvad_runtime::ModelInfo;
 use serde_json::{Map, Value};
 
 /// The spec's JSON object for a solution, derivatives restricted to `wrt` (with the qp keys
-/// when the model has qps).
-pub fn grad_json(
-    info: &ModelInfo,
-    qps: &[QpLayerInfo],
-    sol: &Solution,
-    wrt: &[usize],
-    mode: &str,
-) -> Value {
+/// when the model has qps); the top-level `mode` is the gradient mode that ran
+/// (`stats.mode`).
+pub fn grad_json(info: &ModelInfo, qps: &[QpLayerInfo], sol: &Solution, wrt: &[usize]) -> Value {
     let all: Vec<usize> = (0..info.params.len()).collect();
     let mut m = Map::new();
     m.insert("model".into(), Value::from(info.name.clone()));
@@ -34,7 +29,7 @@ pub fn grad_json(
     );
     m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
     m.insert("stats".into(), stats_json(&sol.stats));
-    m.insert("mode".into(), Value::from(mode));
+    m.insert("mode".into(), Value::from(sol.stats.mode.name()));
     add_qp_keys(&mut m, qps, &info.params, sol, wrt);
     Value::Object(m)
 }
@@ -59,7 +54,8 @@ pub fn by_name(names: &[String], idx: &[usize], values: &[f64]) -> Value {
 
 /// One event as the spec's JSON object: index, name, t, modes, guard slope,
 /// transversality, t_k' per param, the jump per state and observable, and the atoms
-/// α_k = −J_k t_k' per observable and param (params restricted to `wrt`).
+/// α_k = −J_k t_k' per observable and param (params restricted to `wrt`). An event without
+/// t' (adjoint mode) leaves out `dt` and `atoms`, as the spec allows.
 pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
     let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
     let name = info
@@ -93,9 +89,14 @@ pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
     m.insert("mode_after".into(), Value::from(mode_name(ev.mode_after)));
     m.insert("guard_slope".into(), num(ev.guard_slope));
     m.insert("transversal".into(), Value::from(ev.transversal));
-    m.insert("dt".into(), by_name(&info.params, wrt, &ev.dt));
+    let forward = !ev.dt.is_empty() || info.params.is_empty();
+    if forward {
+        m.insert("dt".into(), by_name(&info.params, wrt, &ev.dt));
+    }
     m.insert("jump".into(), Value::Object(jump));
-    m.insert("atoms".into(), Value::Object(atoms));
+    if forward {
+        m.insert("atoms".into(), Value::Object(atoms));
+    }
     Value::Object(m)
 }
 
@@ -130,7 +131,8 @@ pub fn diagnostics_json(diags: &[Diagnostic]) -> Value {
     )
 }
 
-/// Stats as `{steps, rejected_steps, events, wall_seconds}` plus the other counters.
+/// Stats as `{steps, rejected_steps, events, wall_seconds}` plus the other counters, the
+/// gradient mode that ran and the bytes of an adjoint run's forward record.
 pub fn stats_json(s: &Stats) -> Value {
     let mut m = Map::new();
     m.insert("steps".into(), Value::from(s.steps));
@@ -141,6 +143,8 @@ pub fn stats_json(s: &Stats) -> Value {
     m.insert("rhs_evals".into(), Value::from(s.rhs_evals));
     m.insert("jac_evals".into(), Value::from(s.jac_evals));
     m.insert("factorizations".into(), Value::from(s.factorizations));
+    m.insert("mode".into(), Value::from(s.mode.name()));
+    m.insert("record_bytes".into(), Value::from(s.record_bytes));
     Value::Object(m)
 }
 

@@ -7,7 +7,7 @@
 
 use std::fmt;
 
-use mvad_runtime::solution::{Method, Options};
+use mvad_runtime::solution::{GradientMode, Method, Options};
 use mvad_runtime::{HybridModel, ModelAlloc};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
@@ -29,6 +29,8 @@ pub struct Request {
     pub method: Method,
     /// τ of the grazing test, in [0, 1).
     pub grazing_tol: Option<f64>,
+    /// How dC/dθ and vector–Jacobian products are computed (see [`check_mode`]).
+    pub mode: GradientMode,
 }
 
 /// Everything a run needs: θ (declared values with the overrides applied), the solver
@@ -92,7 +94,7 @@ pub enum SetupError {
         /// The model's name.
         model: String,
     },
-    /// A gradient mode that is not implemented (`adjoint`) or not known.
+    /// A gradient mode that is not known.
     Mode {
         /// The mode asked for.
         mode: String,
@@ -146,14 +148,10 @@ impl SetupError {
                 "model `{model}` declares no horizon; give one with {}",
                 spell.assign("t_end", "T")
             ),
-            SetupError::Mode { mode } if mode == "adjoint" => format!(
-                "{} is not yet supported; use {} (the default)",
-                spell.assign("mode", "adjoint"),
-                spell.assign("mode", "forward")
+            SetupError::Mode { mode } => format!(
+                "unknown {} `{mode}`; use forward, adjoint or auto",
+                spell.option("mode")
             ),
-            SetupError::Mode { mode } => {
-                format!("unknown {} `{mode}`; use forward", spell.option("mode"))
-            }
             SetupError::BadHorizon { model, t } => format!(
                 "the horizon of model `{model}` evaluates to {t} at these parameters; \
                  it must be positive and finite (or pass {})",
@@ -218,16 +216,13 @@ pub fn wrt_indices(names: &[String], wrt: Option<&[String]>) -> Result<Vec<usize
     Ok(out)
 }
 
-/// Checks the gradient mode: `forward` (sensitivities carried along the run) is the one
-/// implemented; `adjoint` is in the spec and refused until it lands.
-pub fn check_mode(mode: &str) -> Result<(), SetupError> {
-    if mode == "forward" {
-        Ok(())
-    } else {
-        Err(SetupError::Mode {
-            mode: mode.to_string(),
-        })
-    }
+/// The gradient mode a front end names: `forward` (sensitivities carried along the run),
+/// `adjoint` (a primal run and one backward sweep) or `auto` (adjoint from
+/// [`GradientMode::AUTO_ADJOINT_MIN_PARAMS`] params on).
+pub fn check_mode(mode: &str) -> Result<GradientMode, SetupError> {
+    GradientMode::from_name(mode).ok_or_else(|| SetupError::Mode {
+        mode: mode.to_string(),
+    })
 }
 
 /// θ: the declared values with `set` applied.
@@ -285,6 +280,7 @@ where
     let wrt = wrt_indices(&info.params, req.wrt.as_deref())?;
     let mut opts = Options {
         method: req.method,
+        gradient_mode: req.mode,
         ..Options::default()
     };
     if let Some(r) = checked(req.rtol, "rtol", "must be in (0, 1)", |r| {

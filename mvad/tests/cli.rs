@@ -41,14 +41,18 @@ const E1_DCDE: f64 = 2.8314408141470055;
 const E1_T1: f64 = 0.638_550_856_814_101;
 const E1_T2: f64 = 1.6602322277166624;
 
-#[test]
-fn grad_json_has_the_spec_keys_and_the_e1_values() {
-    let v = json(&run_status(&tight(&["grad", BALL, "--json"]), 0));
-    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
-    assert_eq!(v["model"], "BouncingBall");
-    assert_eq!(v["t_end"], 2.0);
-    assert_eq!(v["params"]["e"], 0.8);
-    assert_eq!(v["params"]["g"], 9.81);
+/// The first diagnostic of `kind` in a `grad --json` object.
+fn diagnostic<'a>(v: &'a Value, kind: &str) -> &'a Value {
+    v["diagnostics"]
+        .as_array()
+        .expect("array")
+        .iter()
+        .find(|d| d["kind"] == kind)
+        .unwrap_or_else(|| panic!("no {kind} diagnostic in {v}"))
+}
+
+/// C and dC/de of E1 to 1e-9 and its two events; returns the events.
+fn assert_e1_values(v: &Value) -> &Vec<Value> {
     assert_relative_eq!(
         v["cost"].as_f64().expect("cost"),
         E1_COST,
@@ -61,6 +65,18 @@ fn grad_json_has_the_spec_keys_and_the_e1_values() {
     );
     let events = v["events"].as_array().expect("events");
     assert_eq!(events.len(), 2);
+    events
+}
+
+#[test]
+fn grad_json_has_the_spec_keys_and_the_e1_values() {
+    let v = json(&run_status(&tight(&["grad", BALL, "--json"]), 0));
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
+    assert_eq!(v["model"], "BouncingBall");
+    assert_eq!(v["t_end"], 2.0);
+    assert_eq!(v["params"]["e"], 0.8);
+    assert_eq!(v["params"]["g"], 9.81);
+    let events = assert_e1_values(&v);
     for (k, (ev, t)) in events.iter().zip([E1_T1, E1_T2]).enumerate() {
         assert_eq!(ev["index"], k);
         assert_eq!(ev["name"], "impact");
@@ -145,9 +161,54 @@ fn grad_text_table() {
 }
 
 #[test]
-fn grad_adjoint_is_reported_unsupported() {
-    let o = run_status(&["grad", BALL, "--mode", "adjoint"], 2);
-    assert!(stderr(&o).contains("adjoint"), "{}", stderr(&o));
+fn grad_adjoint_gives_e1_and_leaves_out_forward_quantities() {
+    let v = json(&run_status(
+        &tight(&["grad", BALL, "--json", "--mode", "adjoint"]),
+        0,
+    ));
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
+    assert_eq!(v["stats"]["mode"], "adjoint");
+    assert_eq!(v["mode"], "adjoint");
+    assert!(
+        v["stats"]["record_bytes"].as_u64().is_some_and(|b| b > 0),
+        "{v}"
+    );
+    let events = assert_e1_values(&v);
+    for (ev, t) in events.iter().zip([E1_T1, E1_T2]) {
+        assert_eq!(ev["name"], "impact");
+        assert_relative_eq!(ev["t"].as_f64().expect("t"), t, max_relative = 1e-10);
+        assert!(ev["guard_slope"].is_number() && ev["transversal"] == true);
+        assert!(ev["jump"]["velocity"].is_number());
+        assert!(ev.get("dt").is_none() && ev.get("atoms").is_none(), "{ev}");
+    }
+    // The text form says which mode ran and has no t' columns.
+    let out = stdout(&run_status(&["grad", BALL, "--mode", "adjoint"], 0));
+    assert!(out.contains("gradient by adjoint mode"), "{out}");
+    assert!(!out.contains("dt/d"), "{out}");
+    // auto: 4 params take forward mode.
+    let v = json(&run_status(&["grad", BALL, "--json", "--mode", "auto"], 0));
+    assert_eq!(v["stats"]["mode"], "forward");
+    run_status(&["grad", BALL, "--mode", "backward"], 2);
+}
+
+#[test]
+fn grad_adjoint_of_an_accumulation_falls_back_to_forward() {
+    let o = run_status(
+        &[
+            "grad",
+            "models/zeno_ball.hyb",
+            "--json",
+            "--mode",
+            "adjoint",
+        ],
+        0,
+    );
+    let v = json(&o);
+    assert_eq!(v["stats"]["mode"], "forward");
+    assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
+    let zeno = diagnostic(&v, "zeno");
+    let message = zeno["message"].as_str().expect("message");
+    assert!(message.contains("forward mode"), "{message}");
 }
 
 #[test]
@@ -163,12 +224,7 @@ fn zeno_ball_reports_a_zeno_diagnostic_and_finishes() {
     assert!(kinds.contains(&"zeno"), "{kinds:?}");
     assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{v}");
     // e = 0.5, h0 = 2: the bounces accumulate at t* = t₁ (1 + 2e/(1 − e)) = 3 t₁.
-    let zeno = v["diagnostics"]
-        .as_array()
-        .expect("array")
-        .iter()
-        .find(|d| d["kind"] == "zeno")
-        .expect("zeno");
+    let zeno = diagnostic(&v, "zeno");
     assert_relative_eq!(
         zeno["t"].as_f64().expect("t"),
         3.0 * E1_T1,
@@ -192,6 +248,22 @@ fn every_bundled_model_checks_and_runs_grad() {
             gradient.values().all(Value::is_number),
             "{name}: {gradient:?}"
         );
+        // Adjoint mode: the spec's keys and the same gradient (at the default tolerances).
+        let a = json(&run_status(
+            &["grad", &path, "--json", "--mode", "adjoint"],
+            0,
+        ));
+        assert_eq!(missing_spec_keys(&a), Vec::<String>::new(), "{name}");
+        for (k, g) in gradient {
+            let (f, b) = (
+                g.as_f64().expect("f"),
+                a["gradient"][k].as_f64().expect("a"),
+            );
+            assert!(
+                (f - b).abs() <= 1e-5 * f.abs().max(1e-3),
+                "{name} d/d{k}: forward {f} adjoint {b}"
+            );
+        }
     }
     let v = json(&run_status(
         &["check", "models/thermostat.hyb", "--json"],

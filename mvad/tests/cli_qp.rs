@@ -105,6 +105,57 @@ fn a_saturating_qp_in_the_flow() {
     );
 }
 
+/// `--mode adjoint` on qps: the cart's gradient equals forward mode's, with the qp keys; at
+/// a kink (E3 with C = u*, dC/dθ = 1 from the right, 0 from the left) both one-sided
+/// gradients come from the adjoint's two sweeps.
+#[test]
+fn qps_in_adjoint_mode() {
+    let cart = |mode: &str| {
+        json(&run_status(
+            &[
+                "grad",
+                "models/qp_cart.hyb",
+                "--rtol",
+                "1e-12",
+                "--atol",
+                "1e-14",
+                "--json",
+                "--mode",
+                mode,
+            ],
+            0,
+        ))
+    };
+    let (f, a) = (cart("forward"), cart("adjoint"));
+    assert_eq!(missing_spec_keys(&a), Vec::<String>::new(), "{a}");
+    assert_eq!(a["stats"]["mode"], "adjoint");
+    assert!(a["qp"]["ctl"]["value"]["u"].is_number());
+    for (name, g) in f["gradient"].as_object().expect("gradient") {
+        let (g, ga) = (
+            g.as_f64().expect("f"),
+            a["gradient"][name].as_f64().expect("a"),
+        );
+        assert!(
+            (g - ga).abs() <= 1e-10 * g.abs().max(1.0),
+            "{name}: {g} vs {ga}"
+        );
+        assert_eq!(a["gradient_right"][name], a["gradient"][name]);
+    }
+    let src = include_str!("../../models/qp_kink.hyb")
+        .replace("cost = 0.5 * u_star.u^2;", "cost = u_star.u;");
+    let (_dir, path) = scratch("kink_u.hyb", src.as_bytes());
+    let v = json(&run_status(
+        &[
+            "grad", &path, "--set", "theta=0", "--json", "--mode", "adjoint",
+        ],
+        0,
+    ));
+    assert_eq!(v["stats"]["mode"], "adjoint");
+    assert_eq!(v["diagnostics"][0]["kind"], "kink");
+    assert_eq!(v["gradient_right"]["theta"], 1.0);
+    assert_eq!(v["gradient_left"]["theta"], 0.0);
+}
+
 #[test]
 fn stateless_models_check() {
     let o = run_status(&["check", KINK], 0);

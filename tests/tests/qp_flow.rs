@@ -14,17 +14,7 @@ use mvad_tests::{model_source, tight};
 use nalgebra::DefaultAllocator;
 
 /// Two controls sharing a budget, one pinned by an equality: u₁ + u₂ ≤ b, u₁ − u₂ = d·x.
-const TWO_CONTROLS: &str = "model TwoControls {
-    param k = 1.5; param b = 0.4; param d = 0.3; param w = 2.0;
-    state x = 1.0; state y = -0.5;
-    qp ctl(u1, u2) {
-        minimize 0.5*(u1 - k*x)^2 + 0.5*w*(u2 + k*y)^2 + 0.1*u1*u2;
-        subject to u1 + u2 <= b; u1 - u2 == d*x; u2 >= -1;
-    }
-    flow { der(x) = -x + ctl.u1; der(y) = x - y - ctl.u2; }
-    cost = integral(x^2 + y^2) + final(ctl.u1);
-    horizon 3;
-}";
+const TWO_CONTROLS: &str = include_str!("two_controls.hyb");
 
 fn run<M: HybridModel>(m: &M, p: &nalgebra::OVector<f64, M::P>) -> Solution
 where

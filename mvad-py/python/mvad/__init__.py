@@ -14,7 +14,10 @@ observable as a density on a grid plus atoms at the events (numpy arrays). ``Mod
 array whose backward pass is mvad's own derivative.
 
 Every method takes ``params`` (overrides by name) and the run options ``rtol``, ``atol``,
-``method`` (``auto``, ``tsit5``, ``verner9``, ``rosenbrock``), ``t_end`` and ``grazing_tol``.
+``method`` (``auto``, ``tsit5``, ``verner9``, ``rosenbrock``), ``t_end``, ``grazing_tol`` and
+``mode``: how derivatives are computed, ``forward`` (the default: sensitivities carried along
+the run), ``adjoint`` (a primal run and one backward sweep, cost flat in the number of
+parameters) or ``auto`` (adjoint from 50 parameters on). Both give the same numbers.
 
 Errors: ``mvad.ModelError`` (a ``ValueError``) for a model that does not compile, its message
 holding ``FILE:LINE:COL: error: ...``; ``ValueError`` for a bad request; ``mvad.SolveError``

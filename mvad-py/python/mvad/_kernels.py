@@ -3,9 +3,11 @@ differentiate by (``wrt``, the order of theta) and the run options, applied to p
 arrays of any leading batch shape ``(..., len(wrt))``. Batches run across cores in Rust
 (``Model.cost_batch``, ``Model.observe_batch``, ``Model.observe_vjp_batch``).
 
-The backward passes are Rust's: ``c̄ · dC/dθ`` with dC/dθ from the same run as C, and
-``Model.observe_vjp_batch``, i.e. ``mvad::runtime::vjp::observe_vjp``, the one function that
-decides how a vector-Jacobian product is computed (forward sensitivities today).
+The backward passes are Rust's: ``c̄ · dC/dθ`` with dC/dθ from the same run as C
+(``mvad::runtime::vjp::cost_gradient``), and ``Model.observe_vjp_batch``
+(``mvad::runtime::vjp::observe_vjp``): both go through ``mvad::runtime::vjp::vjp``, the one
+entry point, which computes them in the mode of the ``mode`` option (forward sensitivities,
+or the adjoint's backward sweep).
 """
 
 import numpy as np

@@ -10,8 +10,9 @@
 The functions run the model through ``jax.pure_callback``, so ``jax.jit`` accepts them, and
 ``jax.vmap`` hands the whole batch to one call that runs across cores. ``jax.grad`` and
 ``jax.vjp`` use ``jax.custom_vjp``: the cost's backward pass is c̄ · dC/dθ with dC/dθ from the
-same run as C; the observables' is ``Model.observe_vjp_batch`` (forward sensitivities today,
-the adjoint once it lands). Higher derivatives are not available.
+same run as C; the observables' is ``Model.observe_vjp_batch``. Both come from Rust's one VJP
+entry point (``mvad::runtime::vjp``), in the mode the ``mode`` option names (``forward``,
+``adjoint`` or ``auto``). Higher derivatives are not available.
 
 Without ``jax_enable_x64`` JAX computes in float32 and the results are rounded to it; a
 warning says so once.
@@ -49,7 +50,7 @@ def _callback(fn, shapes, *args):
 def cost(model, wrt, params=None, **options):
     """f(theta) -> C(theta), theta a 1-D array ordered as ``wrt``; other parameters take
     ``params`` (overrides by name) or their declared values. ``options``: rtol, atol, method,
-    t_end, grazing_tol."""
+    t_end, grazing_tol, mode."""
     kernel = Cost(model, wrt, params, options)
     w = len(kernel.wrt)
 

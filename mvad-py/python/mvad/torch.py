@@ -10,7 +10,8 @@ is mvad's derivative.
 
 theta may carry leading batch axes, ``(..., len(wrt))``: the batch runs across cores. The
 cost's backward pass is c̄ · dC/dθ with dC/dθ from the same run as C (computed only when theta
-requires grad); the observables' is ``Model.observe_vjp_batch``. Higher derivatives are not
+requires grad); the observables' is ``Model.observe_vjp_batch``. Both are computed in the mode
+the ``mode`` option names (``forward``, ``adjoint`` or ``auto``). Higher derivatives are not
 available (``once_differentiable``).
 """
 

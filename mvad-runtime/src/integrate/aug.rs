@@ -98,9 +98,25 @@ pub(super) fn axpy_slice(y: &mut [f64], a: f64, x: &[f64]) {
     }
 }
 
+/// `out += h Σ_j c_j k_j` over slices, zero coefficients skipped (the primary parts of
+/// [`StageVector::combine_primary`] and [`StageVector::lincomb_primary`]).
+#[inline]
+pub(super) fn accumulate_slices<'a>(
+    out: &mut [f64],
+    h: f64,
+    coefs: &[f64],
+    ks: impl Iterator<Item = &'a [f64]>,
+) {
+    for (c, k) in coefs.iter().zip(ks) {
+        if *c != 0.0 {
+            axpy_slice(out, h * c, k);
+        }
+    }
+}
+
 /// `o = Σ_i w_i v_i` elementwise over five slices, summed left to right.
 #[inline]
-fn mix5_slice(o: &mut [f64], w: &[f64; 5], v: [&[f64]; 5]) {
+pub(super) fn mix5_slice(o: &mut [f64], w: &[f64; 5], v: [&[f64]; 5]) {
     for i in 0..o.len() {
         o[i] = w[0] * v[0][i] + w[1] * v[1][i] + w[2] * v[2][i] + w[3] * v[3][i] + w[4] * v[4][i];
     }
@@ -117,7 +133,15 @@ fn hermite_weights(theta: f64) -> (f64, f64, f64) {
 
 /// d = a + c (b − a) + h (w₀ f₀ + w₁ f₁), elementwise.
 #[inline]
-fn hermite_slice(d: &mut [f64], a: &[f64], b: &[f64], f0: &[f64], f1: &[f64], h: f64, th: f64) {
+pub(super) fn hermite_slice(
+    d: &mut [f64],
+    a: &[f64],
+    b: &[f64],
+    f0: &[f64],
+    f1: &[f64],
+    h: f64,
+    th: f64,
+) {
     let (w0, w1, c) = hermite_weights(th);
     for ((((di, ai), bi), g0), g1) in d.iter_mut().zip(a).zip(b).zip(f0).zip(f1) {
         *di = ai + c * (bi - ai) + h * (w0 * g0 + w1 * g1);
@@ -197,55 +221,67 @@ where
     }
 
     #[inline]
-    fn primary_dist_sq(&self, other: &Self) -> f64 {
-        let mut sum = 0.0;
-        for (a, b) in self.x.iter().zip(other.x.iter()) {
-            let d = a - b;
-            sum += d * d;
-        }
-        sum
-    }
-
-    #[inline]
-    fn primary_into(&self, out: &mut OVector<f64, N>) {
-        out.copy_from(&self.x);
-    }
-
-    #[inline]
-    fn combine_primary(out: &mut OVector<f64, N>, base: &Self, h: f64, coefs: &[f64], ks: &[Self]) {
-        out.copy_from(&base.x);
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c != 0.0 {
-                axpy_slice(out.as_mut_slice(), h * c, k.x.as_slice());
-            }
-        }
-    }
-
-    #[inline]
-    fn mix5_primary(out: &mut OVector<f64, N>, w: &[f64; 5], v: [&Self; 5]) {
-        mix5_slice(out.as_mut_slice(), w, v.map(|u| u.x.as_slice()));
-    }
-
-    #[inline]
-    fn hermite_primary(
-        out: &mut OVector<f64, N>,
-        y0: &Self,
-        y1: &Self,
-        f0: &Self,
-        f1: &Self,
-        h: f64,
-        th: f64,
-    ) {
-        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.x.as_slice());
-        hermite_slice(out.as_mut_slice(), a, b, g0, g1, h, th);
+    fn primary(&self) -> &[f64] {
+        self.x.as_slice()
     }
 }
 
-/// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over x, q (with a running
-/// cost) and, under sensitivity error control (`sens_err`), S and q_θ. The weight is 1 on x
-/// and q and [`sens_weight`]`(θ_j)` on column j of S and on q_θ[j], so both are measured as
-/// the change θ_j·S_j they predict for a relative change of θ_j. Entries whose scale is 0 are
-/// not counted in N.
+/// The weighted RMS norm sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²),
+/// accumulated part by part (each part with its own weight w), so every system measures its
+/// local error the same way. Entries whose scale is 0 are not counted in N.
+pub(super) struct WeightedRms {
+    atol: f64,
+    rtol: f64,
+    sum: f64,
+    count: usize,
+}
+
+impl WeightedRms {
+    /// An empty sum for the tolerances (atol, rtol).
+    #[inline]
+    pub(super) fn new(atol: f64, rtol: f64) -> Self {
+        WeightedRms {
+            atol,
+            rtol,
+            sum: 0.0,
+            count: 0,
+        }
+    }
+
+    /// Adds the entries of one part: its error `e`, its values `y0`, `y1` at the two ends of
+    /// the step, and its weight `w`.
+    #[inline]
+    pub(super) fn add(&mut self, e: &[f64], y0: &[f64], y1: &[f64], w: f64) {
+        for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
+            let scale = self.atol + self.rtol * w * a.abs().max(b.abs());
+            // A component with scale 0 (atol = 0 and y = 0 at both ends, as S at t = 0 when
+            // x₀ does not depend on θ) has no relative accuracy to hold: it is left out, rather
+            // than making the norm infinite and the (first) step zero.
+            if scale == 0.0 {
+                continue;
+            }
+            if *ei != 0.0 {
+                let r = w * ei / scale;
+                self.sum += r * r;
+            }
+            self.count += 1;
+        }
+    }
+
+    /// The norm (0 when nothing was counted).
+    #[inline]
+    pub(super) fn norm(&self) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        (self.sum / self.count as f64).sqrt()
+    }
+}
+
+/// [`WeightedRms`] over x, q (with a running cost) and, under sensitivity error control
+/// (`sens_err`), S and q_θ. The weight is 1 on x and q and [`sens_weight`]`(θ_j)` on column j
+/// of S and on q_θ[j], so both are measured as the change θ_j·S_j they predict for a relative
+/// change of θ_j.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn weighted_rms<N: Dim, P: Dim>(
     e: &AugState<N, P>,
@@ -260,48 +296,28 @@ pub(super) fn weighted_rms<N: Dim, P: Dim>(
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    let mut add = |e: &[f64], y0: &[f64], y1: &[f64], w: f64| {
-        for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
-            let scale = atol + rtol * w * a.abs().max(b.abs());
-            // A component with scale 0 (atol = 0 and y = 0 at both ends, as S at t = 0 when
-            // x₀ does not depend on θ) has no relative accuracy to hold: it is left out, rather
-            // than making the norm infinite and the (first) step zero.
-            if scale == 0.0 {
-                continue;
-            }
-            if *ei != 0.0 {
-                let r = w * ei / scale;
-                sum += r * r;
-            }
-            count += 1;
-        }
-    };
-    add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
+    let mut rms = WeightedRms::new(atol, rtol);
+    rms.add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
     if has_rc {
-        add(&[e.q], &[y0.q], &[y1.q], 1.0);
+        rms.add(&[e.q], &[y0.q], &[y1.q], 1.0);
     }
     if sens_err {
         let n = e.x.len();
         for (j, th) in theta.iter().enumerate() {
             let w = sens_weight(*th);
             let col = j * n..(j + 1) * n;
-            add(
+            rms.add(
                 &e.s.as_slice()[col.clone()],
                 &y0.s.as_slice()[col.clone()],
                 &y1.s.as_slice()[col],
                 w,
             );
             if has_rc {
-                add(&[e.qp[j]], &[y0.qp[j]], &[y1.qp[j]], w);
+                rms.add(&[e.qp[j]], &[y0.qp[j]], &[y1.qp[j]], w);
             }
         }
     }
-    if count == 0 {
-        return 0.0;
-    }
-    (sum / count as f64).sqrt()
+    rms.norm()
 }
 
 /// The weight of parameter θ_j's sensitivities in the error norm: |θ_j|, or 1 when θ_j = 0

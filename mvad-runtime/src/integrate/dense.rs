@@ -56,6 +56,54 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         dense_into(self.dense_scheme, k, y0, y1, self.dense_h, theta, all, out);
     }
 
+    /// The degree in θ of the dense output [`Integrator::dense_x`] gives now: 4 for Tsit5 and
+    /// Rodas5P, 9 for Verner (3 while its interpolation stages are pending), 0 right after a
+    /// restart (see [`Integrator::dense_poly`]).
+    pub fn dense_degree(&self) -> usize {
+        if self.dense_h == 0.0 {
+            0
+        } else if self.dense_pending {
+            3
+        } else {
+            match self.dense_scheme {
+                Scheme::Tsit5 => TSIT5.degree(),
+                Scheme::Verner9 => VERNER9.degree(),
+                Scheme::Rodas5P => rosenbrock::DENSE_DEGREE,
+            }
+        }
+    }
+
+    /// The primary part of the dense output of the last accepted step as a polynomial in
+    /// θ = (t − t_prev)/h: Σ_{m=0..D} θᵐ c_m with c₀ = Y₀, c_m into `coefs[m]` (at least
+    /// [`Integrator::dense_degree`] + 1 of them); returns D. The same polynomial
+    /// [`Integrator::dense_x`] evaluates, in the monomial basis about the step start, so a
+    /// component the step left unchanged (all its stages exactly zero, as a stiff state at its
+    /// equilibrium) is reproduced exactly, not to the rounding of a mix of Y₀ and Y₁.
+    pub fn dense_poly(&self, coefs: &mut [<Sys::Vector as StageVector>::Primary]) -> usize {
+        let deg = self.dense_degree();
+        if deg == 0 {
+            self.y.primary_into(&mut coefs[0]);
+            return 0;
+        }
+        let (k, y0, y1, h) = (&self.k[..], &self.y_prev, self.end_state(), self.dense_h);
+        if self.dense_pending {
+            // Y₀ + θ h f₀ + θ² (3ΔY − 2h f₀ − h f₁) + θ³ (−2ΔY + h f₀ + h f₁), ΔY = Y₁ − Y₀.
+            let f1 = &k[VERNER9.fsal_slot()];
+            let v = [y0, y1, &k[0], f1, f1];
+            y0.primary_into(&mut coefs[0]);
+            Sys::Vector::mix5_primary(&mut coefs[1], &[0.0, 0.0, h, 0.0, 0.0], v);
+            Sys::Vector::mix5_primary(&mut coefs[2], &[-3.0, 3.0, -2.0 * h, -h, 0.0], v);
+            Sys::Vector::mix5_primary(&mut coefs[3], &[2.0, -2.0, h, h, 0.0], v);
+            return deg;
+        }
+        match self.dense_scheme {
+            Scheme::Tsit5 => TSIT5.poly_primary(k, y0, h, coefs),
+            Scheme::Verner9 => VERNER9.poly_primary(k, y0, h, coefs),
+            Scheme::Rodas5P => rosenbrock::poly_primary(k, y0, y1, coefs),
+        }
+        deg
+    }
+
     /// The state at the end of the last accepted step (before any truncation).
     fn end_state(&self) -> &Sys::Vector {
         if self.truncated {

@@ -52,6 +52,11 @@ impl<const S: usize, const K: usize, const D: usize> Tableau<S, K, D> {
         }
     }
 
+    /// The degree D of the continuous extension in θ.
+    pub const fn degree(&self) -> usize {
+        D
+    }
+
     /// The weights b_i(θ) of the continuous extension (Horner's scheme).
     #[inline]
     pub fn weights(&self, theta: f64) -> [f64; K] {
@@ -80,6 +85,18 @@ impl<const S: usize, const K: usize, const D: usize> Tableau<S, K, D> {
         out.combine(y0, h, &self.weights(theta), &k[..K], all);
     }
 
+    /// The primary part of [`Tableau::dense`] as a polynomial in θ:
+    /// Y₀ + h Σ_i b_i(θ) k_i = Σ_{m=0..D} θᵐ c_m with c₀ = Y₀ and c_m = h Σ_i r_im k_i, into
+    /// `coefs[0..=D]`.
+    #[inline]
+    pub fn poly_primary<V: StageVector>(&self, k: &[V], y0: &V, h: f64, coefs: &mut [V::Primary]) {
+        y0.primary_into(&mut coefs[0]);
+        for (m, c) in coefs[1..=D].iter_mut().enumerate() {
+            let column: [f64; K] = std::array::from_fn(|i| self.dense[i][m]);
+            V::lincomb_primary(c, h, &column, &k[..K]);
+        }
+    }
+
     /// The primary part of [`Tableau::dense`].
     #[inline]
     pub fn dense_primary<V: StageVector>(
@@ -105,14 +122,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         h: f64,
     ) -> f64 {
         let all = self.sys.all_parts();
+        let reads = self.sys.reads_secondary();
         let t = self.t;
         for i in 1..S {
-            let dst = if tab.last_stage_is_solution && i == S - 1 {
-                &mut self.ynew
+            // A stage argument needs only what F reads, unless it is the solution itself.
+            let (dst, parts) = if tab.last_stage_is_solution && i == S - 1 {
+                (&mut self.ynew, all)
             } else {
-                &mut self.tmp
+                (&mut self.tmp, reads)
             };
-            dst.combine(&self.y, h, tab.a[i], &self.k[..i], all);
+            dst.combine(&self.y, h, tab.a[i], &self.k[..i], parts);
             self.sys.eval(t + tab.c[i] * h, dst, &mut self.k[i]);
         }
         if !tab.last_stage_is_solution {
@@ -142,12 +161,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         stages: std::ops::Range<usize>,
         h: f64,
     ) {
-        let all = self.sys.all_parts();
+        let reads = self.sys.reads_secondary();
         let t0 = self.t_prev;
         for i in stages {
             let row = tab.a[i];
             self.tmp
-                .combine(&self.y_prev, h, row, &self.k[..row.len()], all);
+                .combine(&self.y_prev, h, row, &self.k[..row.len()], reads);
             self.sys.eval(t0 + tab.c[i] * h, &self.tmp, &mut self.k[i]);
         }
     }

@@ -46,7 +46,7 @@ use super::Integrator;
 use crate::model::ModelSecondOrder;
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
-use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// The forward augmented system (x, S, q, q_θ) of `model` at parameters θ in one mode with
 /// frozen switch bits (see the module doc).
@@ -57,6 +57,9 @@ where
     rhs: Rhs<'a, M>,
     /// S and q_θ are under error control.
     sens_err: bool,
+    /// Columns of S and length of q_θ: p, or 0 in a primal run of a model whose parameter
+    /// dimension is dynamic (so no stage operation or copy touches n·p unused entries).
+    sp: M::P,
     imp: ImplicitWork<M::N, M::P>,
     /// The run's global error estimate (`Options::global_error`), with the tolerances that
     /// weigh its split along the flow.
@@ -97,6 +100,9 @@ where
     lx0: OVector<f64, N>,
     /// ℓ_θ scratch.
     lp0: OVector<f64, P>,
+    /// A zero S and its q̇_θ_t, full width, for ∂ₜℓ in a narrow primal run (else empty).
+    s0: OMatrix<f64, N, P>,
+    qp0: OVector<f64, P>,
     /// F_t at the step start.
     dt: AugState<N, P>,
     /// (f_x, ℓ_x, F_t) belong to the current step start.
@@ -110,10 +116,27 @@ where
     /// The forward system of `model` at `p` in its initial mode; allocates its buffers once
     /// (the Rodas5P ones only when `opts.method` may use it).
     pub fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
+        Self::sized(model, p, opts, false)
+    }
+
+    /// [`Forward::new`]; with `narrow`, a primal run (`opts.sensitivities == false`) of a
+    /// model with a dynamic parameter dimension gets S of width 0 and q_θ of length 0, so
+    /// its vectors (see [`OdeSystem::zeros`]) carry nothing of size n·p. (Rodas5P's F_t needs
+    /// ∂ₜℓ, which only `running_cost_sens_dt` gives, and that takes a full S: such a run keeps
+    /// one zero S for that call.)
+    fn sized(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options, narrow: bool) -> Self {
         let n = model.nstates();
         let np = model.nparams();
-        // The global error estimate factorises I − h f_x on every step, whatever the method.
+        // The global error estimate factorises I − h f_x on stiff steps, whatever the method.
         let used = matches!(opts.method, Method::Auto | Method::Rosenbrock) || opts.global_error;
+        let narrow = narrow && !opts.sensitivities && M::P::try_to_usize().is_none();
+        let sp = if narrow { M::P::from_usize(0) } else { np };
+        let zero_s = narrow && used && model.info().has_running_cost;
+        let s0p = if zero_s || M::P::try_to_usize().is_some() {
+            np
+        } else {
+            M::P::from_usize(0)
+        };
         // Unused Rodas5P buffers: empty for Dyn sizes (no allocation).
         let rn = if used || M::N::try_to_usize().is_some() {
             n
@@ -125,6 +148,7 @@ where
         } else {
             M::P::from_usize(0)
         };
+        let rsp = if used { sp } else { rp };
         Forward {
             rhs: Rhs {
                 model,
@@ -138,14 +162,17 @@ where
                 evals: 0,
             },
             sens_err: opts.sens_error_control && opts.sensitivities,
+            sp,
             imp: ImplicitWork {
                 w: WMatrix::new(n, used),
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 lp0: OVector::zeros_generic(rp, Const::<1>),
-                dt: AugState::zeros(rn, rp),
+                s0: OMatrix::zeros_generic(n, s0p),
+                qp0: OVector::zeros_generic(s0p, Const::<1>),
+                dt: AugState::zeros(rn, rsp),
                 base_valid: false,
             },
-            global: opts.global_error.then(|| GlobalError::new(n, np)),
+            global: opts.global_error.then(|| GlobalError::new(n, sp)),
             atol: opts.atol,
             rtol: opts.rtol,
         }
@@ -207,12 +234,19 @@ where
 {
     type Vector = AugState<M::N, M::P>;
 
+    /// (x, S, q, q_θ) with S n×p, or n×0 in a primal run of a `Dyn`-parameter model.
     fn zeros(&self) -> Self::Vector {
-        AugState::zeros(self.rhs.model.nstates(), self.rhs.model.nparams())
+        AugState::zeros(self.rhs.model.nstates(), self.sp)
     }
 
     #[inline]
     fn all_parts(&self) -> bool {
+        self.rhs.sens
+    }
+
+    /// F reads S (f_x S + f_θ) whenever it is integrated.
+    #[inline]
+    fn reads_secondary(&self) -> bool {
         self.rhs.sens
     }
 
@@ -298,7 +332,12 @@ where
         }
         if rhs.has_rc {
             model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
-            w.dt.q = model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &y0.s, &mut w.dt.qp);
+            w.dt.q = if y0.s.ncols() == p.len() {
+                model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &y0.s, &mut w.dt.qp)
+            } else {
+                // A narrow primal run: ∂ₜℓ alone, from the full-width zero S.
+                model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &w.s0, &mut w.qp0)
+            };
         } else {
             w.lx0.fill(0.0);
             w.dt.q = 0.0;
@@ -428,6 +467,13 @@ where
     /// every buffer once. Call [`Integrator::restart`] before the first [`Integrator::step`].
     pub fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
         Integrator::with_system(Forward::new(model, p, opts), opts)
+    }
+
+    /// [`Integrator::new`] for the event loop: in a primal run of a model with a dynamic
+    /// parameter dimension S and q_θ have zero width (the states it restarts from must come
+    /// from `system().zeros()`), so a primal run's cost does not grow with p.
+    pub(crate) fn new_narrow(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options) -> Self {
+        Integrator::with_system(Forward::sized(model, p, opts, true), opts)
     }
 
     /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at

@@ -48,6 +48,7 @@
 //! the Jacobian, the step-size history. The driver calls it at the start and after every event,
 //! mode switch or switch flip, so the first stage after a jump is always F at the new state.
 
+mod adjoint;
 mod aug;
 mod control;
 mod dense;
@@ -59,6 +60,7 @@ pub mod system;
 mod tsit5;
 mod verner;
 
+pub use adjoint::{AdjState, Backward};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;

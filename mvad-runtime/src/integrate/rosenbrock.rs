@@ -252,6 +252,9 @@ where
     }
 }
 
+/// Degree in θ of the dense output: θ³(1 − θ) D₃ is its highest term.
+pub(super) const DENSE_DEGREE: usize = 4;
+
 /// Weights of (Y₀, Y₁, D₁, D₂, D₃) in the dense output at θ.
 #[inline]
 fn weights(theta: f64) -> [f64; 5] {
@@ -281,6 +284,23 @@ pub(super) fn dense_primary<V: StageVector>(
 ) {
     let dk = &k[1 + NSTAGES..STAGES];
     V::mix5_primary(out, &weights(theta), [y0, y1, &dk[0], &dk[1], &dk[2]]);
+}
+
+/// [`dense_primary`] as a polynomial in θ, Σ_{m=0..4} θᵐ c_m, into `coefs[0..=4]`:
+/// c₀ = Y₀, c₁ = Y₁ − Y₀ + D₁, c₂ = D₂ − D₁, c₃ = D₃ − D₂, c₄ = −D₃.
+pub(super) fn poly_primary<V: StageVector>(k: &[V], y0: &V, y1: &V, coefs: &mut [V::Primary]) {
+    let dk = &k[1 + NSTAGES..STAGES];
+    let v = [y0, y1, &dk[0], &dk[1], &dk[2]];
+    y0.primary_into(&mut coefs[0]);
+    let rows: [[f64; 5]; DENSE_DEGREE] = [
+        [-1.0, 1.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, -1.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, -1.0, 1.0],
+        [0.0, 0.0, 0.0, 0.0, -1.0],
+    ];
+    for (c, w) in coefs[1..=DENSE_DEGREE].iter_mut().zip(&rows) {
+        V::mix5_primary(c, w, v);
+    }
 }
 
 impl<Sys: ImplicitSystem> Integrator<Sys> {
@@ -323,8 +343,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         if s == 0 {
             self.r.copy_from(&self.k[0]);
         } else {
+            let reads = self.sys.reads_secondary();
             self.tmp
-                .combine(&self.y, 1.0, &A[s][..s], &self.k[1..=s], all);
+                .combine(&self.y, 1.0, &A[s][..s], &self.k[1..=s], reads);
             self.sys.eval(t0 + C[s] * h, &self.tmp, &mut self.r);
             for (c, kj) in CC[s][..s].iter().zip(&self.k[1..=s]) {
                 self.r.axpy(c / h, kj, all);

@@ -19,6 +19,9 @@
 //! an adjoint (λ and its quadratures, integrated from T down to t₀) or a system with a QP in
 //! its flow implements the same three traits and reuses every method unchanged.
 
+use super::aug::{accumulate_slices, hermite_slice, mix5_slice};
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OVector};
+
 /// The operations a Runge–Kutta or Rosenbrock stage loop performs on the integrated vector.
 ///
 /// Every method works part by part on contiguous slices, without allocating, so stage counts
@@ -26,7 +29,7 @@
 /// that are exactly 0 are skipped (so rows of a tableau may be shorter than `ks`).
 pub trait StageVector {
     /// The primary part (x for the forward system): what dense output for root finding gives.
-    type Primary;
+    type Primary: PrimarySlice;
 
     /// `self = other`, every part.
     fn copy_from(&mut self, other: &Self);
@@ -57,19 +60,51 @@ pub trait StageVector {
     );
     /// Whether every entry of every part is finite.
     fn is_finite(&self) -> bool;
+    /// The primary part as a slice.
+    fn primary(&self) -> &[f64];
+
     /// Σ_i (a_i − b_i)² over the primary part (Hairer's stiffness estimate).
-    fn primary_dist_sq(&self, other: &Self) -> f64;
+    #[inline]
+    fn primary_dist_sq(&self, other: &Self) -> f64 {
+        let mut sum = 0.0;
+        for (a, b) in self.primary().iter().zip(other.primary()) {
+            let d = a - b;
+            sum += d * d;
+        }
+        sum
+    }
 
     /// `out = primary(self)`.
-    fn primary_into(&self, out: &mut Self::Primary);
+    #[inline]
+    fn primary_into(&self, out: &mut Self::Primary) {
+        out.slice_mut().copy_from_slice(self.primary());
+    }
     /// `out = primary(base) + h Σ_j c_j primary(k_j)`.
+    #[inline]
     fn combine_primary(out: &mut Self::Primary, base: &Self, h: f64, coefs: &[f64], ks: &[Self])
     where
-        Self: Sized;
+        Self: Sized,
+    {
+        out.slice_mut().copy_from_slice(base.primary());
+        accumulate_slices(out.slice_mut(), h, coefs, ks.iter().map(|k| k.primary()));
+    }
+    /// `out = h Σ_j c_j primary(k_j)`.
+    #[inline]
+    fn lincomb_primary(out: &mut Self::Primary, h: f64, coefs: &[f64], ks: &[Self])
+    where
+        Self: Sized,
+    {
+        out.slice_mut().fill(0.0);
+        accumulate_slices(out.slice_mut(), h, coefs, ks.iter().map(|k| k.primary()));
+    }
     /// Primary part of [`StageVector::mix5`].
-    fn mix5_primary(out: &mut Self::Primary, w: &[f64; 5], v: [&Self; 5]);
+    #[inline]
+    fn mix5_primary(out: &mut Self::Primary, w: &[f64; 5], v: [&Self; 5]) {
+        mix5_slice(out.slice_mut(), w, v.map(|u| u.primary()));
+    }
     /// Primary part of [`StageVector::hermite`].
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     fn hermite_primary(
         out: &mut Self::Primary,
         y0: &Self,
@@ -78,7 +113,26 @@ pub trait StageVector {
         f1: &Self,
         h: f64,
         theta: f64,
-    );
+    ) {
+        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.primary());
+        hermite_slice(out.slice_mut(), a, b, g0, g1, h, theta);
+    }
+}
+
+/// A primary part the stage loops write into: a contiguous slice of f64.
+pub trait PrimarySlice {
+    /// The entries, mutably.
+    fn slice_mut(&mut self) -> &mut [f64];
+}
+
+impl<N: Dim> PrimarySlice for OVector<f64, N>
+where
+    DefaultAllocator: Allocator<N>,
+{
+    #[inline]
+    fn slice_mut(&mut self) -> &mut [f64] {
+        self.as_mut_slice()
+    }
 }
 
 /// A system Ẏ = F(t, Y) the explicit methods can integrate, in either time direction.
@@ -91,6 +145,11 @@ pub trait OdeSystem {
     fn zeros(&self) -> Self::Vector;
     /// Whether the secondary parts are integrated (the `all` flag of every operation).
     fn all_parts(&self) -> bool;
+    /// Whether F reads the secondary parts of its argument (S, for the forward system). When
+    /// it does not (the adjoint's gradient quadrature is never read back), the steppers form
+    /// only the primary part of a stage argument Y₀ + hΣa_ij k_j; the step's solution, error
+    /// estimate and dense output still carry every integrated part.
+    fn reads_secondary(&self) -> bool;
     /// Whether the secondary parts enter the error norm (never more than [`Self::all_parts`]).
     fn controls_all(&self) -> bool;
     /// `out = F(t, y)`.

@@ -1,5 +1,6 @@
 //! The difference quotients behind the [`super::ModelSecondOrder`] defaults (their steps are
-//! explained on that trait). Public so that a model whose second derivatives are not
+//! explained on that trait) and the [`super::ModelAdjoint`] defaults `rhs_vjp_dir` and
+//! `running_cost_grad_dir`. Public so that a model whose second derivatives are not
 //! symbolic — one whose flow reads a qp of the state, whose solution has first derivatives
 //! from the KKT system but no second — can use them from its own implementation. They
 //! allocate scratch.
@@ -40,6 +41,91 @@ where
 /// ε^{1/3}·max(1, |t|) (truncation and rounding errors balance at O(ε^{2/3})).
 fn time_step(t: f64) -> f64 {
     f64::EPSILON.cbrt() * t.abs().max(1.0)
+}
+
+/// The step ε of the [`super::ModelAdjoint`] defaults along the direction (1, v) of (t, x)
+/// and the points x ± ε v: the smaller of the steps along v ([`DIR_STEP`]) and in t
+/// ([`time_step`]), so that a fast transient (‖v‖ large) is differenced on its own scale.
+fn flow_points<N: Dim>(
+    t: f64,
+    x: &OVector<f64, N>,
+    v: &OVector<f64, N>,
+) -> (f64, OVector<f64, N>, OVector<f64, N>)
+where
+    DefaultAllocator: Allocator<N>,
+{
+    let ht = time_step(t);
+    let nv = v.norm();
+    let hv = if nv > 0.0 && nv.is_finite() {
+        DIR_STEP * x.norm().max(1.0) / nv
+    } else {
+        ht
+    };
+    let h = hv.min(ht);
+    let (mut up, mut dn) = (x.clone_owned(), x.clone_owned());
+    up.axpy(h, v, 1.0);
+    dn.axpy(-h, v, 1.0);
+    (h, up, dn)
+}
+
+/// d/dε (λᵀf_x, λᵀf_θ)(t + ε, x + εv) at ε = 0 by a central difference with the step of
+/// [`flow_points`] (the default of [`super::ModelAdjoint::rhs_vjp_dir`]).
+pub fn rhs_vjp_dir<M: HybridModel + ?Sized>(
+    m: &M,
+    pt: Point<'_, M::N, M::P>,
+    lambda: &OVector<f64, M::N>,
+    v: &OVector<f64, M::N>,
+    vx: &mut OVector<f64, M::N>,
+    vp: &mut OVector<f64, M::P>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (eps, xu, xd) = flow_points(pt.t, pt.x, v);
+    let (mut vx_dn, mut vp_dn) = (vx.clone_owned(), vp.clone_owned());
+    let up = Point {
+        t: pt.t + eps,
+        x: &xu,
+        ..pt
+    };
+    let dn = Point {
+        t: pt.t - eps,
+        x: &xd,
+        ..pt
+    };
+    m.rhs_vjp(up, lambda, vx, vp);
+    m.rhs_vjp(dn, lambda, &mut vx_dn, &mut vp_dn);
+    *vx -= &vx_dn;
+    *vp -= &vp_dn;
+    *vx /= 2.0 * eps;
+    *vp /= 2.0 * eps;
+}
+
+/// d/dε (ℓ_x, ℓ_θ)(t + ε, x + εv) at ε = 0 into `lx`, `lp`, returning dℓ/dε, by central
+/// differences with the step of [`flow_points`] (the default of
+/// [`super::ModelAdjoint::running_cost_grad_dir`]).
+#[allow(clippy::too_many_arguments)]
+pub fn running_cost_grad_dir<M: HybridModel + ?Sized>(
+    m: &M,
+    sw: &Switches,
+    t: f64,
+    x: &OVector<f64, M::N>,
+    p: &OVector<f64, M::P>,
+    v: &OVector<f64, M::N>,
+    lx: &mut OVector<f64, M::N>,
+    lp: &mut OVector<f64, M::P>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (eps, xu, xd) = flow_points(t, x, v);
+    let (mut lx_dn, mut lp_dn) = (lx.clone_owned(), lp.clone_owned());
+    let up = m.running_cost_value_grad(sw, t + eps, &xu, p, lx, lp);
+    let dn = m.running_cost_value_grad(sw, t - eps, &xd, p, &mut lx_dn, &mut lp_dn);
+    *lx -= &lx_dn;
+    *lp -= &lp_dn;
+    *lx /= 2.0 * eps;
+    *lp /= 2.0 * eps;
+    (up - dn) / (2.0 * eps)
 }
 
 /// (∂/∂x (f_x S + f_θ))·v by a central difference along v (the default of

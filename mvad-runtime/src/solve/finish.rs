@@ -3,6 +3,7 @@
 
 use super::zeno::ZENO_RATIOS;
 use super::Driver;
+use crate::adjoint::record::Tape;
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{final_terms, FinalWork};
@@ -15,7 +16,9 @@ where
 {
     /// C = q(T) + Σφ_k + Φ and dC/dθ = q_θ(T) + Σ dφ_k/dθ + dΦ/dθ, x(T), S(T) and the work
     /// counters. The event table is the sink's business: `Solution::events` is left empty.
-    pub(super) fn finish(mut self) -> Result<Solution, SolveError> {
+    /// The adjoint's tape, if kept, comes back with the solution (with its final state only
+    /// when the run reached T without an accumulation).
+    pub(super) fn finish(mut self) -> Result<(Solution, Option<Tape>), SolveError> {
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
         let mut fw = FinalWork::new(model);
         self.integ.carry_global_error();
@@ -41,13 +44,16 @@ where
             // The state is at rest at T.
             f_end = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
         } else {
+            let y = self.integ.y();
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(t_end, self.mode, &self.sw);
+                rec.finish(t_end, &y.x, self.mode, &self.sw);
             }
-            let y = self.integ.y();
             cost = y.q + self.c_ev;
-            grad.copy_from(&y.qp);
-            grad += &self.g_ev;
+            if sens {
+                grad.copy_from(&y.qp);
+                grad += &self.g_ev;
+            }
             model.rhs(Point::new(self.mode, &self.sw, t_end, &y.x, p), &mut fw.f);
             f_end = fw.f.clone();
         }
@@ -74,7 +80,11 @@ where
         stats.events = self.nevents;
         stats.switch_crossings = self.switch_crossings;
         let sens_vec = |v: &[f64]| if sens { v.to_vec() } else { Vec::new() };
-        Ok(Solution {
+        let (trajectory, tape) = match self.rec {
+            Some(rec) => rec.into_parts(),
+            None => (None, None),
+        };
+        let sol = Solution {
             t_end,
             params: p.iter().copied().collect(),
             cost,
@@ -88,8 +98,9 @@ where
             diagnostics: self.diagnostics,
             error_estimate,
             stats,
-            trajectory: self.rec.map(|r| r.traj),
-        })
+            trajectory,
+        };
+        Ok((sol, tape))
     }
 
     /// The `zeno` diagnostic of a run that ended at an accumulation point t*.

@@ -3,6 +3,7 @@
 //! switch crossing of a kink (identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump).
 
 use super::Driver;
+use crate::adjoint::record::JumpKind;
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::sens;
@@ -52,6 +53,11 @@ where
             && self.stuck_after_reset(k, t, mode_after, approach.rate);
         if approach.grazing && zeno_stop.is_none() && !stuck {
             self.report_grazing(k, t, approach);
+        }
+        if let Some(rec) = &mut self.rec {
+            let modes = (mode_before, mode_after);
+            let (x, xp) = (&self.y.x, &self.x_plus);
+            rec.jump(JumpKind::Event(k), t, x, xp, modes, &self.sw, &self.sw_next);
         }
         // The new state.
         self.y.x.copy_from(&self.x_plus);
@@ -313,6 +319,10 @@ where
             }
         }
         self.error_through_switch(j, t);
+        if let Some(rec) = &mut self.rec {
+            let (x, modes) = (&self.y.x, (self.mode, self.mode));
+            rec.jump(JumpKind::Switch(j), t, x, x, modes, &self.sw, &self.sw_next);
+        }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.switch_crossings += 1;
         Ok(())

@@ -31,12 +31,13 @@ mod qp;
 mod record;
 mod zeno;
 
+use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
 use crate::event::{Scanner, Watch};
-use crate::integrate::{AugState, Forward, Integrator};
+use crate::integrate::{AugState, Forward, Integrator, OdeSystem};
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
 use crate::sink::EventSink;
-use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, Options, Solution};
+use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, GradientMode, Options, Solution};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 use record::Recorder;
 use std::time::Instant;
@@ -65,12 +66,37 @@ where
 /// Like [`solve`], but every user event goes to `sink` instead of into
 /// `Solution::events` (which stays empty): with `&mut ()` a run that wants only C and dC/dθ
 /// allocates nothing per event; see [`crate::sink`].
+///
+/// With sensitivities and `Options::gradient_mode` resolving to
+/// [`GradientMode::Adjoint`], dC/dθ comes from a primal run and a backward sweep
+/// ([`crate::adjoint`]); the sink then sees the primal run's events (without t').
 pub fn solve_with<M: HybridModel, K: EventSink>(
     model: &M,
     params: &OVector<f64, M::P>,
     opts: &Options,
     sink: &mut K,
 ) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let adjoint = opts.gradient_mode.resolve(model.nparams().value()) == GradientMode::Adjoint;
+    if opts.sensitivities && adjoint {
+        return crate::adjoint::solve_with(model, params, opts, sink);
+    }
+    Ok(run_loop(model, params, opts, sink, false)?.0)
+}
+
+/// One run of the event loop, with forward sensitivities or primal only as
+/// `opts.sensitivities` says (`opts.gradient_mode` is not looked at), keeping the adjoint's
+/// record of the run when `tape` (returned only if the run reached T without a Zeno or
+/// stuck-state stop, which end it differently).
+pub(crate) fn run_loop<M: HybridModel, K: EventSink>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    sink: &mut K,
+    tape: bool,
+) -> Result<(Solution, Option<Tape>), SolveError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
@@ -89,10 +115,10 @@ where
     if !(t_end.is_finite() && (t_end > 0.0 || timeless && t_end == 0.0)) {
         return Err(SolveError::BadHorizon { t_end });
     }
-    let mut sol = qp::run(model, params, opts, t_end, sink)?;
+    let (mut sol, tape) = qp::run(model, params, opts, t_end, sink, tape)?;
     qp::report(model, params, opts, &mut sol)?;
     sol.stats.wall_seconds = start.elapsed().as_secs_f64();
-    Ok(sol)
+    Ok((sol, tape))
 }
 
 fn validate<M: HybridModel>(
@@ -206,13 +232,22 @@ where
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
     stuck: Option<usize>,
     rec: Option<Recorder>,
+    /// The coefficients of one step's dense polynomial, for the adjoint's tape (empty
+    /// without it).
+    poly: Vec<OVector<f64, M::N>>,
 }
 
 impl<'a, M: HybridModel> Driver<'a, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    fn new(model: &'a M, p: &'a OVector<f64, M::P>, opts: &'a Options, t_end: f64) -> Self {
+    fn new(
+        model: &'a M,
+        p: &'a OVector<f64, M::P>,
+        opts: &'a Options,
+        t_end: f64,
+        tape: bool,
+    ) -> Self {
         let (n, np) = (model.nstates(), model.nparams());
         let info = model.info();
         let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
@@ -223,6 +258,12 @@ where
         }
         let nobs = info.nobservables();
         let nev = info.events.len();
+        let mut integ = Integrator::new_narrow(model, p, opts);
+        integ.set_lazy_dense(true);
+        // S and q_θ as wide as the integrator's (zero width in a primal run of a Dyn model).
+        let y = integ.system().zeros();
+        let aug_tmp = integ.system().zeros();
+        let sp = if opts.sensitivities { np.value() } else { 0 };
         Driver {
             model,
             p,
@@ -230,13 +271,9 @@ where
             t_end,
             dt_end,
             sens: opts.sensitivities,
-            integ: {
-                let mut it = Integrator::new(model, p, opts);
-                it.set_lazy_dense(true);
-                it
-            },
-            y: AugState::zeros(n, np),
-            aug_tmp: AugState::zeros(n, np),
+            integ,
+            y,
+            aug_tmp,
             mode: info.initial_mode,
             sw: Switches::new(info.switches),
             sw_next: Switches::new(info.switches),
@@ -269,9 +306,12 @@ where
             zeno: Zeno::new(model),
             zeno_stop: None,
             stuck: None,
-            rec: opts
-                .record
-                .then(|| Recorder::new(n.value(), if opts.sensitivities { np.value() } else { 0 })),
+            rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),
+            poly: if tape {
+                (0..MAX_COEFS).map(|_| vn()).collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 
@@ -526,7 +566,7 @@ where
     /// Records [t0, t1] of the current step when recording.
     fn record_step(&mut self, t0: f64, t1: f64) {
         if let Some(rec) = &mut self.rec {
-            rec.record_step(&self.integ, &mut self.aug_tmp, t0, t1);
+            rec.record_step(&self.integ, &mut self.aug_tmp, &mut self.poly, t0, t1);
         }
     }
 }

@@ -6,6 +6,7 @@
 //! second run with every qp on the left side gives `gradient_left`.
 
 use super::Driver;
+use crate::adjoint::record::Tape;
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc};
 use crate::qp::Side;
@@ -13,18 +14,20 @@ use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, Options, Solution};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
-/// One run from t = 0 to `t_end`: the driver's loop and its end.
+/// One run from t = 0 to `t_end`: the driver's loop and its end (with the adjoint's record
+/// when `tape`, see [`super::run_loop`]).
 pub(super) fn run<M: HybridModel, K: EventSink>(
     model: &M,
     params: &OVector<f64, M::P>,
     opts: &Options,
     t_end: f64,
     sink: &mut K,
-) -> Result<Solution, SolveError>
+    tape: bool,
+) -> Result<(Solution, Option<Tape>), SolveError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let mut d = Driver::new(model, params, opts, t_end);
+    let mut d = Driver::new(model, params, opts, t_end, tape);
     d.run(sink).map_err(|e| explain(model, e))?;
     d.finish().map_err(|e| explain(model, e))
 }
@@ -90,9 +93,9 @@ where
     sol.qp = states;
     if kink && opts.sensitivities {
         model.set_qp_side(Side::Left);
-        let left = run(model, params, opts, t, &mut ());
+        let left = run(model, params, opts, t, &mut (), false);
         model.set_qp_side(Side::Right);
-        sol.gradient_left = Some(left?.gradient);
+        sol.gradient_left = Some(left?.0.gradient);
     }
     Ok(())
 }

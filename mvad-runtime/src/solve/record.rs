@@ -1,42 +1,59 @@
-//! Recording the trajectory (only with `Options::record`): x and S at [`TRAJ_NODES`]
-//! equispaced nodes of every accepted step, filled from the integrator's dense output, and
-//! the smooth segments (mode and switch bits) between events. Together with the event table
-//! (x⁻, x⁺, t_k, dt_k/dθ per event) this is the forward record a backward pass replays.
+//! The forward record of a run, kept by the event loop when asked: the trajectory
+//! (`Options::record`: x and S at [`TRAJ_NODES`] equispaced nodes of every accepted step,
+//! filled from the integrator's dense output, and the smooth segments between events) and,
+//! for an adjoint sweep, the [`Tape`] (every step's dense output at its own degree, and the
+//! jumps with the states, modes and switch bits on both sides; see [`crate::adjoint::record`]).
 
+use crate::adjoint::record::{JumpKind, Tape};
 use crate::integrate::{AugState, Forward, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Switches};
 use crate::solution::{Segment, Trajectory, TRAJ_NODES};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-/// The trajectory being recorded and the segment currently open.
+/// The records being kept and the segment currently open.
 pub(super) struct Recorder {
-    pub(super) traj: Trajectory,
+    traj: Option<Trajectory>,
+    tape: Option<Tape>,
     segment_start: f64,
     segment_first_step: usize,
 }
 
 impl Recorder {
-    /// An empty record for n states and p parameters (p = 0: no sensitivities).
-    pub(super) fn new(n: usize, p: usize) -> Self {
+    /// Empty records for n states and p parameters (p = 0: no sensitivities): the trajectory
+    /// when `traj`, the adjoint's tape when `tape`.
+    pub(super) fn new(n: usize, p: usize, traj: bool, tape: bool) -> Self {
         Recorder {
-            traj: Trajectory::new(n, p),
+            traj: traj.then(|| Trajectory::new(n, p)),
+            tape: tape.then(|| Tape::new(n)),
             segment_start: 0.0,
             segment_first_step: 0,
         }
     }
 
+    /// The records: (trajectory, tape).
+    pub(super) fn into_parts(self) -> (Option<Trajectory>, Option<Tape>) {
+        (self.traj, self.tape)
+    }
+
     /// Opens a segment at t (after a restart).
     pub(super) fn open_segment(&mut self, t: f64) {
         self.segment_start = t;
-        self.segment_first_step = self.traj.len();
+        if let Some(traj) = &self.traj {
+            self.segment_first_step = traj.len();
+        }
+        if let Some(tape) = &mut self.tape {
+            tape.open_segment(t);
+        }
     }
 
     /// Records [t0, t1] of the integrator's current step from its dense output (before the
-    /// step is truncated at an event). `tmp` is scratch space for one dense evaluation.
+    /// step is truncated at an event). `tmp` is scratch space for one dense evaluation,
+    /// `poly` for the coefficients of one dense polynomial (the tape's; `MAX_COEFS` vectors).
     pub(super) fn record_step<M: HybridModel>(
         &mut self,
         integ: &Integrator<Forward<'_, M>>,
         tmp: &mut AugState<M::N, M::P>,
+        poly: &mut [OVector<f64, M::N>],
         t0: f64,
         t1: f64,
     ) where
@@ -45,7 +62,17 @@ impl Recorder {
         if t1 <= t0 {
             return;
         }
-        let traj = &mut self.traj;
+        if let Some(tape) = &mut self.tape {
+            let deg = integ.dense_poly(poly);
+            let step = (integ.t_prev(), integ.last_step_size());
+            let cut = (t1 != integ.t()).then_some(t1);
+            tape.record_step(step, cut, deg, |m, out| {
+                out.copy_from_slice(poly[m].as_slice());
+            });
+        }
+        let Some(traj) = &mut self.traj else {
+            return;
+        };
         traj.t0.push(t0);
         traj.t1.push(t1);
         for i in 0..TRAJ_NODES {
@@ -61,9 +88,15 @@ impl Recorder {
     /// Closes the open segment at t, in `mode` with switch bits `sw` (empty segments, as
     /// between simultaneous events, are dropped).
     pub(super) fn close_segment(&mut self, t: f64, mode: usize, sw: &Switches) {
-        let end_step = self.traj.len();
+        if let Some(tape) = &mut self.tape {
+            tape.close_segment(t, mode, sw);
+        }
+        let Some(traj) = &mut self.traj else {
+            return;
+        };
+        let end_step = traj.len();
         if end_step > self.segment_first_step {
-            self.traj.segments.push(Segment {
+            traj.segments.push(Segment {
                 t_start: self.segment_start,
                 t_end: t,
                 mode,
@@ -74,8 +107,39 @@ impl Recorder {
         }
     }
 
+    /// A jump the event loop applied at t: what fired, x⁻ and x⁺, the modes (before, after)
+    /// and the switch bits on both sides (for the tape; the trajectory has its event table).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn jump<N: Dim>(
+        &mut self,
+        kind: JumpKind,
+        t: f64,
+        x_before: &OVector<f64, N>,
+        x_after: &OVector<f64, N>,
+        modes: (usize, usize),
+        sw_before: &Switches,
+        sw_after: &Switches,
+    ) where
+        DefaultAllocator: nalgebra::allocator::Allocator<N>,
+    {
+        if let Some(tape) = &mut self.tape {
+            let (a, b) = (x_before.as_slice(), x_after.as_slice());
+            tape.jump(kind, t, a, b, modes, sw_before, sw_after);
+        }
+    }
+
+    /// The run reached T with state x in `mode` under bits `sw` (for the tape).
+    pub(super) fn finish<N: Dim>(&mut self, t: f64, x: &OVector<f64, N>, mode: usize, sw: &Switches)
+    where
+        DefaultAllocator: nalgebra::allocator::Allocator<N>,
+    {
+        if let Some(tape) = &mut self.tape {
+            tape.finish(t, x.as_slice(), mode, sw);
+        }
+    }
+
     /// Appends one step holding x and S constant from the last recorded time to `t_end`
-    /// (the state at rest after an accumulation), as its own segment.
+    /// (the state at rest after an accumulation), as its own segment of the trajectory.
     pub(super) fn hold<N: Dim, P: Dim>(
         &mut self,
         t_end: f64,
@@ -86,7 +150,9 @@ impl Recorder {
     ) where
         DefaultAllocator: ModelAlloc<N, P>,
     {
-        let traj = &mut self.traj;
+        let Some(traj) = &mut self.traj else {
+            return;
+        };
         let t0 = traj.t1.last().copied().unwrap_or(0.0);
         if t_end <= t0 {
             return;

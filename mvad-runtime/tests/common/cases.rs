@@ -557,11 +557,12 @@ fn twin() -> Case {
         r.check(has(sol, DiagnosticKind::SimultaneousEvents), || {
             format!("{:?}", sol.diagnostics)
         });
-        // C = 0.4·1 + 0.6·4 = 2.8, dC/dc = 1 − 4 = −3.
-        r.close("cost", sol.cost, 2.8, 0.0, 1e-12 * tol.x);
+        // At (c, y0, u, v) = (0.4, 1, 1, 2): C = 0.4·1 + 0.6·4 + 4² = 18.8, dC/dc = 1 − 4 = −3.
+        r.close("cost", sol.cost, 18.8, 0.0, 1e-12 * tol.x);
         r.close("dC/dc", sol.gradient[0], -3.0, 0.0, 1e-9 * tol.x);
     });
-    ad_case("twin".into(), Twin, &[0.4], tight(), &Method::ALL, check)
+    let p = [0.4, 1.0, 1.0, 2.0];
+    ad_case("twin".into(), Twin, &p, tight(), &Method::ALL, check)
 }
 
 /// No parameters: x = e^{−t} until ln 2, then 0.25 e^{−(t − ln 2)}.
@@ -601,6 +602,29 @@ pub fn run(case: &Case, method: Method) -> Vec<String> {
     r.0.into_iter()
         .map(|m| format!("{} under {method:?}: {m}", case.name))
         .collect()
+}
+
+/// Runs every case under every method it applies to, except the [`KNOWN_FAILURES`], and
+/// asserts that there were at least `min_runs` runs and no failure (all reported at once).
+pub fn run_matrix(cases: impl IntoIterator<Item = Case>, min_runs: usize) {
+    let mut failures = vec![];
+    let mut runs = 0;
+    for case in cases {
+        for &method in case.methods {
+            if known(&case.name, method) {
+                continue;
+            }
+            failures.extend(run(&case, method));
+            runs += 1;
+        }
+    }
+    assert!(runs >= min_runs, "{runs} runs");
+    assert!(
+        failures.is_empty(),
+        "{} failures:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 /// Whether (case, method) is a listed known failure.

@@ -242,16 +242,18 @@ impl Spec for Dip {
     }
 }
 
-/// Two events on the same guard: fired at the same time in declaration order, reported.
+/// Two events on one guard at the same instant, fired in declaration order (a: y += u, then
+/// b: y ×= v) and reported: x = t, y(0) = y0, C = ∫₀¹ y dt + y(1)², so y = y0 before c and
+/// (y0 + u) v after, C = y0 c + (y0 + u) v (1 − c) + ((y0 + u) v)².
 #[derive(Clone)]
 pub struct Twin;
 
 impl Spec for Twin {
     fn info(&self) -> ModelInfo {
-        info(
+        let mut i = info(
             "Twin",
             &["x", "y"],
-            &[("c", 0.4)],
+            &[("c", 0.4), ("y0", 1.5), ("u", 0.7), ("v", 2.0)],
             &["main"],
             vec![
                 ev("a", Direction::Up, None, None, false),
@@ -259,11 +261,13 @@ impl Spec for Twin {
             ],
             &["y"],
             0,
-        )
+        );
+        i.has_final_cost = true;
+        i
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
         x[0] = S::cst(0.0);
-        x[1] = S::cst(1.0);
+        x[1] = p[1];
     }
     fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
         Some(S::cst(1.0))
@@ -275,12 +279,18 @@ impl Spec for Twin {
     fn guard<S: Sc>(&self, _k: usize, _t: S, x: &[S], p: &[S]) -> S {
         x[0] - p[0]
     }
-    fn reset<S: Sc>(&self, k: usize, _t: S, x: &[S], _p: &[S], xp: &mut [S]) {
+    fn reset<S: Sc>(&self, k: usize, _t: S, x: &[S], p: &[S], xp: &mut [S]) {
         xp[0] = x[0];
-        xp[1] = if k == 0 { x[1] + 1.0 } else { x[1] * 2.0 };
+        xp[1] = if k == 0 { x[1] + p[2] } else { x[1] * p[3] };
+    }
+    fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
+        y[0] = x[1];
     }
     fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
         x[1]
+    }
+    fn final_cost<S: Sc>(&self, _t: S, x: &[S], _p: &[S]) -> S {
+        x[1] * x[1]
     }
 }
 

@@ -1,6 +1,11 @@
 //! `mvad grad MODEL.hyb`: the cost C(θ) and dC/dθ, with the event table: for every event
 //! t_k, the guard slope ∇ₓg·f⁻, transversality, t_k' per param, the jump J_k of every
 //! state and observable, and the atoms α_k = −J_k t_k'. `--json` prints the spec's object.
+//!
+//! `--mode adjoint` computes dC/dθ by a backward sweep (`mvad::adjoint`); its events have no
+//! t' and no atoms (forward quantities), which the JSON leaves out. `--mode auto` takes the
+//! adjoint from `GradientMode::AUTO_ADJOINT_MIN_PARAMS` params on; `stats.mode` (and the
+//! top-level `mode`) say which mode ran.
 
 use clap::Args;
 use mvad::json::grad_json;
@@ -23,9 +28,10 @@ pub struct GradArgs {
     /// Common options.
     #[command(flatten)]
     pub common: Common,
-    /// Sensitivity mode: `forward` (sensitivities carried along the run). `adjoint` is in the
-    /// spec but not implemented yet: it is refused with exit status 2.
-    #[arg(long, default_value = "forward", value_parser = ["forward", "adjoint"])]
+    /// Sensitivity mode: `forward` (sensitivities carried along the run), `adjoint` (a primal
+    /// run, then one backward sweep: cost flat in the number of params; events without t'
+    /// and atoms) or `auto` (adjoint from 50 params on).
+    #[arg(long, default_value = "forward", value_parser = ["forward", "adjoint", "auto"])]
     pub mode: String,
 }
 
@@ -34,18 +40,12 @@ pub fn run<M: HybridModel>(model: &M, file: &str, args: &GradArgs) -> CmdResult
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let s = setup(model, &args.common)?;
-    check_mode(&args.mode).map_err(setup_err)?;
+    let mut s = setup(model, &args.common)?;
+    s.opts.gradient_mode = check_mode(&args.mode).map_err(setup_err)?;
     let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
     let info = model.info();
     if args.common.json {
-        Ok(json_text(&grad_json(
-            info,
-            model.qps(),
-            &sol,
-            &s.wrt,
-            &args.mode,
-        )))
+        Ok(json_text(&grad_json(info, model.qps(), &sol, &s.wrt)))
     } else {
         Ok(grad_text(info, model.qps(), file, &sol, &s.wrt))
     }
@@ -65,7 +65,8 @@ pub fn grad_text(
         info.name,
         g(sol.t_end, 10)
     ));
-    s.push_str(&format!("cost C = {}\n\n", g(sol.cost, 15)));
+    s.push_str(&format!("cost C = {}\n", g(sol.cost, 15)));
+    s.push_str(&format!("gradient by {} mode\n\n", sol.stats.mode.name()));
 
     let left = sol.gradient_left.as_deref();
     let header: &[&str] = if left.is_some() {
@@ -90,12 +91,15 @@ pub fn grad_text(
 
     s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
     if !sol.events.is_empty() {
+        // t' and the atoms are forward quantities: an adjoint run's events have neither.
+        let with_dt = sol.events.iter().all(|e| !e.dt.is_empty());
+        let cols: &[usize] = if with_dt { wrt } else { &[] };
         let mode = |m: usize| info.modes.get(m).cloned().unwrap_or_default();
         let mut t = Table::new(&param_header(
             &["#", "event", "t", "mode", "guard slope", "transversal"],
             "dt/d",
             &info.params,
-            wrt,
+            cols,
         ));
         for e in sol.events.iter().take(MAX_EVENT_ROWS) {
             let name = info
@@ -117,7 +121,7 @@ pub fn grad_text(
                 if e.transversal { "yes" } else { "NO (grazing)" }.to_string(),
             ];
             row.extend(
-                wrt.iter()
+                cols.iter()
                     .map(|&k| g(e.dt.get(k).copied().unwrap_or(f64::NAN), 8)),
             );
             t.row(row);
@@ -130,7 +134,7 @@ pub fn grad_text(
             &["#", "t", "observable", "jump J"],
             "atom d/d",
             &info.params,
-            wrt,
+            cols,
         ));
         for e in sol.events.iter().take(MAX_EVENT_ROWS) {
             for (i, o) in info.observables.iter().enumerate() {
@@ -141,7 +145,7 @@ pub fn grad_text(
                 let mut row = vec![e.index.to_string(), g(e.t, 8), o.clone(), g(jump, 8)];
                 let atoms = e.atoms.get(i).map(Vec::as_slice).unwrap_or(&[]);
                 row.extend(
-                    wrt.iter()
+                    cols.iter()
                         .map(|&k| g(atoms.get(k).copied().unwrap_or(f64::NAN), 8)),
                 );
                 t.row(row);
@@ -149,6 +153,13 @@ pub fn grad_text(
         }
         if t.is_empty() {
             s.push_str("\nno observable jumps at the events: the measures have no atoms\n");
+        } else if !with_dt {
+            s.push_str(
+                "\njumps J of the observables (the atoms α = −J t' need t', a forward \
+                 quantity: --mode forward):\n",
+            );
+            s.push_str(&t.render());
+            s.push_str(&more_events(sol.events.len()));
         } else {
             s.push_str("\natoms α = −J t' of the observables that jump:\n");
             s.push_str(&t.render());
@@ -229,15 +240,32 @@ mod tests {
     }
 
     #[test]
-    fn text_table_and_adjoint() {
+    fn text_table() {
         let out = on_ball(run, &[]).expect("runs");
         assert!(out.contains("cost C = 1.89051371"), "{out}");
+        assert!(out.contains("gradient by forward mode"), "{out}");
         assert!(out.contains("events (2):"), "{out}");
         assert!(out.contains("impact"), "{out}");
         assert!(out.contains("velocity"), "{out}");
-        let err = on_ball(run, &["--mode", "adjoint"])
-            .map(|_| ())
-            .expect_err("error");
-        assert_eq!(err.status(), 2);
+    }
+
+    #[test]
+    fn adjoint_json_has_the_spec_keys_and_the_e1_values() {
+        let out = on_ball(run, &tight(&["--json", "--mode", "adjoint"])).expect("runs");
+        let v = json(&out);
+        assert_eq!(missing_spec_keys(&v), Vec::<String>::new(), "{out}");
+        assert_eq!(v["stats"]["mode"], "adjoint");
+        let de = v["gradient"]["e"].as_f64().expect("number");
+        assert_relative_eq!(de, 2.8314408141470055, max_relative = 1e-8);
+        assert!(v["events"][0].get("dt").is_none(), "{out}");
+        // Dropping a key an adjoint run must have is still caught.
+        let mut broken = v.clone();
+        if let Some(ev) = broken["events"][0].as_object_mut() {
+            ev.remove("jump");
+        }
+        assert_eq!(missing_spec_keys(&broken), ["events[0].jump"]);
+        let text = on_ball(run, &["--mode", "adjoint"]).expect("runs");
+        assert!(text.contains("gradient by adjoint mode"), "{text}");
+        assert!(text.contains("jumps J of the observables"), "{text}");
     }
 }

@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
-use mvad::runtime::solution::Method;
+use mvad::runtime::solution::{GradientMode, Method};
 use mvad::setup::{params_with, resolve, Request, Setup, SetupError, Spelling};
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
@@ -299,6 +299,8 @@ where
         atol: common.atol,
         method: Method::from_name(&common.method).unwrap_or_default(),
         grazing_tol: common.grazing_tol,
+        // `grad` sets its own `--mode`; every other command is forward mode's.
+        mode: GradientMode::Forward,
     };
     resolve(model, &req).map_err(setup_err)
 }

@@ -30,6 +30,9 @@ pub const EVENT_KEYS: [&str; 10] = [
     "atoms",
 ];
 
+/// Event keys an adjoint run (`stats.mode` = `adjoint`) may leave out: forward quantities.
+pub const ADJOINT_OPTIONAL_EVENT_KEYS: [&str; 2] = ["dt", "atoms"];
+
 /// Keys of every diagnostic object.
 pub const DIAGNOSTIC_KEYS: [&str; 3] = ["kind", "t", "message"];
 
@@ -37,7 +40,12 @@ pub const DIAGNOSTIC_KEYS: [&str; 3] = ["kind", "t", "message"];
 pub const STATS_KEYS: [&str; 4] = ["steps", "rejected_steps", "events", "wall_seconds"];
 
 /// The spec's keys that `v` lacks, each named by its path (`events[1].dt`); empty if none.
+/// The events of an adjoint run need not have [`ADJOINT_OPTIONAL_EVENT_KEYS`].
 pub fn missing_spec_keys(v: &Value) -> Vec<String> {
+    let adjoint = v["stats"]["mode"] == "adjoint";
+    let optional = |list: &str, k: &str| {
+        adjoint && list == "events" && ADJOINT_OPTIONAL_EVENT_KEYS.contains(&k)
+    };
     let mut missing: Vec<String> = GRAD_KEYS
         .iter()
         .filter(|k| v.get(**k).is_none())
@@ -50,7 +58,7 @@ pub fn missing_spec_keys(v: &Value) -> Vec<String> {
         for (i, item) in v[list].as_array().into_iter().flatten().enumerate() {
             missing.extend(
                 keys.iter()
-                    .filter(|k| item.get(**k).is_none())
+                    .filter(|k| item.get(**k).is_none() && !optional(list, k))
                     .map(|k| format!("{list}[{i}].{k}")),
             );
         }

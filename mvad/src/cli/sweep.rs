@@ -158,10 +158,7 @@ where
                     m.insert("qp".into(), qp_json(model.qps(), &sol.qp));
                 }
                 m.insert("diagnostics".into(), diagnostics_json(&sol.diagnostics));
-                m.insert(
-                    "run".into(),
-                    grad_json(info, model.qps(), sol, &s.wrt, "forward"),
-                );
+                m.insert("run".into(), grad_json(info, model.qps(), sol, &s.wrt));
                 Value::Object(m)
             })
             .collect();

@@ -1,0 +1,419 @@
+//! The forward record a backward sweep replays: the primal run's trajectory on every smooth
+//! segment and what happened at every jump between them.
+//!
+//! The primal run (x and q only, no sensitivities) hands the record, through the event
+//! loop's `Recorder`, three things:
+//!
+//! - **Steps.** Each accepted step from t₀ with signed length h (the part of it before an
+//!   event, where one falls inside) keeps the integrator's dense output, a polynomial of
+//!   degree D in θ = (t − t₀)/h (D = 4 for Tsit5 and Rodas5P, 9 for Verner), as its monomial
+//!   coefficients c₀ = x(t₀), c₁, …, c_D ([`crate::integrate::Integrator::dense_poly`]), and
+//!   evaluates x(t) = c₀ + θ(c₁ + θ(c₂ + …)) by Horner's scheme: what the forward run's own
+//!   dense output gives, at the order of the method. A component the step left unchanged
+//!   comes back exactly: a stiff state sitting at its equilibrium u = w stays w − u = 0, which
+//!   matters where the flow divides by a small parameter (a lag (w − u)/τ has
+//!   ∂/∂τ = −(w − u)/τ², so a rounding error of u in the record, 1e-16, would be an error of
+//!   1 in f_τ at τ = 1e-8).
+//!
+//! Times on a segment are **local**: s, the sum of the step lengths h taken since the
+//! segment's start, which the record stores and [`Tape::state_at`] takes (s ≈ t − t_start).
+//! Near t ≈ 2.5 absolute time is resolved to 4.4e-16, and across a transient of width 1e-8
+//! (the stiff relay's lag) that is an error of 1e-7 in x(t); the primal run's own times are
+//! rounded that way too (t += h), while its states advance by exactly h. The forward run
+//! never looks its states up by time, so it does not see it; in s, which is resolved to
+//! 1e-24 where the transient is and advances by the h the states did, neither error arises.
+//! - **Segments.** A smooth piece between two jumps: its mode, its frozen switch bits and the
+//!   range of its steps (segments of length zero, between simultaneous events, are dropped).
+//! - **Jumps.** A user event k or a switch flip j at t: x⁻, x⁺ (equal for a flip), the modes
+//!   and the switch bits on both sides; everything else the transpose needs (f⁻, f⁺, ∇g, ℓ⁻,
+//!   ℓ⁺, the costs) is recomputed from these.
+//!
+//! Memory: 8·(D + 1)·n bytes of nodes plus 32 bytes per step (40n + 32 for Tsit5 and
+//! Rodas5P, 80n + 32 for Verner 9(8)); per jump 16n bytes of states plus about 100 bytes
+//! (switch bits beyond 64 add 8 bytes per 64 on each side). [`Tape::bytes`] counts it.
+
+use crate::model::Switches;
+use std::ops::Range;
+
+/// Most coefficients a step keeps (Verner's degree-9 dense output).
+pub(crate) const MAX_COEFS: usize = 10;
+
+/// What fired at a jump.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JumpKind {
+    /// User event k (its reset, mode switch and costs).
+    Event(usize),
+    /// Switching function σ_j crossed zero: bit j flips, the reset is the identity.
+    Switch(usize),
+}
+
+/// One jump of the primal run, in the order it was applied.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Jump {
+    /// What fired.
+    pub kind: JumpKind,
+    /// t_k.
+    pub t: f64,
+    /// The mode before it.
+    pub mode_before: usize,
+    /// The mode after it.
+    pub mode_after: usize,
+    /// The switch bits before it (those f⁻ and ℓ⁻ are evaluated with).
+    pub sw_before: Switches,
+    /// The switch bits after it (those f⁺ and ℓ⁺ are evaluated with).
+    pub sw_after: Switches,
+    /// Offset of x⁻ (then x⁺) in `Tape::jump_x`.
+    at: usize,
+}
+
+/// One smooth segment of the primal run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SegmentRec {
+    /// Start time (0 or a jump time).
+    pub t_start: f64,
+    /// End time (a jump time or T).
+    pub t_end: f64,
+    /// Its mode.
+    pub mode: usize,
+    /// Its frozen switch bits.
+    pub sw: Switches,
+    /// Its local length: the local time s of its end (≈ t_end − t_start).
+    pub s_end: f64,
+    /// Its steps (indices into the tape's steps).
+    pub steps: Range<usize>,
+}
+
+impl SegmentRec {
+    /// The local time s ≈ t − t_start of an absolute time t on this segment (exactly s_end
+    /// at t_end).
+    pub fn local(&self, t: f64) -> f64 {
+        if t >= self.t_end {
+            self.s_end + (t - self.t_end)
+        } else {
+            t - self.t_start
+        }
+    }
+}
+
+/// A piece of the primal run, in time order.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Item {
+    /// A smooth segment.
+    Segment(SegmentRec),
+    /// A jump (user event or switch flip).
+    Jump(Jump),
+}
+
+/// The dense output of one step from local time `t0` with signed length `h`, recorded on
+/// [lo, hi] (lo = t0; hi < t0 + h when an event cut the step): degree `deg` in
+/// θ = (s − t0)/h, its `deg + 1` coefficient vectors at `at`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct StepPoly {
+    lo: f64,
+    hi: f64,
+    t0: f64,
+    h: f64,
+    at: usize,
+    deg: usize,
+}
+
+/// The state at the end of the run: t = T, x(T) (after any jump at T), the mode and bits.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FinalState {
+    /// T.
+    pub t: f64,
+    /// x(T).
+    pub x: Vec<f64>,
+    /// The mode at T.
+    pub mode: usize,
+    /// The switch bits at T.
+    pub sw: Switches,
+}
+
+/// The record of a primal run (see the module doc).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tape {
+    n: usize,
+    steps: Vec<StepPoly>,
+    nodes: Vec<f64>,
+    jump_x: Vec<f64>,
+    items: Vec<Item>,
+    open_start: f64,
+    open_first: usize,
+    /// The local time reached on the open segment.
+    clock: f64,
+    fin: Option<FinalState>,
+}
+
+impl Tape {
+    /// An empty record for n states.
+    pub(crate) fn new(n: usize) -> Self {
+        Tape {
+            n,
+            steps: Vec::new(),
+            nodes: Vec::new(),
+            jump_x: Vec::new(),
+            items: Vec::new(),
+            open_start: 0.0,
+            open_first: 0,
+            clock: 0.0,
+            fin: None,
+        }
+    }
+
+    /// Opens a segment at t (after a restart).
+    pub(crate) fn open_segment(&mut self, t: f64) {
+        self.open_start = t;
+        self.open_first = self.steps.len();
+        self.clock = 0.0;
+    }
+
+    /// Records a step from `t0` (absolute) of signed length `h`, or its part up to `cut` (an
+    /// event time inside it), whose dense output has degree `deg` ≤ 9: `coefs(m, out)`
+    /// writes c_m (length n) into `out`, m = 0..=deg. In local time the step starts where
+    /// the last one ended and lasts h (the states advanced by exactly h), or cut − t0.
+    pub(crate) fn record_step(
+        &mut self,
+        (t0, h): (f64, f64),
+        cut: Option<f64>,
+        deg: usize,
+        mut coefs: impl FnMut(usize, &mut [f64]),
+    ) {
+        let len = match cut {
+            Some(te) => te - t0,
+            None => h,
+        };
+        if len.is_nan() || len <= 0.0 || h == 0.0 {
+            return;
+        }
+        let start = self.clock;
+        self.clock = start + len;
+        let step = StepPoly {
+            lo: start,
+            hi: self.clock,
+            t0: start,
+            h,
+            at: self.nodes.len(),
+            deg: deg.min(MAX_COEFS - 1),
+        };
+        let n = self.n;
+        for m in 0..=step.deg {
+            let start = self.nodes.len();
+            self.nodes.resize(start + n, 0.0);
+            coefs(m, &mut self.nodes[start..]);
+        }
+        self.steps.push(step);
+    }
+
+    /// Closes the open segment at t in `mode` with bits `sw` (dropped if it has no steps).
+    pub(crate) fn close_segment(&mut self, t: f64, mode: usize, sw: &Switches) {
+        let end = self.steps.len();
+        if end > self.open_first {
+            self.items.push(Item::Segment(SegmentRec {
+                t_start: self.open_start,
+                t_end: t,
+                mode,
+                sw: sw.clone(),
+                s_end: self.clock,
+                steps: self.open_first..end,
+            }));
+        }
+        self.open_first = end;
+    }
+
+    /// Records a jump: what fired at t, x⁻ and x⁺, the modes and bits on both sides.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn jump(
+        &mut self,
+        kind: JumpKind,
+        t: f64,
+        x_before: &[f64],
+        x_after: &[f64],
+        modes: (usize, usize),
+        sw_before: &Switches,
+        sw_after: &Switches,
+    ) {
+        let at = self.jump_x.len();
+        self.jump_x.extend_from_slice(x_before);
+        self.jump_x.extend_from_slice(x_after);
+        self.items.push(Item::Jump(Jump {
+            kind,
+            t,
+            mode_before: modes.0,
+            mode_after: modes.1,
+            sw_before: sw_before.clone(),
+            sw_after: sw_after.clone(),
+            at,
+        }));
+    }
+
+    /// Records the state at T.
+    pub(crate) fn finish(&mut self, t: f64, x: &[f64], mode: usize, sw: &Switches) {
+        self.fin = Some(FinalState {
+            t,
+            x: x.to_vec(),
+            mode,
+            sw: sw.clone(),
+        });
+    }
+
+    /// Number of states n.
+    pub fn nstates(&self) -> usize {
+        self.n
+    }
+
+    /// The segments and jumps in time order.
+    pub fn items(&self) -> &[Item] {
+        &self.items
+    }
+
+    /// The state at T (None if the run did not reach T normally).
+    pub fn final_state(&self) -> Option<&FinalState> {
+        self.fin.as_ref()
+    }
+
+    /// (x⁻, x⁺) of a jump.
+    pub fn jump_states(&self, j: &Jump) -> (&[f64], &[f64]) {
+        let n = self.n;
+        (
+            &self.jump_x[j.at..j.at + n],
+            &self.jump_x[j.at + n..j.at + 2 * n],
+        )
+    }
+
+    /// Recorded steps.
+    pub fn nsteps(&self) -> usize {
+        self.steps.len()
+    }
+
+    /// Bytes held by the record (steps, nodes, jumps; the switch words beyond 64 included).
+    pub fn bytes(&self) -> usize {
+        let f = std::mem::size_of::<f64>();
+        let sw_bytes = |s: &Switches| std::mem::size_of_val(s.high_words());
+        self.steps.len() * std::mem::size_of::<StepPoly>()
+            + (self.nodes.len() + self.jump_x.len()) * f
+            + self.items.len() * std::mem::size_of::<Item>()
+            + self
+                .items
+                .iter()
+                .map(|i| match i {
+                    Item::Segment(s) => sw_bytes(&s.sw),
+                    Item::Jump(j) => sw_bytes(&j.sw_before) + sw_bytes(&j.sw_after),
+                })
+                .sum::<usize>()
+    }
+
+    /// x at local time s (= t − t_start, see the module doc) on `seg` into `out` (length n)
+    /// from the polynomial of the step holding s; `cursor` (a step index, kept between calls)
+    /// makes a monotone sweep O(1) per call. Times outside the segment use its first or last
+    /// step.
+    pub fn state_at(&self, seg: &SegmentRec, t: f64, cursor: &mut usize, out: &mut [f64]) {
+        let (first, last) = (seg.steps.start, seg.steps.end - 1);
+        let mut k = (*cursor).clamp(first, last);
+        while k > first && t < self.steps[k].lo {
+            k -= 1;
+        }
+        while k < last && t > self.steps[k].hi {
+            k += 1;
+        }
+        *cursor = k;
+        self.eval_step(k, t, out);
+    }
+
+    /// Step k's polynomial at t, by Horner's scheme in θ = (t − t0)/h.
+    fn eval_step(&self, k: usize, t: f64, out: &mut [f64]) {
+        let s = self.steps[k];
+        let n = self.n;
+        let theta = (t - s.t0) / s.h;
+        let coef = |m: usize| &self.nodes[s.at + m * n..s.at + (m + 1) * n];
+        out.copy_from_slice(coef(s.deg));
+        for m in (0..s.deg).rev() {
+            for (o, c) in out.iter_mut().zip(coef(m)) {
+                *o = *o * theta + c;
+            }
+        }
+    }
+
+    /// x(t) at a sample time into `out`, right-continuous: on the segment with
+    /// t_start ≤ t < t_end, or x(T) (after any jump at T) for t = T. False (and `out`
+    /// untouched) for a time outside [0, T] or a run that did not reach T.
+    pub fn sample(&self, t: f64, out: &mut [f64]) -> bool {
+        let Some(fin) = self.fin.as_ref() else {
+            return false;
+        };
+        if t == fin.t {
+            out.copy_from_slice(&fin.x);
+            return true;
+        }
+        let seg = self.items.iter().find_map(|it| match it {
+            Item::Segment(s) if s.t_start <= t && t < s.t_end => Some(s),
+            _ => None,
+        });
+        let Some(seg) = seg else {
+            return false;
+        };
+        let s = seg.local(t);
+        let mut cursor =
+            seg.steps.start + self.steps[seg.steps.clone()].partition_point(|st| st.hi < s);
+        self.state_at(seg, s, &mut cursor, out);
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The record evaluates each step's polynomial, picks the step that holds t, and samples
+    /// right-continuously.
+    #[test]
+    fn steps_evaluate_their_polynomials() {
+        // x(t) = (1 + 2θ − θ⁴, 3θ⁹) on the step from 0.3 of length 0.4 (θ = (t − 0.3)/0.4),
+        // recorded on [0.3, 0.6] (cut by an event), then a constant step on [0.6, 0.9].
+        let p = |t: f64| {
+            let th = (t - 0.3) / 0.4;
+            [1.0 + 2.0 * th - th.powi(4), 3.0 * th.powi(9)]
+        };
+        let mut c = [[0.0; 2]; 10];
+        c[0][0] = 1.0;
+        c[1][0] = 2.0;
+        c[4][0] = -1.0;
+        c[9][1] = 3.0;
+        let mut tape = Tape::new(2);
+        tape.open_segment(0.3);
+        tape.record_step((0.3, 0.4), Some(0.6), 9, |m, out| {
+            out.copy_from_slice(&c[m])
+        });
+        tape.record_step((0.6, 0.3), None, 0, |_, out| {
+            out.copy_from_slice(&[5.0, 6.0])
+        });
+        tape.close_segment(0.9, 0, &Switches::default());
+        tape.finish(0.9, &[5.0, 6.0], 0, &Switches::default());
+        let Item::Segment(seg) = &tape.items()[0] else {
+            panic!("no segment");
+        };
+        let mut out = [0.0; 2];
+        let mut cursor = 0;
+        for i in 0..=30 {
+            let t = 0.3 + 0.3 * i as f64 / 30.0;
+            tape.state_at(seg, seg.local(t), &mut cursor, &mut out);
+            let want = p(t);
+            for c in 0..2 {
+                assert!(
+                    (out[c] - want[c]).abs() < 1e-14,
+                    "t {t}: {out:?} vs {want:?}"
+                );
+            }
+        }
+        tape.state_at(seg, seg.local(0.75), &mut cursor, &mut out);
+        assert_eq!(out, [5.0, 6.0]);
+        // Right-continuous sampling, x(T) at T, nothing outside [0, T].
+        assert!(tape.sample(0.75, &mut out));
+        assert_eq!(out, [5.0, 6.0]);
+        assert!(tape.sample(0.45, &mut out));
+        assert!((out[0] - p(0.45)[0]).abs() < 1e-14);
+        assert!(tape.sample(0.9, &mut out));
+        assert!(!tape.sample(0.1, &mut out));
+        assert!(!tape.sample(1.0, &mut out));
+    }
+}

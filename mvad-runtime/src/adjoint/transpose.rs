@@ -1,0 +1,208 @@
+//! The transposes of the forward event map: how λ and dC/dθ cross a jump backwards.
+//!
+//! ## A user event
+//! Forwards (DESIGN.md, `solve/jump.rs`), with ġ = g_x f⁻ + g_t:
+//!
+//! ```text
+//!   t'  = −(g_x S⁻ + g_θ) / ġ
+//!   S⁺  = R_x S⁻ + R_θ + (R_x f⁻ + R_t − f⁺) t'
+//!   dC += w [(ℓ⁻ − ℓ⁺) t' + φ_x (S⁺ + f⁺ t') + φ_t t' + φ_θ]
+//! ```
+//!
+//! (w the cost's cotangent). What comes after the event contributes λ⁺ᵀS⁺ (λ⁺ the adjoint just
+//! after it), so the event and everything after it contribute, with λ̃ = λ⁺ + w φ_xᵀ,
+//!
+//! ```text
+//!   λ̃ᵀS⁺ + w(φ_x f⁺ + φ_t + ℓ⁻ − ℓ⁺) t' + w φ_θ
+//!   = λ̃ᵀR_x S⁻ + λ̃ᵀR_θ + c t' + w φ_θ,
+//!   c = λ̃ᵀ(R_x f⁻ + R_t − f⁺) + w(φ_x f⁺ + φ_t + ℓ⁻ − ℓ⁺)
+//!     = (R_xᵀλ̃)·f⁻ + λ̃ᵀR_t − λ⁺·f⁺ + w(φ_t + ℓ⁻ − ℓ⁺),
+//! ```
+//!
+//! and substituting t' leaves a term linear in S⁻ and one in θ alone:
+//!
+//! ```text
+//!   λ⁻     = R_xᵀλ̃ − (c/ġ) g_xᵀ
+//!   dC/dθ += R_θᵀλ̃ − (c/ġ) g_θ + w φ_θ .
+//! ```
+//!
+//! R_xᵀλ̃, R_θᵀλ̃ and λ̃ᵀR_t are one [`crate::model::ModelAdjoint::reset_vjp`]; g_x, g_θ, φ_x,
+//! φ_θ are gradients: nothing of size n×p is formed, so the work per event is O(n + p)
+//! beyond the model's own. ġ = 0 (a tangential crossing) is the same error forward mode
+//! reports.
+//!
+//! ## A switch flip
+//! The identity reset in the same mode, bits b⁻ → b⁺ (f⁻, ℓ⁻ under b⁻; f⁺, ℓ⁺ under b⁺):
+//! S⁺ = S⁻ + (f⁻ − f⁺) t', dC += w (ℓ⁻ − ℓ⁺) t', t' = −(σ_x S⁻ + σ_θ)/σ̇, σ̇ = σ_x f⁻ + σ_t, so
+//!
+//! ```text
+//!   c = λ⁺·(f⁻ − f⁺) + w(ℓ⁻ − ℓ⁺),   λ⁻ = λ⁺ − (c/σ̇) σ_xᵀ,   dC/dθ −= (c/σ̇) σ_θ .
+//! ```
+//!
+//! Simultaneous jumps are undone in the reverse of the order they were applied in.
+
+use super::record::{Jump, JumpKind};
+use crate::error::SolveError;
+use crate::model::{HybridModel, ModelAlloc, Point};
+use nalgebra::{Const, DefaultAllocator, OVector};
+
+/// Scratch for the transposes (allocated once per sweep).
+pub(super) struct JumpWork<M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    xm: OVector<f64, M::N>,
+    xp: OVector<f64, M::N>,
+    f_minus: OVector<f64, M::N>,
+    f_plus: OVector<f64, M::N>,
+    gx: OVector<f64, M::N>,
+    gp: OVector<f64, M::P>,
+    mu: OVector<f64, M::N>,
+    vx: OVector<f64, M::N>,
+    vp: OVector<f64, M::P>,
+    cx: OVector<f64, M::N>,
+    cp: OVector<f64, M::P>,
+}
+
+impl<M: HybridModel> JumpWork<M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Buffers for `model`.
+    pub(super) fn new(model: &M) -> Self {
+        let (n, p) = (model.nstates(), model.nparams());
+        let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        let vp = || OVector::<f64, M::P>::zeros_generic(p, Const::<1>);
+        JumpWork {
+            xm: vn(),
+            xp: vn(),
+            f_minus: vn(),
+            f_plus: vn(),
+            gx: vn(),
+            gp: vp(),
+            mu: vn(),
+            vx: vn(),
+            vp: vp(),
+            cx: vn(),
+            cp: vp(),
+        }
+    }
+
+    /// After [`JumpWork::approach`] and [`JumpWork::crossing_grad`] (which returned `gt`):
+    /// the guard slope ∇g·f⁻ and whether the crossing grazes at tolerance `tau`, exactly as
+    /// the event loop judged it.
+    pub(super) fn slope_and_grazing(&self, gt: f64, tau: f64) -> (f64, bool) {
+        let grazing = crate::sens::is_grazing(&self.gx, &self.f_minus, gt, tau);
+        (self.gx.dot(&self.f_minus), grazing)
+    }
+
+    /// x⁻ as loaded by [`JumpWork::approach`].
+    pub(super) fn x_minus(&self) -> &OVector<f64, M::N> {
+        &self.xm
+    }
+
+    /// x⁺ as loaded by [`JumpWork::approach`].
+    pub(super) fn x_plus(&self) -> &OVector<f64, M::N> {
+        &self.xp
+    }
+
+    /// Loads x⁻, x⁺ and evaluates f⁻ = f_{m⁻}(t, x⁻) under b⁻ and f⁺ = f_{m⁺}(t, x⁺) under b⁺.
+    pub(super) fn approach(
+        &mut self,
+        model: &M,
+        p: &OVector<f64, M::P>,
+        jump: &Jump,
+        x_minus: &[f64],
+        x_plus: &[f64],
+    ) {
+        self.xm.as_mut_slice().copy_from_slice(x_minus);
+        self.xp.as_mut_slice().copy_from_slice(x_plus);
+        let (t, sw0, sw1) = (jump.t, &jump.sw_before, &jump.sw_after);
+        let before = Point::new(jump.mode_before, sw0, t, &self.xm, p);
+        model.rhs(before, &mut self.f_minus);
+        let after = Point::new(jump.mode_after, sw1, t, &self.xp, p);
+        model.rhs(after, &mut self.f_plus);
+    }
+
+    /// ∂g/∂t of the guard or switching function that fired, with ∇ₓ into `gx` and ∂θ into
+    /// `gp`, at (t, x⁻).
+    pub(super) fn crossing_grad(&mut self, model: &M, p: &OVector<f64, M::P>, jump: &Jump) -> f64 {
+        let (t, x) = (jump.t, &self.xm);
+        match jump.kind {
+            JumpKind::Event(k) => model.guard_grad(k, t, x, p, &mut self.gx, &mut self.gp),
+            JumpKind::Switch(j) => model.switch_grad(j, t, x, p, &mut self.gx, &mut self.gp),
+        }
+    }
+}
+
+/// Undoes one jump: λ⁺ → λ⁻ in place and its share of dC/dθ added to `grad` (see the module
+/// doc), with cost cotangent `cw`. x⁻ and x⁺ come from the tape.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn transpose_jump<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    cw: f64,
+    jump: &Jump,
+    (x_minus, x_plus): (&[f64], &[f64]),
+    lam: &mut OVector<f64, M::N>,
+    grad: &mut OVector<f64, M::P>,
+    w: &mut JumpWork<M>,
+) -> Result<(), SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let info = model.info();
+    let t = jump.t;
+    w.approach(model, p, jump, x_minus, x_plus);
+    let gt = w.crossing_grad(model, p, jump);
+    let gdot = w.gx.dot(&w.f_minus) + gt;
+    // w(ℓ⁻ − ℓ⁺): both sides of the jump, each under its own bits.
+    let mut c = 0.0;
+    if info.has_running_cost && cw != 0.0 {
+        let l_minus = model.running_cost(&jump.sw_before, t, &w.xm, p);
+        let l_plus = model.running_cost(&jump.sw_after, t, &w.xp, p);
+        c += cw * (l_minus - l_plus);
+    }
+    match jump.kind {
+        JumpKind::Event(k) => {
+            // λ̃ = λ⁺ + w φ_xᵀ, and w φ_θ into grad.
+            w.mu.copy_from(lam);
+            if info.events[k].has_cost && cw != 0.0 {
+                let phi_t = model.event_cost_grad(k, t, &w.xp, p, &mut w.cx, &mut w.cp);
+                w.mu.axpy(cw, &w.cx, 1.0);
+                grad.axpy(cw, &w.cp, 1.0);
+                c += cw * phi_t;
+            }
+            let mu_rt = model.reset_vjp(k, t, &w.xm, p, &w.mu, &mut w.vx, &mut w.vp);
+            c += w.vx.dot(&w.f_minus) + mu_rt - lam.dot(&w.f_plus);
+            lam.copy_from(&w.vx);
+            *grad += &w.vp;
+        }
+        JumpKind::Switch(_) => {
+            c += lam.dot(&w.f_minus) - lam.dot(&w.f_plus);
+        }
+    }
+    let ratio = c / gdot;
+    if !(ratio.is_finite() && gdot != 0.0) {
+        let what = match jump.kind {
+            JumpKind::Event(k) => format!(
+                "event-time sensitivity of event `{}` (tangential crossing: ∇g·f + ∂g/∂t = {gdot:e})",
+                info.events[k].name
+            ),
+            JumpKind::Switch(j) => format!(
+                "crossing-time sensitivity of switching function {j} (tangential crossing)"
+            ),
+        };
+        return Err(SolveError::NonFinite { t, what });
+    }
+    lam.axpy(-ratio, &w.gx, 1.0);
+    grad.axpy(-ratio, &w.gp, 1.0);
+    if !(lam.iter().all(|v| v.is_finite()) && grad.iter().all(|v| v.is_finite())) {
+        let what = match jump.kind {
+            JumpKind::Event(k) => format!("adjoint jump of event `{}`", info.events[k].name),
+            JumpKind::Switch(j) => format!("adjoint jump of switching function {j}"),
+        };
+        return Err(SolveError::NonFinite { t, what });
+    }
+    Ok(())
+}
