@@ -33,20 +33,7 @@ where
         let phi_t = model.info().events[k]
             .has_cost
             .then(|| model.event_cost_grad(k, t, &self.x_plus, p, &mut self.cx, &mut self.cp));
-        let s = Saltation {
-            rx: Some(&self.rx),
-            rt: Some(&self.rt),
-            f_minus: &self.f_minus,
-            f_plus: &self.f_plus,
-            gx: &self.gx,
-            rate,
-            l_minus,
-            l_plus,
-            cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
-        };
-        if let Some(ge) = self.integ.global_error_mut() {
-            ge.jump(&s, self.sens);
-        }
+        self.error_jump(true, rate, (l_minus, l_plus), phi_t);
     }
 
     /// Carries the estimate through the crossing of switching function j at t (identity
@@ -65,16 +52,29 @@ where
         } else {
             0.0
         };
+        self.error_jump(false, rate, (l_minus, l_plus), None);
+    }
+
+    /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, R_x and R_t from
+    /// them too when `reset` (else the identity), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event
+    /// cost, φ_t with φ_x in `cx`.
+    fn error_jump(
+        &mut self,
+        reset: bool,
+        rate: f64,
+        (l_minus, l_plus): (f64, f64),
+        phi_t: Option<f64>,
+    ) {
         let s = Saltation {
-            rx: None,
-            rt: None,
+            rx: reset.then_some(&self.rx),
+            rt: reset.then_some(&self.rt),
             f_minus: &self.f_minus,
             f_plus: &self.f_plus,
             gx: &self.gx,
             rate,
             l_minus,
             l_plus,
-            cost: None,
+            cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
         };
         if let Some(ge) = self.integ.global_error_mut() {
             ge.jump(&s, self.sens);
