@@ -11,6 +11,7 @@
 //! | [`stiff_relay`] | lag with τ = 1e-8 | stiffness (`--method auto`) |
 //! | [`zeno_ball`] | e = 0.5 to T = 3 | Zeno accumulation, tail of the series |
 //! | [`ceiling`] | near-grazing impact | t' ∝ 1/√(apex − c) |
+//! | [`queue`] | the seed paper's E4, a FIFO queue | `at each` table events, 10³–10⁷ customers |
 //! | [`qp_kink`] | the seed paper's E3 | a static qp, its kink at θ = 0, no states |
 //! | [`qp_cart`] | a saturating qp controller, a wall | a qp in the flow, its active-set changes as kinks |
 //!
@@ -23,6 +24,7 @@ pub mod e2_sweep;
 pub mod paper;
 pub mod qp_cart;
 pub mod qp_kink;
+pub mod queue;
 pub mod stiff_relay;
 pub mod thermostat;
 pub mod zeno_ball;

@@ -43,6 +43,8 @@ pub enum Item {
     Const(Const),
     /// `state NAME = EXPR;`
     State(State),
+    /// `table NAME = "FILE";`
+    Table(Table),
     /// `flow { der(X) = EXPR; ... }`
     Flow(Flow),
     /// `mode NAME { ... }`
@@ -68,6 +70,7 @@ impl Item {
             Item::Param(x) => x.span,
             Item::Const(x) => x.span,
             Item::State(x) => x.span,
+            Item::Table(x) => x.span,
             Item::Flow(x) => x.span,
             Item::Mode(x) => x.span,
             Item::InitialMode(x) => x.span,
@@ -109,6 +112,20 @@ pub struct State {
     pub name: Ident,
     /// The initial value (may use params and consts).
     pub init: Expr,
+    /// The whole declaration.
+    pub span: Span,
+}
+
+/// `table NAME = "FILE";` — a data table read from a CSV file (a header row of column
+/// names, then numeric rows).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    /// The table's name.
+    pub name: Ident,
+    /// The file name as written (escapes resolved), relative to the model file.
+    pub file: String,
+    /// Where the file name is written (quotes included).
+    pub file_span: Span,
     /// The whole declaration.
     pub span: Span,
 }
@@ -155,13 +172,13 @@ pub struct InitialMode {
     pub span: Span,
 }
 
-/// `event [NAME] when LHS OP RHS [-> MODE] { X = EXPR; ... }` or `...;`.
+/// `event [NAME] TRIGGER [-> MODE] { X = EXPR; ... }` or `...;`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Event {
     /// The event's name, if given (otherwise it is called `event_K`, K its global index).
     pub name: Option<Ident>,
-    /// The guard; after [`crate::check::check`] always a [`Condition::Compare`].
-    pub guard: Condition,
+    /// What fires it: a guard or a schedule of times.
+    pub trigger: Trigger,
     /// The mode switched to after the reset (`-> MODE`).
     pub target: Option<Ident>,
     /// `Some(assignments)` for a reset block `{ ... }` (possibly empty), `None` for `;`.
@@ -172,9 +189,46 @@ pub struct Event {
 }
 
 impl Event {
-    /// The guard as a comparison, or `None` if it is not one (a checker error).
+    /// The guard as a comparison, or `None` if it is not one (a checker error) or the event
+    /// is a time event.
     pub fn comparison(&self) -> Option<&Comparison> {
-        self.guard.comparison()
+        match &self.trigger {
+            Trigger::When(c) => c.comparison(),
+            _ => None,
+        }
+    }
+}
+
+/// What fires an event.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Trigger {
+    /// `when LHS OP RHS`: the guard crosses zero; after [`crate::check::check`] always a
+    /// [`Condition::Compare`].
+    When(Condition),
+    /// `at EXPR`: once, at t = EXPR (params, consts and numbers).
+    At(Expr),
+    /// `every PERIOD [from START]`: at t = START + j·PERIOD, j = 0, 1, ... (START defaults to 0).
+    Every {
+        /// The period (params, consts and numbers; positive at run time).
+        period: Expr,
+        /// The first time, if written.
+        start: Option<Expr>,
+    },
+    /// `at each EXPR`: once per row of the one table EXPR reads, at t = EXPR(row).
+    Each(Expr),
+}
+
+impl Trigger {
+    /// The span of the trigger's expressions (the guard, or the time expression).
+    pub fn span(&self) -> Span {
+        match self {
+            Trigger::When(c) => c.span(),
+            Trigger::At(e) | Trigger::Each(e) => e.span,
+            Trigger::Every { period, start } => match start {
+                Some(s) => period.span.to(s.span),
+                None => period.span,
+            },
+        }
     }
 }
 
@@ -423,11 +477,12 @@ pub enum ExprKind {
     Name(Ident),
     /// The time `t`.
     Time,
-    /// `NAME.VAR`: variable VAR of the solution of qp NAME (what NAME declares decides).
+    /// `NAME.VAR`: column VAR of table NAME at the current row, or variable VAR of the
+    /// solution of qp NAME (the checker resolves which; a name may not be both).
     Column {
-        /// The qp (NAME).
+        /// The table or qp (NAME).
         table: Ident,
-        /// The variable (VAR).
+        /// The column or variable (VAR).
         column: Ident,
     },
     /// Unary minus, `-EXPR`.
@@ -482,6 +537,14 @@ impl Model {
     pub fn states(&self) -> impl Iterator<Item = &State> {
         self.items.iter().filter_map(|i| match i {
             Item::State(s) => Some(s),
+            _ => None,
+        })
+    }
+
+    /// The `table` declarations, in source order.
+    pub fn tables(&self) -> impl Iterator<Item = &Table> {
+        self.items.iter().filter_map(|i| match i {
+            Item::Table(t) => Some(t),
             _ => None,
         })
     }

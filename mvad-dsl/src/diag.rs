@@ -71,7 +71,16 @@ pub fn rule_phrase(rule: Rule) -> &'static str {
         Rule::kw_mode | Rule::mode_block => "`mode`",
         Rule::kw_initial | Rule::initial_decl => "`initial`",
         Rule::kw_event | Rule::event_decl => "`event`",
-        Rule::kw_when => "`when`",
+        Rule::kw_when | Rule::when_trigger => "`when`",
+        Rule::kw_at | Rule::at_trigger | Rule::each_trigger => "`at`",
+        Rule::kw_each => "`each`",
+        Rule::kw_every | Rule::every_trigger => "`every`",
+        Rule::kw_from => "`from`",
+        Rule::trigger => "`when`, `at` or `every`",
+        Rule::kw_table | Rule::table_decl => "`table`",
+        Rule::string => "a file name in quotes",
+        Rule::dot => "`.`",
+        Rule::column => "a dotted name (`TABLE.COL` or `QP.VAR`)",
         Rule::kw_observe | Rule::observe_decl => "`observe`",
         Rule::kw_cost | Rule::cost_decl => "`cost`",
         Rule::kw_horizon | Rule::horizon_decl => "`horizon`",
@@ -87,8 +96,6 @@ pub fn rule_phrase(rule: Rule) -> &'static str {
         Rule::kw_subject | Rule::qp_constraints => "`subject to`",
         Rule::kw_to => "`to`",
         Rule::qp_constraint => "a constraint",
-        Rule::column => "an expression",
-        Rule::dot => "`.`",
         Rule::eq => "`==`",
         Rule::kw_if => "`if`",
         Rule::kw_then => "`then`",
@@ -188,6 +195,7 @@ pub fn from_pest(err: &pest::error::Error<Rule>, src: &str) -> Diagnostic {
                     | Rule::if_expr
                     | Rule::call
                     | Rule::paren
+                    | Rule::column
                         if operand_start =>
                     {
                         "an expression"

@@ -72,7 +72,7 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
         let node = ar.node(e);
         let dv = |id: ExprId| d[id.index()];
         let r = match node {
-            Node::Const(_) | Node::QpDeriv(..) => zero,
+            Node::Const(_) | Node::Column(_) | Node::QpDeriv(..) => zero,
             Node::QpSol(k) => match var.wrt() {
                 Some(w) => {
                     let (on_x, on_t) = ar.qp_deps(k);

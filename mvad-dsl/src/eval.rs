@@ -4,10 +4,10 @@
 //! topological order, instruction i writing register i from earlier registers. Evaluation
 //! reads `&[f64]` slices (no nalgebra) and writes into caller-provided scratch, so a call
 //! allocates nothing. Every instruction computes exactly what [`crate::ir::apply_node`]
-//! and the generated code compute, operation for operation; qp solutions and their
-//! derivatives are read from the [`QpValues`] of the run.
+//! and the generated code compute, operation for operation; qp solutions, their
+//! derivatives and table columns are read from the [`Inputs`] of the run.
 
-use crate::ir::{Cmp, ExprArena, Func, Node, Point, QpValues, Wrt};
+use crate::ir::{Cmp, ExprArena, Func, Inputs, Node, Point, Wrt};
 use crate::schedule::Kernel;
 
 /// One tape instruction; operands are register indices.
@@ -17,6 +17,7 @@ enum Op {
     Time,
     X(u32),
     P(u32),
+    Col(u32),
     Add(u32, u32),
     Mul(u32, u32),
     Neg(u32),
@@ -53,6 +54,7 @@ impl Tape {
                 Node::Time => Op::Time,
                 Node::State(i) => Op::X(i),
                 Node::Param(i) => Op::P(i),
+                Node::Column(c) => Op::Col(c),
                 Node::Add(a, b) => Op::Add(g(a), g(b)),
                 Node::Mul(a, b) => Op::Mul(g(a), g(b)),
                 Node::Neg(a) => Op::Neg(g(a)),
@@ -86,7 +88,7 @@ impl Tape {
         }
     }
 
-    /// Whether the tape reads qp solutions (then they must be passed to [`Tape::run_qp`]).
+    /// Whether the tape reads qp solutions (then they must be passed to [`Tape::run_inputs`]).
     pub fn reads_qp(&self) -> bool {
         self.reads_qp
     }
@@ -125,11 +127,18 @@ impl Tape {
     /// [`Tape::run`] with switch bits beyond the first 64: `at.sw` holds bits 0..64 and
     /// `hi` the rest (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent).
     pub fn run_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> bool {
-        self.run_qp(at, hi, &QpValues::NONE, regs)
+        self.run_inputs(at, hi, &Inputs::NONE, regs)
     }
 
-    /// [`Tape::run_with`] reading qp solutions and their derivatives from `qp`.
-    pub fn run_qp(&self, at: &Point<'_>, hi: &[u64], qp: &QpValues<'_>, regs: &mut [f64]) -> bool {
+    /// [`Tape::run_with`] reading qp solutions, their derivatives and table columns from
+    /// `inputs`.
+    pub fn run_inputs(
+        &self,
+        at: &Point<'_>,
+        hi: &[u64],
+        inputs: &Inputs<'_>,
+        regs: &mut [f64],
+    ) -> bool {
         if regs.len() < self.ops.len() {
             return false;
         }
@@ -167,8 +176,9 @@ impl Tape {
                         r(b)
                     }
                 }
-                Op::QpSol(k) => qp.leaf(&Node::QpSol(k)),
-                Op::QpDeriv(k, w) => qp.leaf(&Node::QpDeriv(k, w)),
+                Op::Col(c) => inputs.row.get(c as usize).copied().unwrap_or(f64::NAN),
+                Op::QpSol(k) => inputs.qp.leaf(&Node::QpSol(k)),
+                Op::QpDeriv(k, w) => inputs.qp.leaf(&Node::QpDeriv(k, w)),
             };
             regs[i] = v;
         }
@@ -183,19 +193,20 @@ impl Tape {
 
     /// [`Tape::eval`] with switch bits beyond the first 64 in `hi` (see [`Tape::run_with`]).
     pub fn eval_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64], out: &mut [f64]) {
-        self.eval_qp(at, hi, &QpValues::NONE, regs, out);
+        self.eval_inputs(at, hi, &Inputs::NONE, regs, out);
     }
 
-    /// [`Tape::eval_with`] reading qp solutions and their derivatives from `qp`.
-    pub fn eval_qp(
+    /// [`Tape::eval_with`] reading qp solutions, their derivatives and table columns from
+    /// `inputs`.
+    pub fn eval_inputs(
         &self,
         at: &Point<'_>,
         hi: &[u64],
-        qp: &QpValues<'_>,
+        inputs: &Inputs<'_>,
         regs: &mut [f64],
         out: &mut [f64],
     ) {
-        if !self.run_qp(at, hi, qp, regs) {
+        if !self.run_inputs(at, hi, inputs, regs) {
             out.iter_mut().take(self.len).for_each(|o| *o = f64::NAN);
             return;
         }

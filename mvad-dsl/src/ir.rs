@@ -207,6 +207,9 @@ pub enum Node {
     State(u32),
     /// Parameter θ_i.
     Param(u32),
+    /// Column c of the program's [`Program::columns`] at the current row of its table (a
+    /// datum, never differentiated; read only by `at each` events).
+    Column(u32),
     /// a + b (operands sorted by id).
     Add(ExprId, ExprId),
     /// a · b (operands sorted by id).
@@ -245,6 +248,7 @@ impl Node {
             | Node::Time
             | Node::State(_)
             | Node::Param(_)
+            | Node::Column(_)
             | Node::QpSol(_)
             | Node::QpDeriv(..) => (None, None, None),
             Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => (Some(a), None, None),
@@ -274,8 +278,8 @@ impl Node {
         }
     }
 
-    /// Whether the node is a leaf (constant, time, state, parameter, qp solution or its
-    /// derivative).
+    /// Whether the node is a leaf (constant, time, state, parameter, table column, qp
+    /// solution or its derivative).
     pub fn is_leaf(&self) -> bool {
         matches!(
             self,
@@ -283,6 +287,7 @@ impl Node {
                 | Node::Time
                 | Node::State(_)
                 | Node::Param(_)
+                | Node::Column(_)
                 | Node::QpSol(_)
                 | Node::QpDeriv(..)
         )
@@ -343,9 +348,36 @@ impl QpValues<'_> {
     }
 }
 
+/// The inputs of an evaluation beyond its [`Point`]: the qp solutions and the current row of
+/// a table (column c, [`Node::Column`]`(c)`, reads `row[c]`).
+#[derive(Clone, Copy, Debug)]
+pub struct Inputs<'a> {
+    /// The qp solutions and their derivatives.
+    pub qp: QpValues<'a>,
+    /// The current row's value of every column of [`Program::columns`] (empty outside the
+    /// methods of `at each` events).
+    pub row: &'a [f64],
+}
+
+impl Inputs<'_> {
+    /// No inputs (every qp leaf and column reads NaN).
+    pub const NONE: Inputs<'static> = Inputs {
+        qp: QpValues::NONE,
+        row: &[],
+    };
+
+    /// The value of a leaf that is an input (NaN when absent or not an input).
+    pub fn leaf(&self, node: &Node) -> f64 {
+        match *node {
+            Node::Column(c) => self.row.get(c as usize).copied().unwrap_or(f64::NAN),
+            _ => self.qp.leaf(node),
+        }
+    }
+}
+
 /// Evaluates one node given the values of its children (`v` indexed by node id).
 /// The single definition of every node's value: folding, the tape and codegen agree with it.
-/// The reference evaluator has no qp values: qp leaves are NaN here.
+/// The reference evaluator has no [`Inputs`]: qp leaves and columns are NaN here.
 pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
     let g = |id: ExprId| v[id.index()];
     match *node {
@@ -374,7 +406,7 @@ pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
                 g(b)
             }
         }
-        Node::QpSol(_) | Node::QpDeriv(..) => QpValues::NONE.leaf(node),
+        Node::Column(_) | Node::QpSol(_) | Node::QpDeriv(..) => Inputs::NONE.leaf(node),
     }
 }
 
@@ -517,7 +549,28 @@ pub struct Mode {
     pub flow: Vec<ExprId>,
 }
 
-/// One event: guard, reset, target and its event cost.
+/// When a time event fires (expressions of θ, and for `at each` of the columns of its table).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Schedule {
+    /// `at τ`: once at t = τ(θ).
+    At(ExprId),
+    /// `every period from start`: at t = start(θ) + j·period(θ), j = 0, 1, ...
+    Every {
+        /// The period.
+        period: ExprId,
+        /// The first time.
+        start: ExprId,
+    },
+    /// `at each τ`: at t = τ(θ, row j) for every row j of table `table`.
+    Each {
+        /// Index into [`Program::tables`].
+        table: usize,
+        /// τ, reading [`Node::Column`]s of that table.
+        time: ExprId,
+    },
+}
+
+/// One event: guard (or schedule), reset, target and its event cost.
 #[derive(Clone, Debug)]
 pub struct Event {
     /// Declared name or `event_K`.
@@ -528,8 +581,10 @@ pub struct Event {
     pub mode: Option<usize>,
     /// Mode switched to after the reset.
     pub target: Option<usize>,
-    /// g = LHS − RHS.
+    /// g = LHS − RHS of a state event; NaN for a time event (which has no guard).
     pub guard: ExprId,
+    /// `Some` for a time event: when it fires.
+    pub schedule: Option<Schedule>,
     /// x⁺ = R(t, x⁻, θ), one expression per state (x_i itself when not assigned).
     pub reset: Vec<ExprId>,
     /// Whether the event has a reset block.
@@ -599,6 +654,11 @@ pub struct Program {
     pub states: Vec<String>,
     /// Parameter names.
     pub params: Vec<String>,
+    /// Data tables: (name, file as written in the model).
+    pub tables: Vec<(String, String)>,
+    /// The table columns the model reads: (index into `tables`, column name); column c is
+    /// [`Node::Column`]`(c)`.
+    pub columns: Vec<(usize, String)>,
     /// Declared parameter values (consts folded).
     pub param_defaults: Vec<f64>,
     /// x₀(θ), one expression per state.

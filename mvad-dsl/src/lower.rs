@@ -31,7 +31,7 @@ use std::collections::HashMap;
 
 use crate::ast::{self, BinOp, CmpOp, CostKind, ExprKind};
 use crate::diag::Diagnostic;
-use crate::ir::{Cmp, Direction, Event, ExprArena, ExprId, Func, Mode, Node, Program};
+use crate::ir::{Cmp, Direction, Event, ExprArena, ExprId, Func, Mode, Node, Program, Schedule};
 use crate::span::Span;
 
 /// Deepest nesting of expressions, observables included, that lowering accepts.
@@ -91,6 +91,10 @@ struct Lowerer<'a> {
     consts_only: bool,
     depth: usize,
     diags: Vec<Diagnostic>,
+    /// Table name → index in declaration order.
+    table_index: HashMap<&'a str, usize>,
+    /// The columns read so far: (table, column), in order of first use.
+    columns: Vec<(usize, String)>,
     /// Per qp: the [`Node::QpSol`] index of its first variable and its variables' names.
     qp_vars: Vec<(usize, Vec<&'a str>)>,
     /// The qp whose data are being lowered (its variables are in scope).
@@ -130,6 +134,14 @@ impl<'a> Lowerer<'a> {
             consts_only: false,
             depth: 0,
             diags: Vec::new(),
+            table_index: {
+                let mut index = HashMap::new();
+                for (i, t) in model.tables().enumerate() {
+                    index.entry(t.name.name.as_str()).or_insert(i);
+                }
+                index
+            },
+            columns: Vec::new(),
             qp_vars,
             qp_scope: None,
             qp_deps: Vec::new(),
@@ -256,19 +268,8 @@ impl<'a> Lowerer<'a> {
                 .as_ref()
                 .map_or_else(|| format!("event_{k}"), |i| i.name.clone());
             event_index.insert(name.clone(), k);
-            let Some(cmp) = ev.comparison() else {
-                self.internal(
-                    ev.guard.span(),
-                    "the guard of an event must be a comparison",
-                );
+            let Some((guard, direction, schedule)) = self.trigger(ev) else {
                 continue;
-            };
-            let l = self.expr(&cmp.lhs, Ctx::Pointwise);
-            let r = self.expr(&cmp.rhs, Ctx::Pointwise);
-            let guard = self.ar.sub(l, r);
-            let direction = match cmp.op {
-                CmpOp::Le | CmpOp::Lt => Direction::Down,
-                CmpOp::Ge | CmpOp::Gt => Direction::Up,
             };
             let mode = mode.and_then(|m| mode_index.get(m.name.name.as_str()).copied());
             let target = match &ev.target {
@@ -299,6 +300,7 @@ impl<'a> Lowerer<'a> {
                 mode,
                 target,
                 guard,
+                schedule,
                 reset,
                 has_reset: ev.resets.is_some(),
                 cost: None,
@@ -366,6 +368,11 @@ impl<'a> Lowerer<'a> {
             name: model.name.name.clone(),
             states,
             params,
+            tables: model
+                .tables()
+                .map(|t| (t.name.name.clone(), t.file.clone()))
+                .collect(),
+            columns: std::mem::take(&mut self.columns),
             param_defaults,
             x0,
             modes,
@@ -378,6 +385,79 @@ impl<'a> Lowerer<'a> {
             switches: std::mem::take(&mut self.switches),
             qps,
         }
+    }
+
+    /// The guard g = LHS − RHS and direction of a state event, or a NaN guard and the
+    /// schedule of a time event; `None` (with an internal error) for a guard that is not a
+    /// comparison.
+    fn trigger(&mut self, ev: &'a ast::Event) -> Option<(ExprId, Direction, Option<Schedule>)> {
+        let time = |lw: &mut Self, e: &'a ast::Expr| {
+            let id = lw.expr(e, Ctx::Pointwise);
+            lw.no_state_or_time(id, e.span, "the time of an event");
+            id
+        };
+        let schedule = match &ev.trigger {
+            ast::Trigger::When(cond) => {
+                let Some(cmp) = cond.comparison() else {
+                    self.internal(cond.span(), "the guard of an event must be a comparison");
+                    return None;
+                };
+                let l = self.expr(&cmp.lhs, Ctx::Pointwise);
+                let r = self.expr(&cmp.rhs, Ctx::Pointwise);
+                let direction = match cmp.op {
+                    CmpOp::Le | CmpOp::Lt => Direction::Down,
+                    CmpOp::Ge | CmpOp::Gt => Direction::Up,
+                };
+                return Some((self.ar.sub(l, r), direction, None));
+            }
+            ast::Trigger::At(e) => Schedule::At(time(self, e)),
+            ast::Trigger::Every { period, start } => {
+                let period = time(self, period);
+                let start = match start {
+                    Some(s) => time(self, s),
+                    None => self.ar.constant(0.0),
+                };
+                Schedule::Every { period, start }
+            }
+            ast::Trigger::Each(e) => {
+                let mut table = None;
+                crate::check::walk_expr(e, &mut |x| {
+                    if let (None, ExprKind::Column { table: t, .. }) = (table, &x.kind) {
+                        table = Some(t);
+                    }
+                });
+                let Some(&t) = table.and_then(|t| self.table_index.get(t.name.as_str())) else {
+                    self.internal(e.span, "the times of an `at each` event read no table");
+                    return None;
+                };
+                Schedule::Each {
+                    table: t,
+                    time: time(self, e),
+                }
+            }
+        };
+        let nan = self.ar.constant(f64::NAN);
+        Some((nan, Direction::Up, Some(schedule)))
+    }
+
+    /// The node of column `column` of table `table` (numbered on first use).
+    fn column(&mut self, table: &ast::Ident, column: &ast::Ident) -> ExprId {
+        let Some(&t) = self.table_index.get(table.name.as_str()) else {
+            self.internal(table.span, format!("unknown table `{}`", table.name));
+            return self.ar.constant(f64::NAN);
+        };
+        let c = match self
+            .columns
+            .iter()
+            .position(|(ti, name)| *ti == t && *name == column.name)
+        {
+            Some(c) => c,
+            None => {
+                self.columns.push((t, column.name.clone()));
+                self.columns.len() - 1
+            }
+        };
+        self.ar.intern(Node::Column(c as u32))
     }
 
     fn no_state_or_time(&mut self, id: ExprId, span: Span, what: &str) {
@@ -443,6 +523,17 @@ impl<'a> Lowerer<'a> {
                 self.ar.time()
             }
             ExprKind::Name(id) => self.name(id, ctx),
+            ExprKind::Column { table, column }
+                if self.table_index.contains_key(table.name.as_str()) =>
+            {
+                if self.consts_only {
+                    self.internal(
+                        e.span,
+                        "a table column cannot be used in a constant expression",
+                    );
+                }
+                self.column(table, column)
+            }
             ExprKind::Column { table, column } => self.qp_solution(table, column, ctx),
             ExprKind::Neg(a) => {
                 let a = self.expr(a, ctx);

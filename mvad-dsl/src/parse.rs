@@ -135,12 +135,17 @@ fn significant(pair: Pair<'_, Rule>) -> impl Iterator<Item = Pair<'_, Rule>> {
                 | Rule::kw_initial
                 | Rule::kw_event
                 | Rule::kw_when
+                | Rule::kw_table
+                | Rule::kw_at
+                | Rule::kw_each
+                | Rule::kw_every
+                | Rule::kw_from
+                | Rule::dot
                 | Rule::kw_observe
                 | Rule::kw_qp
                 | Rule::kw_minimize
                 | Rule::kw_subject
                 | Rule::kw_to
-                | Rule::dot
                 | Rule::kw_cost
                 | Rule::kw_horizon
                 | Rule::kw_der
@@ -236,6 +241,17 @@ fn build_item(pair: Pair<'_, Rule>) -> Res<ast::Item> {
             })
         }
         Rule::event_decl => ast::Item::Event(build_event(pair)?),
+        Rule::table_decl => {
+            let mut it = significant(pair);
+            let name = ident(next(&mut it, span, "table name")?);
+            let lit = next(&mut it, span, "table file")?;
+            ast::Item::Table(ast::Table {
+                name,
+                file: unescape(lit.as_str()),
+                file_span: span_of(&lit),
+                span,
+            })
+        }
         Rule::cost_decl => ast::Item::Cost(build_cost(pair)?),
         Rule::qp_decl => ast::Item::Qp(qp::build_qp(pair)?),
         Rule::horizon_decl => {
@@ -257,6 +273,41 @@ fn build_der(pair: Pair<'_, Rule>) -> Res<ast::Der> {
     Ok(ast::Der { state, value, span })
 }
 
+/// The text of a string literal `"..."` without its quotes, `\x` read as `x`.
+fn unescape(lit: &str) -> String {
+    let inner = lit
+        .strip_prefix('"')
+        .and_then(|s| s.strip_suffix('"'))
+        .unwrap_or(lit);
+    let mut out = String::with_capacity(inner.len());
+    let mut chars = inner.chars();
+    while let Some(c) = chars.next() {
+        if c == '\\' {
+            out.extend(chars.next());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+fn build_trigger(pair: Pair<'_, Rule>) -> Res<ast::Trigger> {
+    let span = span_of(&pair);
+    let rule = pair.as_rule();
+    let mut it = significant(pair);
+    Ok(match rule {
+        Rule::when_trigger => ast::Trigger::When(build_condition(next(&mut it, span, "guard")?)?.0),
+        Rule::at_trigger => ast::Trigger::At(build_expr(next(&mut it, span, "event time")?)?),
+        Rule::each_trigger => ast::Trigger::Each(build_expr(next(&mut it, span, "event times")?)?),
+        Rule::every_trigger => {
+            let period = build_expr(next(&mut it, span, "event period")?)?;
+            let start = it.next().map(build_expr).transpose()?;
+            ast::Trigger::Every { period, start }
+        }
+        _ => return Err(internal(span, "unexpected trigger")),
+    })
+}
+
 fn build_event(pair: Pair<'_, Rule>) -> Res<ast::Event> {
     let span = span_of(&pair);
     let mut name = None;
@@ -266,7 +317,9 @@ fn build_event(pair: Pair<'_, Rule>) -> Res<ast::Event> {
     for p in significant(pair) {
         match p.as_rule() {
             Rule::ident => name = Some(ident(p)),
-            Rule::condition => guard = Some(build_condition(p)?.0),
+            Rule::when_trigger | Rule::at_trigger | Rule::each_trigger | Rule::every_trigger => {
+                guard = Some(build_trigger(p)?)
+            }
             Rule::target => {
                 let s = span_of(&p);
                 let mut it = significant(p);
@@ -292,7 +345,7 @@ fn build_event(pair: Pair<'_, Rule>) -> Res<ast::Event> {
     }
     Ok(ast::Event {
         name,
-        guard: guard.ok_or_else(|| internal(span, "event without guard"))?,
+        trigger: guard.ok_or_else(|| internal(span, "event without trigger"))?,
         target,
         resets,
         span,
@@ -546,8 +599,8 @@ fn build_primary(pair: Pair<'_, Rule>) -> Res<(Expr, usize)> {
         }
         Rule::column => {
             let mut it = significant(pair);
-            let table = ident(next(&mut it, span, "qp name")?);
-            let column = ident(next(&mut it, span, "qp variable")?);
+            let table = ident(next(&mut it, span, "table or qp name")?);
+            let column = ident(next(&mut it, span, "column or qp variable")?);
             Ok((
                 Expr {
                     kind: ExprKind::Column { table, column },

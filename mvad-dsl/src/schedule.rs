@@ -14,7 +14,7 @@
 //! method's ∂ₓ(G_x S + G_θ)·v and ∂ₜ(G_x S + G_θ)), all taken in the same arena.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, Node, Program, QpKind, Wrt};
+use crate::ir::{Direction, ExprArena, ExprId, Node, Program, QpKind, Schedule, Wrt};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -88,6 +88,9 @@ pub struct ModeKernels {
     pub dt: Kernel,
     /// Whether f depends on t explicitly.
     pub depends_on_t: bool,
+    /// Whether f is a function of θ alone (it reads no state, no t, no switch bit and no qp
+    /// solution): along a segment x and S are then linear in t.
+    pub constant: bool,
     /// Structurally non-zero entries (row, col) of ∂f/∂x.
     pub sparsity: Vec<(usize, usize)>,
     /// Fused sensitivity kernel: slots `[0, n)` f, then one slot per entry of
@@ -148,6 +151,34 @@ pub struct EventKernels {
     pub reset_jac: Kernel,
     /// φ_k and (φ_x, φ_θ, φ_t), if the cost has `sum` terms for this event.
     pub cost: Option<GradKernels>,
+    /// The times of a time event.
+    pub time: Option<TimeKernels>,
+}
+
+/// The times of a time event: τ(θ) (or τ(θ, row) for `at each`, or the start of `every`) and
+/// ∂τ/∂θ; for `every` also the period and its gradient. Time j of `every` is start + j·period.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimeKernels {
+    /// τ, or the start of `every` (1 slot).
+    pub time: Kernel,
+    /// ∂τ/∂θ (p slots).
+    pub time_grad: Kernel,
+    /// `every`: the period (1 slot) and its gradient (p slots).
+    pub period: Option<(Kernel, Kernel)>,
+}
+
+/// What kind of time event an event is (mirrors the runtime's `Trigger`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimeKind {
+    /// `at EXPR`.
+    At,
+    /// `every PERIOD from START`.
+    Every,
+    /// `at each EXPR` over the rows of table `table` (index into [`ModelKernels::tables`]).
+    Each {
+        /// The table.
+        table: usize,
+    },
 }
 
 /// Static description of an event (mirrors the runtime's `EventInfo`).
@@ -165,6 +196,37 @@ pub struct EventMeta {
     pub has_reset: bool,
     /// Whether the cost has `sum` terms for it.
     pub has_cost: bool,
+    /// `Some` for a time event.
+    pub time: Option<TimeKind>,
+    /// Whether the guard is affine in (x, t) (its derivatives in x and t are functions of θ
+    /// alone): along a segment of a constant flow it is then affine in t.
+    pub affine_guard: bool,
+}
+
+/// Whether a leaf can change along a segment at fixed θ (a state, t, a switch bit, a qp
+/// solution or its derivative, a table row).
+fn varies_in_time(nd: &Node) -> bool {
+    matches!(
+        nd,
+        Node::State(_)
+            | Node::Time
+            | Node::Switch(..)
+            | Node::QpSol(_)
+            | Node::QpDeriv(..)
+            | Node::Column(_)
+    )
+}
+
+/// Whether `e` is affine in (x, t): its derivatives in every state and in t are functions of
+/// θ alone ([`varies_in_time`] reads none of them).
+fn affine_in_state_and_time(ar: &mut ExprArena, e: ExprId, n: usize) -> bool {
+    if ar.depends_on(e, |nd| matches!(nd, Node::Switch(..) | Node::Column(_))) {
+        return false;
+    }
+    (0..n).map(Var::State).chain([Var::Time]).all(|v| {
+        let d = diff(ar, e, v);
+        !ar.depends_on(d, varies_in_time)
+    })
 }
 
 /// The kernels of one qp: its data and their derivatives, which the back ends hand to the
@@ -203,6 +265,10 @@ pub struct ModelKernels {
     pub states: Vec<String>,
     /// Parameter names.
     pub params: Vec<String>,
+    /// Data tables: (name, file as written).
+    pub tables: Vec<(String, String)>,
+    /// The columns read: (table index, column name); column c is `row[c]` in the kernels.
+    pub columns: Vec<(usize, String)>,
     /// Declared parameter values.
     pub param_defaults: Vec<f64>,
     /// Mode names.
@@ -248,6 +314,23 @@ impl ModelKernels {
     pub fn nparams(&self) -> usize {
         self.params.len()
     }
+    /// The `at each` events whose times are a bare column `TABLE.COL` (so the column itself
+    /// must not decrease, which can be checked where the table is read): (column, event).
+    pub fn bare_time_columns(&self) -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        for (e, (ev, meta)) in self.events.iter().zip(&self.event_meta).enumerate() {
+            let (Some(tk), Some(TimeKind::Each { .. })) = (&ev.time, meta.time) else {
+                continue;
+            };
+            if let [(_, id)] = tk.time.outputs[..] {
+                if let Node::Column(c) = self.arena.node(id) {
+                    out.push((c as usize, e));
+                }
+            }
+        }
+        out
+    }
+
     /// Every kernel, for the back ends' scratch sizing and tests.
     pub fn all_kernels(&self) -> Vec<&Kernel> {
         let mut v = vec![&self.x0, &self.x0_jac, &self.observe, &self.observe_jac];
@@ -264,6 +347,12 @@ impl ModelKernels {
             v.extend([&e.reset, &e.reset_jac]);
             if let Some(c) = &e.cost {
                 v.extend([&c.value, &c.grad]);
+            }
+            if let Some(tk) = &e.time {
+                v.extend([&tk.time, &tk.time_grad]);
+                if let Some((a, b)) = &tk.period {
+                    v.extend([a, b]);
+                }
             }
         }
         for s in &self.switches {
@@ -453,12 +542,14 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 || ft
                     .iter()
                     .any(|&e| ar.depends_on(e, |nd| matches!(nd, Node::QpDeriv(_, Wrt::Time))));
+            let constant = !m.flow.iter().any(|&e| ar.depends_on(e, varies_in_time));
             ModeKernels {
                 rhs: Kernel::new(&ar, &m.flow),
                 jac_x: Kernel::new(&ar, &fx),
                 jac_p: Kernel::new(&ar, &fp),
                 dt: Kernel::new(&ar, &ft),
                 depends_on_t,
+                constant,
                 sparsity,
                 sens: Kernel::new(&ar, &sens),
                 jac: Kernel::new(&ar, &jac),
@@ -467,6 +558,9 @@ pub fn kernels(program: &Program) -> ModelKernels {
         })
         .collect();
 
+    let affine_guards: Vec<bool> = (program.events.iter())
+        .map(|ev| ev.schedule.is_none() && affine_in_state_and_time(&mut ar, ev.guard, n))
+        .collect();
     let events = program
         .events
         .iter()
@@ -475,11 +569,28 @@ pub fn kernels(program: &Program) -> ModelKernels {
             let mut rj = jacobian(&mut ar, &ev.reset, Var::State, n);
             rj.extend(jacobian(&mut ar, &ev.reset, Var::Param, p));
             rj.extend(jacobian(&mut ar, &ev.reset, |_| Var::Time, 1));
+            let mut theta_kernels = |e: ExprId| {
+                let g: Vec<ExprId> = (0..p).map(|i| diff(&mut ar, e, Var::Param(i))).collect();
+                (Kernel::new(&ar, &[e]), Kernel::new(&ar, &g))
+            };
+            let time = ev.schedule.map(|s| {
+                let (first, period) = match s {
+                    Schedule::At(tau) | Schedule::Each { time: tau, .. } => (tau, None),
+                    Schedule::Every { period, start } => (start, Some(period)),
+                };
+                let (time, time_grad) = theta_kernels(first);
+                TimeKernels {
+                    time,
+                    time_grad,
+                    period: period.map(&mut theta_kernels),
+                }
+            });
             EventKernels {
                 guard,
                 reset: Kernel::new(&ar, &ev.reset),
                 reset_jac: Kernel::new(&ar, &rj),
                 cost: ev.cost.map(|c| grad_kernels(&mut ar, c, n, p, false)),
+                time,
             }
         })
         .collect();
@@ -540,19 +651,25 @@ pub fn kernels(program: &Program) -> ModelKernels {
         name: program.name.clone(),
         states: program.states.clone(),
         params: program.params.clone(),
+        tables: program.tables.clone(),
+        columns: program.columns.clone(),
         param_defaults: program.param_defaults.clone(),
         mode_names: program.modes.iter().map(|m| m.name.clone()).collect(),
         initial_mode: program.initial_mode,
-        event_meta: program
-            .events
-            .iter()
-            .map(|e| EventMeta {
+        event_meta: (program.events.iter().zip(affine_guards))
+            .map(|(e, affine_guard)| EventMeta {
                 name: e.name.clone(),
                 direction: e.direction,
                 mode: e.mode,
                 target: e.target,
                 has_reset: e.has_reset,
                 has_cost: e.cost.is_some(),
+                time: e.schedule.map(|s| match s {
+                    Schedule::At(_) => TimeKind::At,
+                    Schedule::Every { .. } => TimeKind::Every,
+                    Schedule::Each { table, .. } => TimeKind::Each { table },
+                }),
+                affine_guard,
             })
             .collect(),
         observables: program.observables.iter().map(|(n, _)| n.clone()).collect(),

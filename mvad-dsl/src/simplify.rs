@@ -252,9 +252,12 @@ impl ExprArena {
     pub fn rebuild(&mut self, n: Node) -> ExprId {
         match n {
             Node::Const(bits) => self.constant(f64::from_bits(bits)),
-            Node::Time | Node::State(_) | Node::Param(_) | Node::QpSol(_) | Node::QpDeriv(..) => {
-                self.intern(n)
-            }
+            Node::Time
+            | Node::State(_)
+            | Node::Param(_)
+            | Node::Column(_)
+            | Node::QpSol(_)
+            | Node::QpDeriv(..) => self.intern(n),
             Node::Add(a, b) => self.add(a, b),
             Node::Mul(a, b) => self.mul(a, b),
             Node::Neg(a) => self.neg(a),

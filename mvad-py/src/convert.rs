@@ -4,9 +4,12 @@
 
 use std::collections::BTreeMap;
 
+use std::path::PathBuf;
+
 use mvad::runtime::solution::Method;
 use mvad::setup::{check_mode, Request};
-use numpy::{PyArray1, PyArrayMethods};
+use mvad::table::{Table, TableSource};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -15,11 +18,20 @@ use serde_json::Value;
 use crate::errors::{setup_error, value_error};
 
 /// The keyword options every run takes.
-pub const OPTION_NAMES: [&str; 6] = ["rtol", "atol", "method", "t_end", "grazing_tol", "mode"];
+pub const OPTION_NAMES: [&str; 7] = [
+    "rtol",
+    "atol",
+    "method",
+    "t_end",
+    "grazing_tol",
+    "mode",
+    "tables",
+];
 
 /// A request from `params` (overrides by name), `wrt` and the keyword `options`
-/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`, `mode`; `None` values keep the
-/// defaults). `mode` (`forward`, `adjoint` or `auto`) says how derivatives are computed.
+/// (`rtol`, `atol`, `method`, `t_end`, `grazing_tol`, `mode`, `tables`; `None` values keep
+/// the defaults). `mode` (`forward`, `adjoint` or `auto`) says how derivatives are computed;
+/// `tables` replaces data tables (see [`tables`]).
 pub fn request(
     params: Option<BTreeMap<String, f64>>,
     wrt: Option<Vec<String>>,
@@ -44,6 +56,7 @@ pub fn request(
             "atol" => req.atol = number()?,
             "t_end" => req.t_end = number()?,
             "grazing_tol" => req.grazing_tol = number()?,
+            "tables" => req.tables = tables(&value)?,
             "mode" => req.mode = check_mode(&value.extract::<String>()?).map_err(setup_error)?,
             "method" => {
                 let name: String = value.extract()?;
@@ -64,6 +77,44 @@ pub fn request(
         }
     }
     Ok(req)
+}
+
+/// `tables={"NAME": source}` as replacement tables: a source is a file name (a `str` or an
+/// `os.PathLike`, read as CSV) or a dict of columns (`{"t": array, "s": array}`, 1-D float
+/// arrays or sequences of equal length).
+pub fn tables(value: &Bound<'_, PyAny>) -> PyResult<Vec<(String, TableSource)>> {
+    let dict = value.cast::<PyDict>().map_err(|_| {
+        PyTypeError::new_err("tables must be a dict: {\"NAME\": \"FILE.csv\" or {\"COL\": array}}")
+    })?;
+    let mut out = Vec::with_capacity(dict.len());
+    for (name, source) in dict.iter() {
+        let name: String = name.extract()?;
+        if let Ok(columns) = source.cast::<PyDict>() {
+            let mut cols = Vec::with_capacity(columns.len());
+            for (col, values) in columns.iter() {
+                let col: String = col.extract()?;
+                let data: Vec<f64> = match values.extract::<PyReadonlyArray1<'_, f64>>() {
+                    Ok(a) => a.as_array().iter().copied().collect(),
+                    Err(_) => values.extract().map_err(|_| {
+                        value_error(format!(
+                            "tables[\"{name}\"][\"{col}\"] must be a 1-D array of floats"
+                        ))
+                    })?,
+                };
+                cols.push((col, data));
+            }
+            let table = Table::from_columns(&name, cols).map_err(|e| value_error(e.to_string()))?;
+            out.push((name, TableSource::Data(table)));
+        } else {
+            let path: PathBuf = source.extract().map_err(|_| {
+                value_error(format!(
+                    "tables[\"{name}\"] must be a file name or a dict of columns"
+                ))
+            })?;
+            out.push((name, TableSource::File(path)));
+        }
+    }
+    Ok(out)
 }
 
 /// A JSON value as the Python object `json.loads` would make of it (`null` → `None`).

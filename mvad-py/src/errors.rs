@@ -2,7 +2,8 @@
 //!
 //! | failure | exception |
 //! |---|---|
-//! | a model that does not compile (`LoadError::Model`) | `mvad.ModelError` (a `ValueError`), the located `FILE:LINE:COL: error:` text |
+//! | a model that does not compile (`LoadError::Model`), a bad data table (`LoadError::Table`) | `mvad.ModelError` (a `ValueError`), the located `FILE:LINE:COL: error:` text |
+//! | a table name the model does not declare | `ValueError` |
 //! | a file that cannot be read | `FileNotFoundError` / `OSError` |
 //! | a bad request (unknown parameter, tolerance out of range, no horizon, bad sample times) | `ValueError` |
 //! | a run that started and failed (non-finite values, step-size underflow, too many events or steps) | `mvad.SolveError` (a `RuntimeError`) |
@@ -51,7 +52,8 @@ pub fn load_error(e: LoadError) -> PyErr {
             PyFileNotFoundError::new_err(e.to_string())
         }
         LoadError::Io { .. } => PyOSError::new_err(e.to_string()),
-        LoadError::Model { .. } => ModelError::new_err(e.to_string()),
+        LoadError::Model { .. } | LoadError::Table(_) => ModelError::new_err(e.to_string()),
+        LoadError::UnknownTable { .. } => PyValueError::new_err(e.to_string()),
     }
 }
 

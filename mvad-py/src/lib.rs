@@ -19,22 +19,35 @@ use pyo3::prelude::*;
 use errors::{load_error, ModelError, SolveError};
 use model::Model;
 
-/// Loads and compiles the `.hyb` file at `path`.
+/// Loads and compiles the `.hyb` file at `path` and reads the data tables it declares (files
+/// relative to the model), or takes them from `tables` (`{"NAME": "FILE.csv"}` or
+/// `{"NAME": {"COL": array}}`, as every run method also accepts).
 ///
 /// Raises `mvad.ModelError` (with the located `FILE:LINE:COL: error:` text) for an invalid
-/// model and `OSError` when the file cannot be read.
+/// model or table and `OSError` when the model file cannot be read.
 #[pyfunction]
-fn load(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
-    let loaded = py.detach(|| mvad::batch::catch(|| mvad::load::load(&path)));
-    Model::new(loaded.map_err(errors::panicked)?.map_err(load_error)?)
+#[pyo3(signature = (path, tables = None))]
+fn load(py: Python<'_>, path: PathBuf, tables: Option<Bound<'_, PyAny>>) -> PyResult<Model> {
+    let tables = match tables {
+        Some(t) if !t.is_none() => convert::tables(&t)?,
+        _ => Vec::new(),
+    };
+    let loaded = py.detach(|| mvad::batch::catch(|| mvad::load::load_with_tables(&path, &tables)));
+    let dir = path.parent().map(PathBuf::from).unwrap_or_default();
+    Model::new(loaded.map_err(errors::panicked)?.map_err(load_error)?, dir)
 }
 
-/// Compiles model text held in memory; `name` is the file name used in error messages.
+/// Compiles model text held in memory; `name` is the file name used in error messages. Its
+/// data tables are not read: pass them to the run methods (`tables=`), files relative to the
+/// working directory.
 #[pyfunction]
 #[pyo3(signature = (text, name = "<string>"))]
 fn from_source(py: Python<'_>, text: &str, name: &str) -> PyResult<Model> {
     let loaded = py.detach(|| mvad::batch::catch(|| mvad::load::load_str(name, text)));
-    Model::new(loaded.map_err(errors::panicked)?.map_err(load_error)?)
+    Model::new(
+        loaded.map_err(errors::panicked)?.map_err(load_error)?,
+        PathBuf::new(),
+    )
 }
 
 /// The native module.

@@ -11,11 +11,15 @@
 //! row order.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::sync::Mutex;
 
 use mvad::batch::{catch, par_map, Panicked};
 use mvad::interp::InterpretedModel;
-use mvad::json::{diagnostics_json, grad_json, trajectory_event_json};
+use mvad::json::{
+    diagnostics_json, grad_json, solve_listing, trajectory_event_json, MAX_JSON_EVENTS,
+};
+use mvad::load::{bind_tables, LoadError};
 use mvad::runtime::{measure, sample, solve, vjp};
 use mvad::setup::{check_mode, resolve, Request, Setup, SetupError};
 use mvad::{HybridModel, ModelInfo};
@@ -25,10 +29,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::{array, column, json_to_py, request};
-use crate::errors::{panicked, setup_error, solve_error, value_error};
+use crate::errors::{load_error, panicked, setup_error, solve_error, value_error};
 
 /// Why a call failed, carried out of the GIL-free section and raised after it.
 enum Failure {
+    Load(LoadError),
     Setup(SetupError),
     Solve(mvad::SolveError),
     Panic(Panicked),
@@ -49,6 +54,7 @@ impl From<mvad::SolveError> for Failure {
 impl From<Failure> for PyErr {
     fn from(f: Failure) -> Self {
         match f {
+            Failure::Load(e) => load_error(e),
             Failure::Setup(e) => setup_error(e),
             Failure::Solve(e) => solve_error(e),
             Failure::Panic(e) => panicked(e),
@@ -65,18 +71,22 @@ pub struct Model {
     inner: Mutex<InterpretedModel>,
     /// Names and defaults, readable without the lock.
     info: ModelInfo,
+    /// The directory the files of the model's `table` declarations are relative to.
+    dir: PathBuf,
 }
 
 impl Model {
-    /// Wraps a loaded model.
-    pub fn new(model: InterpretedModel) -> PyResult<Model> {
+    /// Wraps a loaded model whose table files are relative to `dir`.
+    pub fn new(model: InterpretedModel, dir: PathBuf) -> PyResult<Model> {
         Ok(Model {
             info: model.info().clone(),
             inner: Mutex::new(model),
+            dir,
         })
     }
 
-    /// Resolves `req` and runs `f` on the model, panics caught. Called without the GIL.
+    /// Resolves `req` and runs `f` on the model (on a copy bound to `req.tables` when the
+    /// request replaces tables), panics caught. Called without the GIL.
     fn run<R>(
         &self,
         req: &Request,
@@ -87,8 +97,17 @@ impl Model {
             Err(poisoned) => poisoned.into_inner(),
         };
         catch(|| {
-            let s = resolve(&*model, req)?;
-            f(&model, &s)
+            let rebound;
+            let m: &InterpretedModel = if req.tables.is_empty() {
+                &model
+            } else {
+                let mut copy = model.clone();
+                bind_tables(&mut copy, &self.dir, &req.tables).map_err(Failure::Load)?;
+                rebound = copy;
+                &rebound
+            };
+            let s = resolve(m, req)?;
+            f(m, &s)
         })
         .map_err(Failure::Panic)?
     }
@@ -217,22 +236,29 @@ impl Model {
     }
 
     /// The cost C, dC/dθ for `wrt` (default all) and the event table: the JSON object of
-    /// `mvad grad --json --mode MODE` as a dict (`forward`, `adjoint` or `auto`).
-    #[pyo3(signature = (params=None, wrt=None, mode="forward", **options))]
+    /// `mvad grad --json --mode MODE` as a dict (`forward`, `adjoint` or `auto`; its first 1000
+    /// events, or all with `all_events=True`, as `--all-events`; `stats.events` counts all).
+    #[pyo3(signature = (params=None, wrt=None, mode="forward", all_events=false, **options))]
     fn grad<'py>(
         &self,
         py: Python<'py>,
         params: Option<BTreeMap<String, f64>>,
         wrt: Option<Vec<String>>,
         mode: &str,
+        all_events: bool,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let mut req = request(params, wrt, options)?;
         req.mode = check_mode(mode).map_err(setup_error)?;
         let info = &self.info;
+        let limit = if all_events {
+            usize::MAX
+        } else {
+            MAX_JSON_EVENTS
+        };
         let value = py.detach(|| {
             self.run(&req, |m, s| {
-                let sol = solve(m, &s.params, &s.opts)?;
+                let sol = solve_listing(m, &s.params, &s.opts, limit)?;
                 Ok(grad_json(info, m.qps(), &sol, &s.wrt))
             })
         })?;

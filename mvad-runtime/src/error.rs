@@ -77,6 +77,14 @@ pub enum SolveError {
         /// What is wrong.
         what: String,
     },
+    /// The times of a time event are unusable at these parameters: a period that is not
+    /// positive, or `at each` times that decrease from one row to the next.
+    BadSchedule {
+        /// The event's name.
+        event: String,
+        /// What is wrong.
+        what: String,
+    },
     /// A measure was asked of a solution that was run without `Options::record`.
     NotRecorded,
     /// An observable index is out of range.
@@ -115,6 +123,7 @@ impl SolveError {
                 | SolveError::ParamCount { .. }
                 | SolveError::BadParam { .. }
                 | SolveError::BadOption { .. }
+                | SolveError::BadSchedule { .. }
                 | SolveError::NoSuchObservable { .. }
                 | SolveError::NoSuchParam { .. }
         )
@@ -167,6 +176,9 @@ impl fmt::Display for SolveError {
                 write!(f, "stopped after {count} events at t = {t} (max_events)")
             }
             SolveError::BadModel { what } => write!(f, "unusable model: {what}"),
+            SolveError::BadSchedule { event, what } => {
+                write!(f, "the times of event `{event}` are unusable: {what}")
+            }
             SolveError::NotRecorded => {
                 write!(
                     f,

@@ -14,7 +14,9 @@
 //!   triggers when the sign of σ_j strictly disagrees with the bit (v > 0); it is always armed.
 //!
 //! On each accepted step [t₀, t₁] the watched values are sampled at t₀, at `INTERIOR` interior
-//! points of the dense output and at t₁. A sign change between two samples gives a bracket.
+//! points of the dense output and at t₁ (when every one is affine in t over the step, as on an
+//! exact step of a constant flow, the interior samples are interpolated from the ends: a line
+//! has no dips). A sign change between two samples gives a bracket.
 //! Two crossings between samples (a near-grazing dip) show up as an interior local maximum of
 //! v that is close to zero relative to v's variation over the step; then v is maximised
 //! on the neighbouring samples' interval by golden-section search and, if the maximum
@@ -250,7 +252,10 @@ impl Scanner {
         };
     }
 
-    /// Scans the accepted step [t0, t1] for crossings.
+    /// Scans the accepted step [t0, t1] for crossings. With `linear` (every active watched
+    /// value is affine in t over the step: an exact step of a constant flow and affine guards)
+    /// only the values at t0 and t1 are evaluated: the interior samples are interpolated
+    /// (exact for a line), and there are no dips to search.
     ///
     /// `sample(t, is_end, active, vals)` must write the signed value v_w(t) of every active w into
     /// `vals[w]` (using the dense output inside the step and the exact end state at t1).
@@ -261,10 +266,12 @@ impl Scanner {
     ///
     /// When no crossing is found, the armed flags and start values are committed for the
     /// next step; otherwise the caller restarts every function after handling the event.
+    #[allow(clippy::too_many_arguments)]
     pub fn scan<S, E>(
         &mut self,
         t0: f64,
         t1: f64,
+        linear: bool,
         mut sample: S,
         mut eval: E,
         sim_tol: f64,
@@ -282,10 +289,21 @@ impl Scanner {
         for (v, &s) in self.vals.iter_mut().zip(&self.start_val) {
             v[0] = s;
         }
-        for (i, &t) in times.iter().enumerate().skip(1) {
+        // An affine function of t is known from its ends: its interior samples are
+        // interpolated, not evaluated.
+        let first = if linear { NSAMP - 1 } else { 1 };
+        for (i, &t) in times.iter().enumerate().skip(first) {
             sample(t, i == NSAMP - 1, &self.active, &mut self.tmp);
             for (v, &s) in self.vals.iter_mut().zip(&self.tmp) {
                 v[i] = s;
+            }
+        }
+        if linear {
+            for v in &mut self.vals {
+                let (a, b) = (v[0], v[NSAMP - 1]);
+                for (i, vi) in v.iter_mut().enumerate().take(NSAMP - 1).skip(1) {
+                    *vi = a + (b - a) * (i as f64 / (NSAMP - 1) as f64);
+                }
             }
         }
         // Brackets per function.
@@ -301,6 +319,11 @@ impl Scanner {
             }
             let strict = self.strict(w);
             let mut armed = self.armed[w];
+            // A line that fired at t₀ and starts below zero re-armed there (its minimum on
+            // the step; a curve's is searched below).
+            if linear && self.fresh[w] && v[0] < 0.0 {
+                armed = true;
+            }
             let mut armed_from = if armed { Some(0) } else { None };
             let mut bracket = None;
             for i in 1..NSAMP {
@@ -315,7 +338,7 @@ impl Scanner {
                     break;
                 }
             }
-            if bracket.is_none() {
+            if bracket.is_none() && !linear {
                 if let Some(i0) = armed_from {
                     bracket = dip(&v, &times, i0, self.rising[w], strict, |t| eval(w, t));
                 } else if self.fresh[w] {
@@ -509,6 +532,7 @@ mod tests {
         sc.scan(
             0.0,
             1.0,
+            false,
             |t, _, _, o| vals(t, o),
             |w, t| if w == 0 { f(t) } else { g(t) },
             0.0,
@@ -527,7 +551,7 @@ mod tests {
         let f = |t: f64| 1e-10 - (t - 0.95) * (t - 0.95);
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, true, f(0.0), false);
-        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
+        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1, "the dip at 0.95 ± 1e-5 is missed");
         assert_relative_eq!(sc.found[0].t, 0.95 - 1e-5, max_relative = 1e-12);
@@ -542,7 +566,7 @@ mod tests {
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, true, f(0.0), true);
         assert!(!sc.armed[0]);
-        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
+        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1);
         assert_relative_eq!(sc.found[0].t, 0.6, max_relative = 1e-14);
@@ -550,7 +574,7 @@ mod tests {
         let g = |t: f64| -t;
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, true, 0.0, true);
-        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
+        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
         assert!(sc.armed[0]);
@@ -559,7 +583,7 @@ mod tests {
         let k = |t: f64| (t - 0.5).max(0.0);
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, true, 0.0, true);
-        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
+        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
         assert!(!sc.armed[0]);
@@ -574,7 +598,7 @@ mod tests {
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, true, f(0.0), true);
         assert!(sc.fresh[0] && !sc.armed[0]);
-        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
+        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1);
         assert_relative_eq!(sc.found[0].t, 0.05, max_relative = 1e-14);
@@ -583,7 +607,7 @@ mod tests {
         let g = |t: f64| t * t;
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, true, 0.0, true);
-        sc.scan(0.0, 1.0, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
+        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
         assert!(!sc.fresh[0] && !sc.armed[0]);
@@ -591,6 +615,7 @@ mod tests {
         sc.scan(
             1.0,
             2.0,
+            false,
             |t, _, _, o| o[0] = f(t - 1.0),
             |_, t| {
                 evals += 1;
@@ -613,6 +638,7 @@ mod tests {
         sc.scan(
             0.0,
             1.0,
+            false,
             |t, _, _, o| {
                 for (w, fw) in fs.iter().enumerate() {
                     o[w] = fw(t);
@@ -624,5 +650,38 @@ mod tests {
         .unwrap();
         let ws: Vec<usize> = sc.found.iter().map(|c| c.w).collect();
         assert_eq!(ws, vec![0, 1]);
+    }
+
+    /// On a linear step only the end is evaluated; a line that fired at t₀ and starts below
+    /// zero re-arms and is found wherever in the step it crosses.
+    #[test]
+    fn a_linear_step_evaluates_only_its_end_and_finds_the_crossing() {
+        let f = |t: f64| 3.0 * t - 0.3;
+        let mut sc = Scanner::new(1, 0);
+        sc.restart_one(0, true, f(0.0), true);
+        let (mut samples, mut evals) = (0, 0);
+        sc.scan(
+            0.0,
+            1.0,
+            true,
+            |t, _, _, o| {
+                samples += 1;
+                o[0] = f(t);
+            },
+            |_, t| {
+                evals += 1;
+                f(t)
+            },
+            0.0,
+        )
+        .unwrap();
+        assert_eq!(samples, 1);
+        assert!(
+            evals <= 3,
+            "{evals} evaluations to locate the root of a line"
+        );
+        assert_eq!(sc.found.len(), 1);
+        assert_relative_eq!(sc.found[0].t, 0.1, max_relative = 1e-14);
+        assert!(f(sc.found[0].t) >= 0.0);
     }
 }

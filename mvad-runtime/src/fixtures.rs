@@ -3,6 +3,8 @@
 //! [`Ball`] is the seed paper's E1 bouncing ball: ḣ = v, v̇ = −g, event `impact` when
 //! h ≤ 0 with v⁺ = −e v⁻, C = ∫₀ᵀ h dt, T = 2. Parameters θ = (e, g, h0, v0).
 
+pub mod counting;
+
 use crate::model::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
     ModelSens, Point, Switches,
@@ -53,6 +55,7 @@ impl Ball {
                     target: None,
                     has_reset: true,
                     has_cost: false,
+                    trigger: crate::Trigger::Guard,
                 }],
                 observables: vec!["height".into(), "velocity".into()],
                 switches: 0,
@@ -131,13 +134,14 @@ impl HybridModel for Ball {
         gp.fill(0.0);
         0.0
     }
-    fn reset(&self, _k: usize, _t: f64, x: &X, p: &Th, xplus: &mut X) {
+    fn reset(&self, _k: usize, _j: usize, _t: f64, x: &X, p: &Th, xplus: &mut X) {
         xplus[0] = x[0];
         xplus[1] = -p[0] * x[1];
     }
     fn reset_jac(
         &self,
         _k: usize,
+        _j: usize,
         _t: f64,
         x: &X,
         p: &Th,
@@ -185,10 +189,19 @@ impl HybridModel for Ball {
         lp.fill(0.0);
         x[0]
     }
-    fn event_cost(&self, _k: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
+    fn event_cost(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
         0.0
     }
-    fn event_cost_grad(&self, _k: usize, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
+    fn event_cost_grad(
+        &self,
+        _k: usize,
+        _j: usize,
+        _t: f64,
+        _x: &X,
+        _p: &Th,
+        cx: &mut X,
+        cp: &mut Th,
+    ) -> f64 {
         zero_grad(cx, cp)
     }
     fn final_cost(&self, _t: f64, _x: &X, _p: &Th) -> f64 {

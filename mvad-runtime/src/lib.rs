@@ -14,7 +14,7 @@ pub mod model;
 
 pub use model::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
-    ModelSecondOrder, ModelSens, Point, Switches,
+    ModelSecondOrder, ModelSens, Point, Switches, Trigger,
 };
 
 pub mod adjoint;
@@ -37,7 +37,7 @@ pub use fd::{fd_full_gradient, fd_gradient, fd_sweep, FdPoint};
 pub use measure::{measure, Measure};
 pub use qp::{QpError, QpSolver};
 pub use sample::{sample, Samples};
-pub use sink::{EventCounts, EventSink, EventView, Stream};
+pub use sink::{EventCounts, EventSink, EventView, FirstEvents, Stream};
 pub use solution::{
     Diagnostic, DiagnosticKind, ErrorEstimate, EventRecord, GradientMode, Method, Options, Segment,
     Solution, Stats, Trajectory,

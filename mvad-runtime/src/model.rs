@@ -112,7 +112,9 @@ impl Switches {
     /// Clears every bit (keeps the words).
     pub fn clear(&mut self) {
         self.lo = 0;
-        self.hi.fill(0);
+        if !self.hi.is_empty() {
+            self.hi.fill(0);
+        }
     }
     /// Bits 64.. as words: bit j ≥ 64 is bit (j − 64) % 64 of word (j − 64) / 64.
     pub fn high_words(&self) -> &[u64] {
@@ -204,6 +206,8 @@ pub struct EventInfo {
     pub has_reset: bool,
     /// Whether the cost has `sum(EVENT, ..)` terms for this event.
     pub has_cost: bool,
+    /// What fires it: its guard, or a schedule of times.
+    pub trigger: Trigger,
 }
 
 impl EventInfo {
@@ -211,6 +215,32 @@ impl EventInfo {
     pub fn armed_in(&self, mode: usize) -> bool {
         self.mode.is_none_or(|m| m == mode)
     }
+    /// Whether this is a time event (its times come from [`HybridModel::event_time`]).
+    pub fn is_time_event(&self) -> bool {
+        self.trigger != Trigger::Guard
+    }
+}
+
+/// What fires an event, and what its occurrence index j counts.
+///
+/// A time event's times τ_kj(θ) are known in advance ([`HybridModel::event_time`]); its
+/// event-time sensitivity is t' = ∂τ/∂θ, which is what the guard formula gives for
+/// g = t − τ(θ) (g_x = 0, g_t = 1). The event loop steps exactly onto each time, with no
+/// root finding. Occurrences that pass while the event is not armed (a time event inside a
+/// mode the model is not in) are skipped. The reset and event cost methods receive j.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Trigger {
+    /// `when`: the guard crosses zero in [`EventInfo::direction`]; j counts earlier firings.
+    Guard,
+    /// `at EXPR`: once (j = 0).
+    At,
+    /// `every PERIOD from START`: j = 0, 1, ... while start + j·period ≤ T.
+    Every,
+    /// `at each EXPR`: j runs over the `rows` of a data table, in row order.
+    Each {
+        /// The number of rows.
+        rows: usize,
+    },
 }
 
 /// Static description of a model: names, defaults and which parts exist.
@@ -330,6 +360,13 @@ where
     fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut OVector<f64, Self::N>);
     /// Whether f_m depends on t explicitly.
     fn rhs_depends_on_t(&self, mode: usize) -> bool;
+    /// Whether f_m is a function of θ alone (it reads no state, no t, no switch bit, no qp):
+    /// then x(t) = x₀ + (t − t₀) f and S(t) = S₀ + (t − t₀) f_θ along a segment, and the
+    /// integrator takes the segment in one exact step. The default, `false`, is always safe.
+    fn flow_is_constant(&self, mode: usize) -> bool {
+        let _ = mode;
+        false
+    }
 
     // ---- events -----------------------------------------------------------------------
 
@@ -341,6 +378,14 @@ where
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
     ) -> f64;
+    /// Whether the guard of event k is affine in (x, t) (its derivatives in x and t are
+    /// functions of θ alone): on a segment of a constant flow
+    /// ([`HybridModel::flow_is_constant`]) it is then affine in t and the event loop samples
+    /// it only at the ends of a step. The default, `false`, is always safe.
+    fn guard_is_affine(&self, event: usize) -> bool {
+        let _ = event;
+        false
+    }
     /// ∇ₓg_k into `gx`, ∂θg_k into `gp`; returns ∂ₜg_k.
     fn guard_grad(
         &self,
@@ -351,20 +396,25 @@ where
         gx: &mut OVector<f64, Self::N>,
         gp: &mut OVector<f64, Self::P>,
     ) -> f64;
-    /// x⁺ = R_k(t, x⁻, θ) (the identity for states the reset block does not assign).
+    /// x⁺ = R_k(t, x⁻, θ) (the identity for states the reset block does not assign), at
+    /// occurrence j of event k (see [`Trigger`]: for `at each` the table row whose values
+    /// the reset reads).
+    #[allow(clippy::too_many_arguments)]
     fn reset(
         &self,
         event: usize,
+        occurrence: usize,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
         xplus: &mut OVector<f64, Self::N>,
     );
-    /// ∂R_k/∂x into `rx`, ∂R_k/∂θ into `rp`, ∂R_k/∂t into `rt`.
+    /// ∂R_k/∂x into `rx`, ∂R_k/∂θ into `rp`, ∂R_k/∂t into `rt`, at occurrence j.
     #[allow(clippy::too_many_arguments)]
     fn reset_jac(
         &self,
         event: usize,
+        occurrence: usize,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -372,6 +422,25 @@ where
         rp: &mut OMatrix<f64, Self::N, Self::P>,
         rt: &mut OVector<f64, Self::N>,
     );
+
+    /// τ_kj(θ): the time of occurrence j of time event k (for `at each`, row j of its table;
+    /// for `every`, start + j·period; for `at`, j = 0). The default, for models without time
+    /// events, is NaN.
+    fn event_time(&self, event: usize, occurrence: usize, p: &OVector<f64, Self::P>) -> f64 {
+        let _ = (event, occurrence, p);
+        f64::NAN
+    }
+    /// ∂τ_kj/∂θ into `dtau` (NaN by default, like [`HybridModel::event_time`]).
+    fn event_time_grad(
+        &self,
+        event: usize,
+        occurrence: usize,
+        p: &OVector<f64, Self::P>,
+        dtau: &mut OVector<f64, Self::P>,
+    ) {
+        let _ = (event, occurrence, p);
+        dtau.fill(f64::NAN);
+    }
 
     // ---- switching functions ----------------------------------------------------------
 
@@ -428,18 +497,22 @@ where
         lx: &mut OVector<f64, Self::N>,
         lp: &mut OVector<f64, Self::P>,
     ) -> f64;
-    /// φ_k(t, x⁺, θ): the `sum(EVENT, ..)` terms of event k, evaluated after its reset.
+    /// φ_k(t, x⁺, θ): the `sum(EVENT, ..)` terms of event k, evaluated after its reset, at
+    /// occurrence j.
     fn event_cost(
         &self,
         event: usize,
+        occurrence: usize,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
     ) -> f64;
-    /// φ_x into `cx`, φ_θ into `cp`; returns φ_t.
+    /// φ_x into `cx`, φ_θ into `cp`; returns φ_t (at occurrence j).
+    #[allow(clippy::too_many_arguments)]
     fn event_cost_grad(
         &self,
         event: usize,
+        occurrence: usize,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -554,7 +627,8 @@ where
         fp.tr_mul_to(lambda, vp);
     }
 
-    /// μᵀR_x into `vx` (n) and μᵀR_θ into `vp` (p) for event k's reset x⁺ = R_k(t, x, θ);
+    /// μᵀR_x into `vx` (n) and μᵀR_θ into `vp` (p) for event k's reset x⁺ = R_k(t, x, θ) at
+    /// occurrence j;
     /// returns μᵀ∂R_k/∂t: vx_j = Σᵢ μᵢ ∂Rᵢ/∂x_j, vp_k = Σᵢ μᵢ ∂Rᵢ/∂θ_k. Both outputs are
     /// overwritten. The transpose of the reset's linearisation, for the adjoint's jump at an
     /// event. The default forms ∂R/∂x, ∂R/∂θ and ∂R/∂t densely (it allocates them).
@@ -562,6 +636,7 @@ where
     fn reset_vjp(
         &self,
         event: usize,
+        occurrence: usize,
         t: f64,
         x: &OVector<f64, Self::N>,
         p: &OVector<f64, Self::P>,
@@ -576,7 +651,7 @@ where
         let mut rx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
         let mut rp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
         let mut rt = OVector::<f64, Self::N>::zeros_generic(n, nalgebra::Const::<1>);
-        self.reset_jac(event, t, x, p, &mut rx, &mut rp, &mut rt);
+        self.reset_jac(event, occurrence, t, x, p, &mut rx, &mut rp, &mut rt);
         rx.tr_mul_to(mu, vx);
         rp.tr_mul_to(mu, vp);
         mu.dot(&rt)

@@ -24,8 +24,36 @@
 //!
 //! All functions write into caller-provided buffers and allocate nothing.
 
-use crate::model::ModelAlloc;
+use crate::model::{HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+
+/// The gradient of what event k crosses at its occurrence j, at (t, x): ∇ₓg into `gx`, ∂θg
+/// into `gp`, and ∂g/∂t returned. For a state event g is its guard; for a time event it is
+/// g = t − τ_kj(θ), so ∇ₓg = 0, ∂θg = −∂τ_kj/∂θ and ∂g/∂t = 1, and the formulas below give
+/// t' = ∂τ/∂θ unchanged. The forward jump and the adjoint's transpose both take it from here.
+#[allow(clippy::too_many_arguments)]
+pub fn event_guard_grad<M: HybridModel>(
+    model: &M,
+    k: usize,
+    j: usize,
+    t: f64,
+    x: &OVector<f64, M::N>,
+    p: &OVector<f64, M::P>,
+    gx: &mut OVector<f64, M::N>,
+    gp: &mut OVector<f64, M::P>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    if model.info().events[k].is_time_event() {
+        gx.fill(0.0);
+        model.event_time_grad(k, j, p, gp);
+        gp.neg_mut();
+        1.0
+    } else {
+        model.guard_grad(k, t, x, p, gx, gp)
+    }
+}
 
 /// Event-time sensitivity: writes t' = −(g_x S⁻ + g_θ)/(g_x f⁻ + g_t) into `dt` (one entry per
 /// parameter) and returns the pair (g_x f⁻, g_x f⁻ + g_t): the guard slope along the flow and

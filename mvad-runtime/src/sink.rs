@@ -4,6 +4,7 @@
 //! - `()` keeps nothing: a run that wants only C and dC/dθ allocates nothing per event
 //!   (the count is still in [`crate::Stats::events`]).
 //! - [`EventCounts`] counts the firings of each declared event.
+//! - [`FirstEvents`] keeps the table of the first N events only.
 //! - `Vec<EventRecord>` keeps the full table, with the jumps and atoms of the measure;
 //!   [`crate::solve::solve`] uses it and returns it as [`crate::Solution::events`].
 //! - [`Stream`] calls a closure per event: a streaming reduction (a running sum of event
@@ -69,18 +70,59 @@ impl EventView<'_> {
 pub trait EventSink {
     /// Called once per user event, after its reset and sensitivity jump are known.
     fn event(&mut self, ev: &EventView<'_>);
+    /// Whether the sink looks at the next event at all: when it does not, the loop neither
+    /// builds the view (the observables on both sides) nor calls [`EventSink::event`].
+    fn wants_events(&self) -> bool {
+        true
+    }
 }
 
 /// Keeps nothing.
 impl EventSink for () {
     #[inline]
     fn event(&mut self, _ev: &EventView<'_>) {}
+    #[inline]
+    fn wants_events(&self) -> bool {
+        false
+    }
 }
 
 /// Keeps the full event table.
 impl EventSink for Vec<EventRecord> {
     fn event(&mut self, ev: &EventView<'_>) {
         self.push(ev.to_record());
+    }
+}
+
+/// Keeps the table of the first `limit` events only (a large run's JSON lists the first
+/// 1000); the count of all of them is in [`crate::Stats::events`]. Allocates nothing once
+/// the limit is reached.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FirstEvents {
+    /// How many records to keep.
+    pub limit: usize,
+    /// The records of the first `limit` events.
+    pub records: Vec<EventRecord>,
+}
+
+impl FirstEvents {
+    /// Keeps at most `limit` records.
+    pub fn new(limit: usize) -> Self {
+        FirstEvents {
+            limit,
+            records: Vec::new(),
+        }
+    }
+}
+
+impl EventSink for FirstEvents {
+    fn event(&mut self, ev: &EventView<'_>) {
+        if self.records.len() < self.limit {
+            self.records.push(ev.to_record());
+        }
+    }
+    fn wants_events(&self) -> bool {
+        self.records.len() < self.limit
     }
 }
 
@@ -121,5 +163,8 @@ impl<F: FnMut(&EventView<'_>)> EventSink for Stream<F> {
 impl<S: EventSink + ?Sized> EventSink for &mut S {
     fn event(&mut self, ev: &EventView<'_>) {
         (**self).event(ev)
+    }
+    fn wants_events(&self) -> bool {
+        (**self).wants_events()
     }
 }

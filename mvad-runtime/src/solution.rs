@@ -106,12 +106,14 @@ pub struct Options {
     pub t_end: Option<f64>,
     /// τ of the grazing test |g_x f⁻| < τ |g_x| |f⁻|.
     pub grazing_tol: f64,
-    /// The run stops with a `max_events` diagnostic after this many events.
+    /// The run stops with a `max_events` diagnostic after this many events (events of an `at
+    /// each` table, and one state event or switch crossing per such event, not counted).
     pub max_events: usize,
     /// The run stops with a `max_steps` error after this many step attempts (accepted and
     /// rejected, over the whole run): an explicit method on a stiff model would otherwise
     /// take ~10⁸ steps. The default, 10⁶, is ~700× the most any example model needs at
-    /// rtol 1e-12 (`stiff_relay.hyb` under `auto`: ~1,500 attempts).
+    /// rtol 1e-12 (`stiff_relay.hyb` under `auto`: ~1,500 attempts). Each event of an `at each`
+    /// table adds 100 attempts, so a run over a long table is not cut short.
     pub max_steps: usize,
     /// Put the sensitivities (and cost quadratures) under error control too, column j
     /// weighted by |θ_j| (on by default: a step size chosen for x alone can leave S wrong

@@ -3,48 +3,16 @@
 //! truncation allocate nothing at all (counted with a global allocator wrapper, per thread
 //! so that parallel tests do not interfere).
 
+use mvad_runtime::fixtures::counting::{allocations, Counting};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::integrate::{AugState, Integrator};
 use mvad_runtime::solution::{Method, Options};
 use mvad_runtime::solve::solve;
 use mvad_runtime::HybridModel;
 use nalgebra::Const;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn bump() {
-    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-}
-
-// SAFETY: forwards to the system allocator; the counter is a const-initialised thread-local
-// `Cell` (touching it never allocates).
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        bump();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
-
-/// Allocations (and reallocations) made by this thread so far.
-fn allocations() -> usize {
-    ALLOCATIONS.with(|c| c.get())
-}
+static GLOBAL: Counting = Counting;
 
 /// Options with the method and tolerances given.
 fn opts(method: Method, rtol: f64, atol: f64) -> Options {

@@ -185,6 +185,28 @@ fn one_sided_fd_error(
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The KKT matrix [[H, A_Bᵀ], [A_B, 0]] of `data` on the constraints `rows` (B), the
+/// matrix whose inverse maps the data's perturbations to (u, μ_B): its condition number
+/// bounds how accurately any solver, however backward stable, can return them.
+fn kkt_matrix(data: &QpData, rows: &[usize]) -> DMatrix<f64> {
+    let n = data.c.len();
+    let k = rows.len();
+    let mut kkt = DMatrix::zeros(n + k, n + k);
+    kkt.view_mut((0, 0), (n, n)).copy_from(&data.h);
+    for (a, &i) in rows.iter().enumerate() {
+        kkt.view_mut((n + a, 0), (1, n)).copy_from(&data.a.row(i));
+        kkt.view_mut((0, n + a), (n, 1))
+            .tr_copy_from(&data.a.row(i));
+    }
+    kkt
+}
+
+/// The 2-norm condition number σ_max/σ_min of a matrix (nalgebra's SVD).
+fn condition_number(m: &DMatrix<f64>) -> f64 {
+    let sv = m.singular_values();
+    sv.max() / sv.min()
+}
+
 /// E3: min ½u² − θu s.t. u ≥ 0 (written −u ≤ 0).
 fn e3(theta: f64) -> QpData {
     QpData {
@@ -244,7 +266,11 @@ fn e3_multiplier_and_its_derivative() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(64))]
+    // (random_qps_kkt_and_fd rejects about one case in ten, near kinks: room for that.)
+    #![proptest_config(ProptestConfig {
+        max_global_rejects: 1 << 16,
+        ..ProptestConfig::with_cases(64)
+    })]
 
     /// Known solutions, strict complementarity: u*, μ and the statuses are recovered, the
     /// KKT residual is at rounding, and the derivative along a random direction matches
@@ -261,7 +287,15 @@ proptest! {
         let mut s = solved(&c.kinds, &c.data);
         prop_assert!(s.kkt_residual(&c.data).max() <= 1e-12, "{:?}", s.kkt_residual(&c.data));
         prop_assert!((s.u() - &c.u).amax() <= 1e-12);
-        prop_assert!((DVector::from_column_slice(s.multipliers()) - &c.mult).amax() <= 1e-11);
+        // μ solves the KKT system on the active set, whose inverse can reach 1/σ_min(A_B)²:
+        // a backward-stable solve (KKT residual at rounding, checked above) is within
+        // ε·κ·‖μ‖ of the constructed μ, κ the KKT matrix's condition number.
+        let active: Vec<usize> =
+            (0..c.kinds.len()).filter(|&i| c.status[i] == ConstraintStatus::Active).collect();
+        let kappa = condition_number(&kkt_matrix(&c.data, &active));
+        let mult_tol = 1e-11_f64.max(1e-15 * kappa * (1.0 + c.mult.amax()));
+        let mult_err = (DVector::from_column_slice(s.multipliers()) - &c.mult).amax();
+        prop_assert!(mult_err <= mult_tol, "multipliers off by {mult_err:e}, κ {kappa:e}");
         prop_assert_eq!(s.status(), &c.status[..]);
         prop_assert!(!s.is_kink());
         let d = rng.direction(n, c.kinds.len());
@@ -291,7 +325,18 @@ proptest! {
         }
         let data = QpData { h: rng.spd(n), c: rng.vector(n) * 3.0, a, b };
         let mut s = solved(&kinds, &data);
-        prop_assert!(s.kkt_residual(&data).max() <= 1e-12, "{:?}", s.kkt_residual(&data));
+        // Each residual at rounding of the terms it sums: stationarity against |H||u|, |c|
+        // and |A|ᵀ|μ|; feasibility against |A||u| and |b|; complementarity μᵢ·slackᵢ against
+        // the multipliers' magnitude times that (μ reaches tens on nearly dependent rows).
+        let r = s.kkt_residual(&data);
+        let mult = DVector::from_column_slice(s.multipliers());
+        let u = s.u();
+        let force = 1.0 + (data.h.abs() * u.abs()).amax() + data.c.amax()
+            + (data.a.transpose().abs() * mult.abs()).amax();
+        let size = 1.0 + (data.a.abs() * u.abs()).amax() + data.b.amax();
+        prop_assert!(r.stationarity <= 1e-12 * force, "{r:?}");
+        prop_assert!(r.primal.max(r.dual) <= 1e-12 * size, "{r:?}");
+        prop_assert!(r.complementarity <= 1e-12 * size * (1.0 + mult.amax()), "{r:?}");
         prop_assume!(!s.is_kink());
         let d = rng.direction(n, m);
         let (du, _) = derivative(&mut s, &d, Side::Right);
@@ -490,7 +535,11 @@ fn derivative_is_homogeneous_in_the_direction() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(64))]
+    // (about one case in twenty is beyond central differences and skipped: room for that.)
+    #![proptest_config(ProptestConfig {
+        max_global_rejects: 1 << 16,
+        ..ProptestConfig::with_cases(64)
+    })]
 
     /// A frozen active set (any independent subset of the inequalities, held as equalities,
     /// the rest dropped): stationarity and the held constraints at rounding, statuses as
@@ -527,12 +576,25 @@ proptest! {
         let scale = 1.0 + (c.data.h.abs() * u.abs()).amax() + c.data.c.amax()
             + (c.data.a.transpose().abs() * mult.abs()).amax();
         prop_assert!(stationarity.amax() <= 1e-12 * scale, "{:e}", stationarity.amax() / scale);
+        // The held constraints' rows, each scaled to unit length: their condition number κ
+        // bounds how well any solver can make them hold (a residual of about κ·ε relative).
+        let rows: Vec<_> = (0..m)
+            .filter(|&i| held[i])
+            .map(|i| c.data.a.row(i) / c.data.a.row(i).norm())
+            .collect();
+        let sv = DMatrix::from_rows(&rows).singular_values();
+        let kappa = sv.max() / sv.min();
+        let held_tol = 1e-12_f64.max(1e-14 * kappa);
         for i in 0..m {
             let slack = c.data.a.row(i).tr_dot(&u) - c.data.b[i];
             let size = 1.0 + c.data.a.row(i).abs().tr_dot(&u.abs()) + c.data.b[i].abs();
             prop_assert!((s.slacks()[i] - slack).abs() <= 1e-12 * size);
             if held[i] {
-                prop_assert!(slack.abs() <= 1e-12 * size);
+                prop_assert!(
+                    slack.abs() <= held_tol * size,
+                    "held {i}: slack {:e} of its size, κ {kappa:e}",
+                    slack.abs() / size
+                );
                 prop_assert_eq!(s.status()[i], ConstraintStatus::Active);
             } else {
                 prop_assert_eq!(mult[i], 0.0);
@@ -543,6 +605,32 @@ proptest! {
         let (du, _) = derivative(&mut s, &d, Side::Right);
         // (and a piece that moves by 1e4 per unit of data is beyond central differences)
         prop_assume!(du.amax() < 1e3);
+        // When central differences can check the derivative at all: the piece u(h) is
+        // rational in h, with poles where K + h·dK is singular (K the frozen set's KKT
+        // matrix, dK the direction's), h = −1/λ for the eigenvalues λ of K⁻¹dK; its Taylor
+        // series at 0 converges within r = 1/ρ(K⁻¹dK), so the extrapolated difference at
+        // step h errs by about (h/r)⁴ (relative), and the solves' own error, ε·κ(K) times
+        // the size of (u, μ), divided by h, adds rounding. Where no step of the test brings
+        // that prediction an order below the tolerance (nearly dependent held rows put a
+        // pole near 0 or make κ huge) the check is meaningless and the case is skipped.
+        let held_rows: Vec<usize> = (0..m).filter(|&i| held[i]).collect();
+        let kkt = kkt_matrix(&c.data, &held_rows);
+        let spectral_radius = kkt
+            .clone()
+            .lu()
+            .solve(&kkt_matrix(&d, &held_rows))
+            .expect("the frozen KKT matrix is invertible")
+            .complex_eigenvalues()
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max);
+        let radius = 1.0 / spectral_radius;
+        let solve_err = f64::EPSILON * condition_number(&kkt) * (1.0 + u.amax().max(mult.amax()));
+        let predicted = [1e-2, 1e-3, 1e-4, 1e-5]
+            .iter()
+            .map(|&h: &f64| (h / radius).powi(4) + solve_err / (h * (1.0 + du.amax())))
+            .fold(f64::INFINITY, f64::min);
+        prop_assume!(predicted <= 1e-9);
         let at = |h: f64| frozen(&shifted(&c.data, &d, h)).expect("solves").u().clone();
         let central = |h: f64| (at(h) - at(-h)) / (2.0 * h);
         let errs: Vec<f64> = [1e-2, 1e-3, 1e-4, 1e-5]
@@ -550,6 +638,6 @@ proptest! {
             .map(|&h| ((central(h / 2.0) * 4.0 - central(h)) / 3.0 - &du).amax() / (1.0 + du.amax()))
             .collect();
         let err = errs.iter().copied().fold(f64::INFINITY, f64::min);
-        prop_assert!(err <= 1e-8, "central FD errors {errs:?}, |du| {}", du.amax());
+        prop_assert!(err <= 1e-8, "central FD errors {errs:?}, |du| {}, radius {radius:e}, predicted {predicted:e}", du.amax());
     }
 }

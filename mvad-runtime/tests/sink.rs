@@ -1,38 +1,11 @@
 //! Event sinks: every sink sees the same events and leaves C and dC/dθ unchanged; the
 //! table sink is what `solve` returns; with `()` a run allocates nothing per event.
 
+use mvad_runtime::fixtures::counting::{allocations, Counting};
 use mvad_runtime::fixtures::Ball;
 use mvad_runtime::sink::{EventCounts, EventView, Stream};
 use mvad_runtime::solution::{EventRecord, Options};
 use mvad_runtime::solve::{solve, solve_with};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-/// Counts the allocations of the current thread only: the test runner's own threads
-/// allocate concurrently (reporting a finished test) and must not count.
-struct Counting;
-
-thread_local! {
-    static ALLOCS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn allocations() -> usize {
-    ALLOCS.with(Cell::get)
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;

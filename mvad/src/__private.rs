@@ -2,13 +2,14 @@
 //! to `::mvad::__private::…` only, so users need no direct dependency on nalgebra or the
 //! runtime crate.
 
+pub use crate::table::{bind_columns, Table, TableError, TableNeeds};
 pub use mvad_dsl::ir::sign;
 pub use mvad_runtime::qp::{
     ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side,
 };
 pub use mvad_runtime::{
     Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
-    ModelSens, Point, Switches,
+    ModelSens, Point, Switches, Trigger,
 };
 pub use nalgebra::{Const, OMatrix, OVector};
 

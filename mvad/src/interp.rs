@@ -17,15 +17,17 @@ use std::cell::RefCell;
 
 use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
-use mvad_dsl::ir::{self, Point, QpValues};
-use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
+use mvad_dsl::ir::{self, Inputs, Point, QpValues};
+use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
 use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
-use mvad_runtime::{EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Switches};
+use mvad_runtime::{EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Switches, Trigger};
 use nalgebra::{DMatrix, DVector, Dyn};
 
 use products::SecondTapes;
+use tables::{Tables, TimeTapes};
 
 mod products;
+mod tables;
 
 /// A value tape and a gradient tape (slots: ∂/∂x, ∂/∂θ, then ∂/∂t or the value).
 #[derive(Clone, Debug)]
@@ -46,14 +48,18 @@ struct ModeTapes {
     second: SecondTapes,
     sparsity: Vec<(usize, usize)>,
     depends_on_t: bool,
+    constant: bool,
 }
 
 #[derive(Clone, Debug)]
 struct EventTapes {
     guard: GradTapes,
+    affine_guard: bool,
     reset: Tape,
     reset_jac: Tape,
     cost: Option<GradTapes>,
+    /// A time event's τ (or start) and ∂τ/∂θ, and for `every` the period and its gradient.
+    time: Option<TimeTapes>,
 }
 
 #[derive(Clone, Debug)]
@@ -81,6 +87,7 @@ pub struct InterpretedModel {
     running_cost: Option<GradTapes>,
     final_cost: Option<GradTapes>,
     running_cost_second: Option<SecondTapes>,
+    tables: Tables,
     scratch: RefCell<Scratch>,
     /// Per qp: its data tape and their Jacobian's.
     qp_tapes: Vec<(Tape, Tape)>,
@@ -125,6 +132,12 @@ impl InterpretedModel {
                     target: e.target,
                     has_reset: e.has_reset,
                     has_cost: e.has_cost,
+                    trigger: match e.time {
+                        None => Trigger::Guard,
+                        Some(TimeKind::At) => Trigger::At,
+                        Some(TimeKind::Every) => Trigger::Every,
+                        Some(TimeKind::Each { .. }) => Trigger::Each { rows: 0 },
+                    },
                 })
                 .collect(),
             observables: k.observables.clone(),
@@ -194,16 +207,20 @@ impl InterpretedModel {
                     second: second(&m.second),
                     sparsity: m.sparsity.clone(),
                     depends_on_t: m.depends_on_t,
+                    constant: m.constant,
                 })
                 .collect(),
-            events: k
-                .events
-                .iter()
-                .map(|e| EventTapes {
+            events: (k.events.iter().zip(&k.event_meta))
+                .map(|(e, meta)| EventTapes {
                     guard: grad(&e.guard),
+                    affine_guard: meta.affine_guard,
                     reset: tape(&e.reset),
                     reset_jac: tape(&e.reset_jac),
                     cost: e.cost.as_ref().map(grad),
+                    time: e.time.as_ref().map(|tk| {
+                        let period = tk.period.as_ref().map(|(a, b)| (tape(a), tape(b)));
+                        (tape(&tk.time), tape(&tk.time_grad), period)
+                    }),
                 })
                 .collect(),
             switches: k.switches.iter().map(grad).collect(),
@@ -212,6 +229,7 @@ impl InterpretedModel {
             running_cost: k.running_cost.as_ref().map(grad),
             final_cost: k.final_cost.as_ref().map(grad),
             running_cost_second: k.running_cost_second.as_ref().map(second),
+            tables: Tables::new(&k),
             scratch: RefCell::new(Scratch {
                 regs: vec![0.0; nregs],
                 out: vec![0.0; nout],
@@ -255,20 +273,27 @@ impl InterpretedModel {
         }
     }
 
-    /// Runs `tape` into `regs`, first solving the qps it reads.
+    /// Runs `tape` into `regs` with the row of `at`, first solving the qps it reads.
     fn run(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64]) -> bool {
         if !tape.reads_qp() {
-            return tape.run_with(&at.pt, at.hi, regs);
+            let inputs = Inputs {
+                qp: QpValues::NONE,
+                row: at.row,
+            };
+            return tape.run_inputs(&at.pt, at.hi, &inputs, regs);
         }
         self.evaluate_qps(at, tape.reads_qp_derivs());
         let bank = self.qp_bank.borrow();
-        let qp = QpValues {
-            u: bank.u(),
-            du: bank.du(),
-            n: self.n,
-            p: self.p,
+        let inputs = Inputs {
+            qp: QpValues {
+                u: bank.u(),
+                du: bank.du(),
+                n: self.n,
+                p: self.p,
+            },
+            row: at.row,
         };
-        tape.run_qp(&at.pt, at.hi, &qp, regs)
+        tape.run_inputs(&at.pt, at.hi, &inputs, regs)
     }
 
     /// Runs `tape` and writes its dense output (zeros included) into `out`; NaN on failure.
@@ -357,11 +382,13 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
 }
 
 /// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest;
-/// `frozen` is the whole switch set at a flow's point (qps are then solved on it).
+/// `frozen` is the whole switch set at a flow's point (qps are then solved on it); `row` the
+/// current row's column values (event methods of `at each` events).
 struct At<'a> {
     pt: Point<'a>,
     hi: &'a [u64],
     frozen: Option<&'a Switches>,
+    row: &'a [f64],
 }
 
 /// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
@@ -375,6 +402,7 @@ fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
         },
         hi: sw.high_words(),
         frozen: Some(sw),
+        row: &[],
     }
 }
 
@@ -389,6 +417,15 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
         },
         hi: &[],
         frozen: None,
+        row: &[],
+    }
+}
+
+/// The point (t, x, θ) at a table row, for the reset and event cost of an event.
+fn pt_row<'a>(t: f64, x: &'a X, p: &'a X, row: &'a [f64]) -> At<'a> {
+    At {
+        row,
+        ..pt0(t, x, p)
     }
 }
 
@@ -403,6 +440,7 @@ fn pt_theta(p: &X) -> At<'_> {
         },
         hi: &[],
         frozen: None,
+        row: &[],
     }
 }
 
@@ -474,12 +512,18 @@ impl HybridModel for InterpretedModel {
     fn rhs_depends_on_t(&self, mode: usize) -> bool {
         self.mode(mode).is_some_and(|m| m.depends_on_t)
     }
+    fn flow_is_constant(&self, mode: usize) -> bool {
+        self.mode(mode).is_some_and(|m| m.constant)
+    }
 
     fn guard(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
         match self.events.get(event) {
             Some(e) => self.scalar(&e.guard.value, &pt0(t, x, p)),
             None => f64::NAN,
         }
+    }
+    fn guard_is_affine(&self, event: usize) -> bool {
+        self.events.get(event).is_some_and(|e| e.affine_guard)
     }
     fn guard_grad(&self, event: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
         match self.events.get(event) {
@@ -491,13 +535,25 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn reset(&self, event: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
+    fn reset(&self, event: usize, j: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
+        let row = self.tables.row(event, j);
         match self.events.get(event) {
-            Some(e) => self.vec_out(&e.reset, &pt0(t, x, p), xplus),
+            Some(e) => self.vec_out(&e.reset, &pt_row(t, x, p, &row), xplus),
             None => xplus.fill(f64::NAN),
         }
     }
-    fn reset_jac(&self, event: usize, t: f64, x: &X, p: &X, rx: &mut M, rp: &mut M, rt: &mut X) {
+    #[allow(clippy::too_many_arguments)]
+    fn reset_jac(
+        &self,
+        event: usize,
+        j: usize,
+        t: f64,
+        x: &X,
+        p: &X,
+        rx: &mut M,
+        rp: &mut M,
+        rt: &mut X,
+    ) {
         let Some(e) = self.events.get(event) else {
             rx.fill(f64::NAN);
             rp.fill(f64::NAN);
@@ -506,7 +562,8 @@ impl HybridModel for InterpretedModel {
         };
         let (n, np) = (self.n, self.p);
         let tape = &e.reset_jac;
-        self.with(tape, &pt0(t, x, p), |ok, regs, out| {
+        let row = self.tables.row(event, j);
+        self.with(tape, &pt_row(t, x, p, &row), |ok, regs, out| {
             Self::mat_out(tape, ok, regs, rx, n, 0);
             Self::mat_out(tape, ok, regs, rp, np, n * n);
             out[..n].fill(if ok { 0.0 } else { f64::NAN });
@@ -519,6 +576,13 @@ impl HybridModel for InterpretedModel {
             }
             copy_into(rt.as_mut_slice(), &out[..n]);
         });
+    }
+
+    fn event_time(&self, event: usize, j: usize, p: &X) -> f64 {
+        self.time_of(event, j, p)
+    }
+    fn event_time_grad(&self, event: usize, j: usize, p: &X, dtau: &mut X) {
+        self.time_grad_of(event, j, p, dtau);
     }
 
     fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
@@ -608,15 +672,27 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn event_cost(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
+    fn event_cost(&self, event: usize, j: usize, t: f64, x: &X, p: &X) -> f64 {
+        let row = self.tables.row(event, j);
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.scalar(&c.value, &pt0(t, x, p)),
+            Some(c) => self.scalar(&c.value, &pt_row(t, x, p, &row)),
             None => 0.0,
         }
     }
-    fn event_cost_grad(&self, event: usize, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
+    #[allow(clippy::too_many_arguments)]
+    fn event_cost_grad(
+        &self,
+        event: usize,
+        j: usize,
+        t: f64,
+        x: &X,
+        p: &X,
+        cx: &mut X,
+        cp: &mut X,
+    ) -> f64 {
+        let row = self.tables.row(event, j);
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.grad(c, &pt0(t, x, p), cx, cp),
+            Some(c) => self.grad(c, &pt_row(t, x, p, &row), cx, cp),
             None => {
                 cx.fill(0.0);
                 cp.fill(0.0);

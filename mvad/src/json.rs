@@ -3,9 +3,32 @@
 //! Non-finite numbers become `null` (JSON has no NaN or ∞).
 
 use mvad_runtime::qp::{QpLayerInfo, QpState};
-use mvad_runtime::solution::{Diagnostic, EventRecord, Solution, Stats};
-use mvad_runtime::ModelInfo;
+use mvad_runtime::solution::{Diagnostic, EventRecord, Options, Solution, Stats};
+use mvad_runtime::solve::solve_with;
+use mvad_runtime::{FirstEvents, HybridModel, ModelAlloc, ModelInfo, SolveError};
+use nalgebra::{DefaultAllocator, OVector};
 use serde_json::{Map, Value};
+
+/// The most events a JSON object lists unless every one is asked for (`--all-events`,
+/// `all_events=True`); `stats.events` always counts all of them.
+pub const MAX_JSON_EVENTS: usize = 1000;
+
+/// Solves keeping the records of the first `limit` events only (a long run streams the
+/// rest: no table of them is built), as [`grad_json`] lists them.
+pub fn solve_listing<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    opts: &Options,
+    limit: usize,
+) -> Result<Solution, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut first = FirstEvents::new(limit);
+    let mut sol = solve_with(model, params, opts, &mut first)?;
+    sol.events = first.records;
+    Ok(sol)
+}
 
 /// The spec's JSON object for a solution, derivatives restricted to `wrt` (with the qp keys
 /// when the model has qps); the top-level `mode` is the gradient mode that ran

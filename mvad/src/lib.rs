@@ -15,6 +15,7 @@ pub mod json;
 pub mod load;
 pub mod setup;
 pub mod suite;
+pub mod table;
 
 #[doc(hidden)]
 pub mod __private;

@@ -11,6 +11,7 @@
 //! No input makes these functions panic or recurse without bound: nesting depth is
 //! limited by the front end before any recursive pass runs.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::io::Read;
 use std::path::Path;
@@ -19,6 +20,7 @@ use mvad_dsl::diag::{render, Diagnostic};
 use mvad_dsl::Span;
 
 use crate::interp::InterpretedModel;
+use crate::table::{Table, TableError, TableSource};
 
 /// The largest model file [`load`] reads (16 MiB).
 pub const MAX_FILE_BYTES: u64 = 16 << 20;
@@ -32,6 +34,15 @@ pub enum LoadError {
         path: String,
         /// The operating system's reason.
         reason: String,
+    },
+    /// A data table could not be read or does not fit the model: located in its file.
+    Table(TableError),
+    /// `--table NAME=FILE` names a table the model does not declare.
+    UnknownTable {
+        /// The name given.
+        name: String,
+        /// The declared tables.
+        known: Vec<String>,
     },
     /// The text is not a valid model: located errors.
     Model {
@@ -48,8 +59,8 @@ impl LoadError {
     /// The located errors (empty for an I/O failure).
     pub fn diagnostics(&self) -> &[Diagnostic] {
         match self {
-            LoadError::Io { .. } => &[],
             LoadError::Model { diagnostics, .. } => diagnostics,
+            _ => &[],
         }
     }
 }
@@ -61,15 +72,83 @@ impl fmt::Display for LoadError {
                 write!(f, "{path}: error: cannot read file: {reason}")
             }
             LoadError::Model { rendered, .. } => f.write_str(rendered.trim_end()),
+            LoadError::Table(e) => write!(f, "{e}"),
+            LoadError::UnknownTable { name, known } => {
+                let known = if known.is_empty() {
+                    "the model declares no tables".to_string()
+                } else {
+                    format!("its tables are {}", known.join(", "))
+                };
+                write!(f, "error: the model has no table `{name}`; {known}")
+            }
         }
     }
 }
 
 impl std::error::Error for LoadError {}
 
-/// Reads and compiles the `.hyb` file at `path`; errors are rendered with `path` as the
-/// file name.
+/// Reads and compiles the `.hyb` file at `path` and reads the tables it declares (paths
+/// relative to the model file); errors are rendered with the file's name.
 pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
+    load_with_tables(path, &[])
+}
+
+/// [`load`], with some tables replaced: `(NAME, source)` takes table NAME from `source` (a
+/// file relative to the working directory, or data in memory) instead of the file the model
+/// names.
+pub fn load_with_tables(
+    path: &Path,
+    tables: &[(String, TableSource)],
+) -> Result<InterpretedModel, LoadError> {
+    let mut model = read_model(path)?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    bind_tables(&mut model, dir, tables)?;
+    Ok(model)
+}
+
+/// Reads the tables `model` declares (files relative to `dir`, or the sources `overrides`
+/// gives, the last one for a name given twice) and binds them.
+pub fn bind_tables(
+    model: &mut InterpretedModel,
+    dir: &Path,
+    overrides: &[(String, TableSource)],
+) -> Result<(), LoadError> {
+    let decls = model.table_decls().to_vec();
+    if let Some((name, _)) = overrides
+        .iter()
+        .find(|(n, _)| !decls.iter().any(|(d, _)| d == n))
+    {
+        return Err(LoadError::UnknownTable {
+            name: name.clone(),
+            known: decls.into_iter().map(|(n, _)| n).collect(),
+        });
+    }
+    if decls.is_empty() {
+        return Ok(());
+    }
+    let source = |name: &str| {
+        overrides
+            .iter()
+            .rev()
+            .find(|(n, _)| n == name)
+            .map(|(_, s)| s)
+    };
+    let tables = decls
+        .iter()
+        .map(|(name, file)| {
+            Ok(match source(name) {
+                Some(TableSource::Data(t)) => Cow::Borrowed(t),
+                Some(TableSource::File(p)) => Cow::Owned(Table::read_csv(p)?),
+                None => Cow::Owned(Table::read_csv(&dir.join(file))?),
+            })
+        })
+        .collect::<Result<Vec<Cow<'_, Table>>, TableError>>()
+        .map_err(LoadError::Table)?;
+    let refs: Vec<&Table> = tables.iter().map(|t| t.as_ref()).collect();
+    model.bind_tables(&refs).map_err(LoadError::Table)
+}
+
+fn read_model(path: &Path) -> Result<InterpretedModel, LoadError> {
     let name = path.display().to_string();
     if path.is_dir() {
         return Err(LoadError::Io {
@@ -95,7 +174,8 @@ pub fn load(path: &Path) -> Result<InterpretedModel, LoadError> {
     load_bytes(&name, &bytes)
 }
 
-/// Compiles model text held in memory; `name` is the file name used in error messages.
+/// Compiles model text held in memory; `name` is the file name used in error messages. The
+/// tables the model declares are not read: bind them with [`bind_tables`].
 pub fn load_str(name: &str, src: &str) -> Result<InterpretedModel, LoadError> {
     if let Some(d) = precheck(src) {
         return Err(clipped_error(name, src, d));

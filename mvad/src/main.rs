@@ -8,7 +8,7 @@
 mod cli;
 
 fn main() -> std::process::ExitCode {
-    cli::run(std::env::args_os(), |path| {
-        mvad::load::load(path).map_err(|e| e.to_string())
+    cli::run(std::env::args_os(), |path, tables| {
+        mvad::load::load_with_tables(path, tables).map_err(|e| e.to_string())
     })
 }

@@ -1,12 +1,13 @@
 //! From what a caller asks for to what a run needs, checked once for every front end.
 //!
 //! A [`Request`] names parameter overrides, the parameters to differentiate by, tolerances,
-//! the method and the horizon; [`resolve`] turns it into θ, [`Options`] and the `wrt` indices
+//! the method, the horizon and replacement data tables; [`resolve`] turns it into θ, [`Options`] and the `wrt` indices
 //! ([`Setup`]), or a [`SetupError`]. The command line (`--rtol`) and the Python package
 //! (`rtol=`) spell the options differently, so an error is rendered through a [`Spelling`].
 
 use std::fmt;
 
+use crate::table::TableSource;
 use mvad_runtime::solution::{GradientMode, Method, Options};
 use mvad_runtime::{HybridModel, ModelAlloc};
 use nalgebra::{Const, DefaultAllocator, OVector};
@@ -29,6 +30,11 @@ pub struct Request {
     pub method: Method,
     /// τ of the grazing test, in [0, 1).
     pub grazing_tol: Option<f64>,
+    /// Data tables replacing the files the model's `table` declarations name, by table name.
+    /// They are bound where the model is built ([`crate::load::load_with_tables`],
+    /// [`crate::load::bind_tables`]; a compiled model takes its tables in `new`), not by
+    /// [`resolve`].
+    pub tables: Vec<(String, TableSource)>,
     /// How dC/dθ and vector–Jacobian products are computed (see [`check_mode`]).
     pub mode: GradientMode,
 }

@@ -129,8 +129,14 @@ where
     fn rhs_depends_on_t(&self, mode: usize) -> bool {
         self.0.rhs_depends_on_t(mode)
     }
+    fn flow_is_constant(&self, mode: usize) -> bool {
+        self.0.flow_is_constant(mode)
+    }
     fn guard(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
         self.0.guard(k, t, x, p)
+    }
+    fn guard_is_affine(&self, k: usize) -> bool {
+        self.0.guard_is_affine(k)
     }
     fn guard_grad(
         &self,
@@ -143,13 +149,14 @@ where
     ) -> f64 {
         self.0.guard_grad(k, t, x, p, gx, gp)
     }
-    fn reset(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>, xplus: &mut Xv<M>) {
-        self.0.reset(k, t, x, p, xplus)
+    fn reset(&self, k: usize, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>, xplus: &mut Xv<M>) {
+        self.0.reset(k, j, t, x, p, xplus)
     }
     #[allow(clippy::too_many_arguments)]
     fn reset_jac(
         &self,
         k: usize,
+        j: usize,
         t: f64,
         x: &Xv<M>,
         p: &Pv<M>,
@@ -157,7 +164,13 @@ where
         rp: &mut Np<M>,
         rt: &mut Xv<M>,
     ) {
-        self.0.reset_jac(k, t, x, p, rx, rp, rt)
+        self.0.reset_jac(k, j, t, x, p, rx, rp, rt)
+    }
+    fn event_time(&self, k: usize, j: usize, p: &Pv<M>) -> f64 {
+        self.0.event_time(k, j, p)
+    }
+    fn event_time_grad(&self, k: usize, j: usize, p: &Pv<M>, dtau: &mut Pv<M>) {
+        self.0.event_time_grad(k, j, p, dtau)
     }
     fn switch_value(&self, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
         self.0.switch_value(j, t, x, p)
@@ -193,19 +206,21 @@ where
     ) -> f64 {
         self.0.running_cost_value_grad(sw, t, x, p, lx, lp)
     }
-    fn event_cost(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
-        self.0.event_cost(k, t, x, p)
+    fn event_cost(&self, k: usize, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
+        self.0.event_cost(k, j, t, x, p)
     }
+    #[allow(clippy::too_many_arguments)]
     fn event_cost_grad(
         &self,
         k: usize,
+        j: usize,
         t: f64,
         x: &Xv<M>,
         p: &Pv<M>,
         cx: &mut Xv<M>,
         cp: &mut Pv<M>,
     ) -> f64 {
-        self.0.event_cost_grad(k, t, x, p, cx, cp)
+        self.0.event_cost_grad(k, j, t, x, p, cx, cp)
     }
     fn final_cost(&self, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
         self.0.final_cost(t, x, p)

@@ -108,7 +108,7 @@ fn reset_products_of(m: &impl HybridModel<N = U2, P = U2>) {
     let (xv, pv) = (Vector2::new(2.0, -0.5), Vector2::new(a, b));
     let mu = Vector2::new(1.5, -2.0);
     let (mut vx, mut vp) = (Vector2::zeros(), Vector2::zeros());
-    let vt = m.reset_vjp(0, t, &xv, &pv, &mu, &mut vx, &mut vp);
+    let vt = m.reset_vjp(0, 0, t, &xv, &pv, &mu, &mut vx, &mut vp);
     // R = (a x y + t, b t): R_x = [[a y, a x], [0, 0]], R_θ = [[x y, 0], [0, t]], R_t = (1, b).
     let (x, y) = (xv[0], xv[1]);
     let want_x = [mu[0] * a * y, mu[0] * a * x];

@@ -267,9 +267,9 @@ where
     for k in 0..info.events.len() {
         let what = |w: &str| format!("{} event {k} {w}", info.name);
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
         let (mut vx, mut vpp) = (zn(), zp());
-        let vt = m.reset_vjp(k, t, &x, &pv, &lam, &mut vx, &mut vpp);
+        let vt = m.reset_vjp(k, 0, t, &x, &pv, &lam, &mut vx, &mut vpp);
         assert_vjp(&what("μᵀR_x"), vx.as_slice(), &rows(&rx), mu);
         assert_vjp(&what("μᵀR_θ"), vpp.as_slice(), &rows(&rp), mu);
         assert_vjp(&what("μᵀR_t"), &[vt], rt.as_slice(), mu);
@@ -373,21 +373,32 @@ where
     // Events.
     for k in 0..info.events.len() {
         let what = format!("{} event {k}", info.name);
-        check_scalar(
-            m,
-            pt,
-            &format!("{what} guard"),
-            |t, x, p| m.guard(k, t, x, p),
-            |gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
-        );
+        if info.events[k].is_time_event() {
+            // A time event has no guard: its time τ_kj(θ) (occurrence 1, so a period counts)
+            // and ∂τ/∂θ; NaN for a table that is not bound here.
+            let tau = |q: &Pt| vec![m.event_time(k, 1, &vp(m, &q.p))];
+            if tau(pt)[0].is_finite() {
+                let mut dtau = zp();
+                m.event_time_grad(k, 1, &pv, &mut dtau);
+                fd_check(&format!("{what} time"), pt, Wrt::P, dtau.as_slice(), &tau);
+            }
+        } else {
+            check_scalar(
+                m,
+                pt,
+                &format!("{what} guard"),
+                |t, x, p| m.guard(k, t, x, p),
+                |gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
+            );
+        }
 
         let r = |q: &Pt| {
             let mut xp = zn();
-            m.reset(k, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut xp);
+            m.reset(k, 0, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut xp);
             xp.as_slice().to_vec()
         };
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
         fd_check_xpt(
             &format!("{what} reset"),
             pt,
@@ -399,8 +410,8 @@ where
             m,
             pt,
             &format!("{what} cost"),
-            |t, x, p| m.event_cost(k, t, x, p),
-            |cx, cp| m.event_cost_grad(k, t, &x, &pv, cx, cp),
+            |t, x, p| m.event_cost(k, 0, t, x, p),
+            |cx, cp| m.event_cost_grad(k, 0, t, &x, &pv, cx, cp),
         );
     }
 
@@ -515,8 +526,10 @@ where
 fn interpreted_models_match_finite_differences() {
     let files = model_files();
     assert!(files.len() >= 4, "models/*.hyb not found");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
     for (name, src) in files {
-        let m = InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        let mut m = InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        mvad::load::bind_tables(&mut m, &dir, &[]).unwrap_or_else(|e| panic!("{name}: {e}"));
         check_all(&m, 7, 20);
     }
     let m = InterpretedModel::from_source(SINK).expect("sink model");
@@ -535,4 +548,17 @@ fn compiled_models_match_finite_differences() {
     check_all(&models::qp_kink::QpKink::new(), 13, 20);
     check_all(&models::qp_cart::QpCart::new(), 14, 20);
     check_all(&Sink::new(), 12, 60);
+    let a = models::queue::Arrivals::generate(10, 1);
+    let q = models::queue::Queue::new(models::queue::QueueTables {
+        arrivals: a.table().expect("table"),
+    })
+    .expect("binds");
+    check_all(&q, 13, 20);
+    let q = models::queue::stretched::StretchedQueue::new(
+        models::queue::stretched::StretchedQueueTables {
+            arrivals: a.table().expect("table"),
+        },
+    )
+    .expect("binds");
+    check_all(&q, 14, 20);
 }

@@ -86,16 +86,16 @@ where
         put(format!("gp{k}"), gp.as_slice());
         put(format!("gt{k}"), &[gt]);
         let mut xp = zn();
-        m.reset(k, t, &xv, &pv, &mut xp);
+        m.reset(k, 0, t, &xv, &pv, &mut xp);
         put(format!("R{k}"), xp.as_slice());
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, t, &xv, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(k, 0, t, &xv, &pv, &mut rx, &mut rp, &mut rt);
         put(format!("Rx{k}"), rx.as_slice());
         put(format!("Rp{k}"), rp.as_slice());
         put(format!("Rt{k}"), rt.as_slice());
-        put(format!("phi{k}"), &[m.event_cost(k, t, &xv, &pv)]);
+        put(format!("phi{k}"), &[m.event_cost(k, 0, t, &xv, &pv)]);
         let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(k, t, &xv, &pv, &mut cx, &mut cp);
+        let ct = m.event_cost_grad(k, 0, t, &xv, &pv, &mut cx, &mut cp);
         put(format!("phix{k}"), cx.as_slice());
         put(format!("phip{k}"), cp.as_slice());
         put(format!("phit{k}"), &[ct]);
@@ -170,7 +170,7 @@ where
     }
     for k in 0..m.info().events.len() {
         let (mut vx, mut vp) = (vec_n(x), zp());
-        let vt = m.reset_vjp(k, t, &xv, &pv, &lam, &mut vx, &mut vp);
+        let vt = m.reset_vjp(k, 0, t, &xv, &pv, &lam, &mut vx, &mut vp);
         put(format!("reset_vjp_x{k}"), vx.as_slice());
         put(format!("reset_vjp_p{k}"), vp.as_slice());
         put(format!("reset_vjp_t{k}"), &[vt]);

@@ -19,7 +19,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use crate::ast::{Condition, CostKind, Event, Expr, ExprKind, Ident, Item, Model};
+use crate::ast::{Condition, CostKind, Event, Expr, ExprKind, Ident, Item, Model, Trigger};
 use crate::diag::Diagnostic;
 use crate::span::Span;
 
@@ -88,6 +88,7 @@ pub fn check(model: &Model) -> Vec<Diagnostic> {
     out.extend(check_conditions(model));
     out.extend(check_names(model));
     out.extend(check_observables(model));
+    out.extend(check_time_events(model));
     out.sort_by_key(|d| (d.span.start, d.span.end));
     out.dedup();
     out
@@ -150,6 +151,8 @@ enum Site<'a> {
     StateInit(&'a Ident),
     /// The horizon.
     Horizon,
+    /// The time, times or period of a time event (`at`, `at each`, `every`), with its name.
+    EventTime(Option<&'a Ident>),
     /// Flows, guards, resets, observables, cost terms.
     Dynamic,
     /// The objective or a constraint of a qp.
@@ -163,12 +166,18 @@ fn sites(model: &Model) -> Vec<(Site<'_>, &Expr)> {
     let mut out = Vec::new();
     let mut nconst = 0;
     fn event_exprs<'a>(out: &mut Vec<(Site<'a>, &'a Expr)>, e: &'a Event) {
-        match &e.guard {
-            Condition::Compare(c) => {
+        let time = Site::EventTime(e.name.as_ref());
+        match &e.trigger {
+            Trigger::When(Condition::Compare(c)) => {
                 out.push((Site::Dynamic, &c.lhs));
                 out.push((Site::Dynamic, &c.rhs));
             }
-            Condition::NotComparison(x) => out.push((Site::Dynamic, x)),
+            Trigger::When(Condition::NotComparison(x)) => out.push((Site::Dynamic, x)),
+            Trigger::At(x) | Trigger::Each(x) => out.push((time, x)),
+            Trigger::Every { period, start } => {
+                out.push((time, period));
+                out.extend(start.iter().map(|s| (time, s)));
+            }
         }
         for r in e.resets.iter().flatten() {
             out.push((Site::Dynamic, &r.value));
@@ -189,7 +198,7 @@ fn sites(model: &Model) -> Vec<(Site<'_>, &Expr)> {
                     event_exprs(&mut out, e);
                 }
             }
-            Item::InitialMode(_) => {}
+            Item::InitialMode(_) | Item::Table(_) => {}
             Item::Event(e) => event_exprs(&mut out, e),
             Item::Observe(o) => out.push((Site::Dynamic, &o.value)),
             Item::Cost(c) => {
@@ -315,6 +324,7 @@ pub fn check_reserved_names(model: &Model) -> Vec<Diagnostic> {
             Item::State(s) => names.push(&s.name),
             Item::Observe(o) => names.push(&o.name),
             Item::Mode(m) => names.push(&m.name),
+            Item::Table(t) => names.push(&t.name),
             Item::Qp(q) => {
                 names.push(&q.name);
                 names.extend(&q.vars);
@@ -362,6 +372,7 @@ pub fn check_duplicates(model: &Model) -> Vec<Diagnostic> {
     let mut values = HashMap::new();
     let mut modes = HashMap::new();
     let mut events = HashMap::new();
+    let mut tables = HashMap::new();
     for item in &model.items {
         match item {
             Item::Param(p) => dup(&mut values, &p.name, "declaration of"),
@@ -370,6 +381,7 @@ pub fn check_duplicates(model: &Model) -> Vec<Diagnostic> {
             Item::Observe(o) => dup(&mut values, &o.name, "declaration of"),
             Item::Qp(q) => dup(&mut values, &q.name, "declaration of"),
             Item::Mode(m) => dup(&mut modes, &m.name, "mode"),
+            Item::Table(t) => dup(&mut tables, &t.name, "table"),
             _ => {}
         }
     }
@@ -661,7 +673,7 @@ pub fn check_conditions(model: &Model) -> Vec<Diagnostic> {
     const HELP: &str = "write a comparison: `LHS <= RHS`, `LHS < RHS`, `LHS >= RHS` or `LHS > RHS`";
     let mut out = Vec::new();
     for (_, e) in model.all_events() {
-        if let Condition::NotComparison(x) = &e.guard {
+        if let Trigger::When(Condition::NotComparison(x)) = &e.trigger {
             out.push(
                 Diagnostic::new(
                     x.span,
@@ -686,8 +698,10 @@ pub fn check_conditions(model: &Model) -> Vec<Diagnostic> {
 
 mod names;
 mod qp;
+mod time_events;
 pub use names::{check_names, check_observables};
 pub use qp::{check_qps, check_stateless, is_stateless};
+pub use time_events::check_time_events;
 
 #[cfg(test)]
 mod tests;

@@ -27,7 +27,7 @@ pub fn check_names(model: &Model) -> Vec<Diagnostic> {
                 }
             }
             ExprKind::Column { table, column } => {
-                if let Some(d) = check_column(model, &syms, site, e, table, column) {
+                if let Some(d) = check_dotted(model, &syms, site, e, table, column) {
                     if reported.insert(format!("{}@{}", d.message, d.span.start)) {
                         out.push(d);
                     }
@@ -64,8 +64,75 @@ pub(super) fn static_site(site: Site<'_>) -> Option<String> {
         Site::ParamDefault(p) => Some(format!("the default value of param `{}`", p.name)),
         Site::StateInit(s) => Some(format!("the initial value of state `{}`", s.name)),
         Site::Horizon => Some("the horizon".to_string()),
+        Site::EventTime(Some(e)) => Some(format!("the time of event `{}`", e.name)),
+        Site::EventTime(None) => Some("the time of an event".to_string()),
         Site::StaticTerm => Some("a static cost term".to_string()),
         Site::Dynamic | Site::Qp(_) => None,
+    }
+}
+
+/// Resolves a dotted name `NAME.VAR`: NAME is a table (VAR a column, which only the table's
+/// file can confirm; where a row is current is checked by [`super::time_events`]) or a qp
+/// (then [`check_column`]). A located error when NAME is neither, or both.
+fn check_dotted(
+    model: &Model,
+    syms: &HashMap<&str, (Kind, Span)>,
+    site: Site<'_>,
+    e: &Expr,
+    table: &Ident,
+    column: &Ident,
+) -> Option<Diagnostic> {
+    let name = table.name.as_str();
+    let declared = model.tables().find(|t| t.name.name == name);
+    let qp = model.qps().find(|q| q.name.name == name);
+    let (has_tables, has_qps) = (
+        model.tables().next().is_some(),
+        model.qps().next().is_some(),
+    );
+    let noun = match (has_tables, has_qps) {
+        (true, false) => "table",
+        (false, true) => "qp",
+        _ => "table or qp",
+    };
+    match (declared, qp) {
+        (Some(t), Some(q)) => Some(
+            Diagnostic::new(
+                table.span,
+                format!(
+                    "`{name}.{}` is ambiguous: `{name}` is a table and a qp",
+                    column.name
+                ),
+            )
+            .with_label(t.name.span, "the table")
+            .with_label(q.name.span, "the qp")
+            .with_help("rename the table or the qp"),
+        ),
+        (Some(_), None) => None,
+        (None, Some(q)) => check_column(q, syms, site, e, column),
+        (None, None) => Some(match syms.get(name) {
+            Some(&(kind, decl)) => Diagnostic::new(
+                table.span,
+                format!(
+                    "{} `{name}` is not a {noun}: `{name}.{}` names nothing",
+                    kind.noun(),
+                    column.name
+                ),
+            )
+            .with_label(decl, "declared here"),
+            None => {
+                let d = Diagnostic::new(table.span, format!("unknown {noun} `{name}`"));
+                let known = (model.tables().map(|t| t.name.name.as_str()))
+                    .chain(model.qps().map(|q| q.name.name.as_str()));
+                match suggest(name, known) {
+                    Some(s) => d.with_help(format!("did you mean `{s}`?")),
+                    None if has_tables || has_qps => d,
+                    None => d.with_help(
+                        "declare a table with `table NAME = \"FILE.csv\";` or a qp with \
+                         `qp NAME(VAR, ...) { ... }`",
+                    ),
+                }
+            }
+        }),
     }
 }
 
@@ -137,7 +204,7 @@ fn scope_error(site: Site<'_>, id: &Ident, kind: Kind, decl: Span) -> Option<Dia
             matches!(kind, Kind::Const(_)),
             "a param's default value may use only numbers and consts",
         ),
-        Site::StateInit(_) | Site::Horizon => (
+        Site::StateInit(_) | Site::Horizon | Site::EventTime(_) => (
             matches!(kind, Kind::Const(_) | Kind::Param),
             "it may use only numbers, consts and params",
         ),

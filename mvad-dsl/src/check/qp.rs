@@ -142,46 +142,16 @@ pub fn check_stateless(model: &Model) -> Vec<Diagnostic> {
     out
 }
 
-/// The checks of one `NAME.VAR` at `site`: NAME is a qp, VAR one of its variables, and the
-/// site may read its solution.
+/// The checks of one `NAME.VAR` at `site` once NAME resolved to qp `q` (see
+/// [`super::names`]): VAR is one of its variables, and the site may read its solution.
 pub(super) fn check_column(
-    model: &Model,
+    q: &Qp,
     syms: &HashMap<&str, (Kind, Span)>,
     site: Site<'_>,
     e: &Expr,
-    table: &Ident,
     column: &Ident,
 ) -> Option<Diagnostic> {
-    let qps: Vec<&Qp> = model.qps().collect();
-    let name = table.name.as_str();
-    let q = match syms.get(name) {
-        Some((Kind::Qp, _)) => qps.iter().find(|q| q.name.name == name)?,
-        Some(&(kind, decl)) => {
-            return Some(
-                Diagnostic::new(
-                    table.span,
-                    format!(
-                        "{} `{name}` is not a qp: `{name}.{}` names nothing",
-                        kind.noun(),
-                        column.name
-                    ),
-                )
-                .with_label(decl, "declared here"),
-            )
-        }
-        None => {
-            let d = Diagnostic::new(table.span, format!("unknown qp `{name}`"));
-            return Some(
-                match suggest(name, qps.iter().map(|q| q.name.name.as_str())) {
-                    Some(s) => d.with_help(format!("did you mean `{s}`?")),
-                    None if qps.is_empty() => {
-                        d.with_help("declare it with `qp NAME(VAR, ...) { ... }`")
-                    }
-                    None => d,
-                },
-            );
-        }
-    };
+    let name = q.name.name.as_str();
     if !q.vars.iter().any(|v| v.name == column.name) {
         let vars: Vec<&str> = q.vars.iter().map(|v| v.name.as_str()).collect();
         let d = Diagnostic::new(

@@ -166,6 +166,11 @@ impl Gen<'_> {
                 let i = usize_lit(i as usize);
                 atom(quote!(p[#i]))
             }
+            // The event method binds `row`, the current row's values of the model's columns.
+            Node::Column(c) => {
+                let c = usize_lit(c as usize);
+                atom(quote!(row[#c]))
+            }
             // qp solutions and their derivatives: slices the method binds first (see
             // `methods::qp_prelude`).
             Node::QpSol(k) => {

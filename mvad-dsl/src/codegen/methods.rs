@@ -8,7 +8,7 @@ use super::emit::Body;
 use super::products::{a_s_plus_b, Coef};
 use super::{lit, usize_lit, Gen};
 use crate::ir::Direction;
-use crate::schedule::{GradKernels, Kernel, ModelKernels};
+use crate::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
 
 impl Gen<'_> {
     pub(super) fn info(&self, k: &ModelKernels) -> TokenStream {
@@ -35,6 +35,16 @@ impl Gen<'_> {
             };
             let (mode, target) = (opt(e.mode), opt(e.target));
             let (hr, hc) = (e.has_reset, e.has_cost);
+            // `rows` is bound by the constructor of a model with tables.
+            let trigger = match e.time {
+                None => quote!(#pr::Trigger::Guard),
+                Some(TimeKind::At) => quote!(#pr::Trigger::At),
+                Some(TimeKind::Every) => quote!(#pr::Trigger::Every),
+                Some(TimeKind::Each { table }) => {
+                    let t = usize_lit(table);
+                    quote!(#pr::Trigger::Each { rows: rows[#t] })
+                }
+            };
             quote!(#pr::EventInfo {
                 name: ::core::convert::From::from(#name),
                 direction: #dir,
@@ -42,6 +52,7 @@ impl Gen<'_> {
                 target: #target,
                 has_reset: #hr,
                 has_cost: #hc,
+                trigger: #trigger,
             })
         });
         let obs = strs(&k.observables);
@@ -144,17 +155,27 @@ impl Gen<'_> {
         } else {
             quote!(ft.fill(0.0);)
         };
-        let dep_t: Vec<Literal> = k
-            .modes
-            .iter()
-            .enumerate()
-            .filter(|(_, m)| m.depends_on_t)
+        let modes_where = |pred: &dyn Fn(&crate::schedule::ModeKernels) -> bool| {
+            let ms: Vec<Literal> = (k.modes.iter().enumerate())
+                .filter(|(_, m)| pred(m))
+                .map(|(i, _)| usize_lit(i))
+                .collect();
+            if ms.is_empty() {
+                quote!(false)
+            } else {
+                quote!(matches!(mode, #(#ms)|*))
+            }
+        };
+        let dep_t = modes_where(&|m| m.depends_on_t);
+        let constant = modes_where(&|m| m.constant);
+        let affine: Vec<Literal> = (k.event_meta.iter().enumerate())
+            .filter(|(_, e)| e.affine_guard)
             .map(|(i, _)| usize_lit(i))
             .collect();
-        let dep_t = if dep_t.is_empty() {
+        let affine = if affine.is_empty() {
             quote!(false)
         } else {
-            quote!(matches!(mode, #(#dep_t)|*))
+            quote!(matches!(event, #(#affine)|*))
         };
         let sens = per_mode(&|m| self.sens_body(k, m), quote!(f));
         self.frozen.set(false);
@@ -207,6 +228,43 @@ impl Gen<'_> {
             quote!(cx.fill(0.0); cp.fill(0.0); 0.0),
             ne,
         );
+
+        // Times of time events: τ_j = τ (at), τ(row j) (at each), start + j·period (every).
+        let etime = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| {
+                let tk = k.events[e].time.as_ref()?;
+                let first = self.scalar(&tk.time);
+                Some(match &tk.period {
+                    Some((per, _)) => {
+                        let per = self.scalar(per);
+                        quote!(#first + (j as f64) * #per)
+                    }
+                    None => first,
+                })
+            }),
+            quote!(f64::NAN),
+            ne,
+        );
+        let etime_grad = self.dispatch(
+            quote!(event),
+            ev_arms(&|e| {
+                let tk = k.events[e].time.as_ref()?;
+                let mut body = self.fill_body(&tk.time_grad, quote!(dtau), vecd(quote!(dtau)));
+                if let Some((_, per_grad)) = &tk.period {
+                    let Body { lets, outputs, .. } = self.body(per_grad);
+                    let adds = outputs.iter().map(|(s, v)| {
+                        let i = usize_lit(*s);
+                        quote!(dtau[#i] += (j as f64) * #v;)
+                    });
+                    body.extend(quote!({ #lets #(#adds)* }));
+                }
+                Some(body)
+            }),
+            quote!(dtau.fill(f64::NAN);),
+            ne,
+        );
+        let row = row_binding(k);
 
         // Switching functions.
         let ns = k.switches.len();
@@ -331,18 +389,22 @@ impl Gen<'_> {
             fn rhs_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, ft: &mut #xv) {
         let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
+            fn flow_is_constant(&self, mode: usize) -> bool { #constant }
+            fn guard_is_affine(&self, event: usize) -> bool { #affine }
             fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
             fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
-            fn reset(&self, event: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #reset }
-            fn reset_jac(&self, event: usize, t: f64, x: &#xv, p: &#pv, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #reset_jac }
+            fn reset(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #row #reset }
+            fn reset_jac(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #row #reset_jac }
+            fn event_time(&self, event: usize, j: usize, p: &#pv) -> f64 { #row #etime }
+            fn event_time_grad(&self, event: usize, j: usize, p: &#pv, dtau: &mut #pv) { #row #etime_grad }
             fn switch_value(&self, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #swv }
             fn switch_grad(&self, j: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #swg }
             fn observe(&self, t: f64, x: &#xv, p: &#pv, y: &mut [f64]) { #obs }
             fn observe_jac(&self, t: f64, x: &#xv, p: &#pv, yx: &mut [f64], yp: &mut [f64]) { #obs_jac }
             fn running_cost(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv) -> f64 { #rc }
             fn running_cost_value_grad(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, lx: &mut #xv, lp: &mut #pv) -> f64 { #rcg }
-            fn event_cost(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #ecost }
-            fn event_cost_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #ecost_grad }
+            fn event_cost(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #row #ecost }
+            fn event_cost_grad(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #row #ecost_grad }
             fn final_cost(&self, t: f64, x: &#xv, p: &#pv) -> f64 { #fc }
             fn final_cost_grad(&self, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #fcg }
         };
@@ -424,5 +486,15 @@ impl Gen<'_> {
         });
         let lets = &body.lets;
         quote!(#lets #stores #ds)
+    }
+}
+
+/// `let row = self.row(j);` in the event methods of a model that reads table columns: the
+/// values of row j (the occurrence) that [`Node::Column`](crate::ir::Node::Column) leaves read.
+pub(super) fn row_binding(k: &ModelKernels) -> TokenStream {
+    if k.columns.is_empty() {
+        quote!()
+    } else {
+        quote!(let row = self.row(j);)
     }
 }

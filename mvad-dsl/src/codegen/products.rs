@@ -236,6 +236,7 @@ impl Gen<'_> {
                 (e, quote!(#lets #vx #vp #rt))
             })
             .collect();
+        let row = super::methods::row_binding(k);
         let reset = self.dispatch(
             quote!(event),
             reset_arms,
@@ -262,7 +263,7 @@ impl Gen<'_> {
         quote! {
             fn rhs_vjp(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, vx: &mut #xv, vp: &mut #pv) {
                 let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
-            fn reset_vjp(&self, event: usize, t: f64, x: &#xv, p: &#pv, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #reset }
+            fn reset_vjp(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #row #reset }
             fn initial_state_vjp(&self, p: &#pv, mu: &#xv, vp: &mut #pv) { #x0 }
         }
     }

@@ -39,7 +39,12 @@ pub(super) fn degree(ar: &ExprArena, root: ExprId, is_var: impl Fn(u32) -> bool)
         }
         let g = |c: ExprId| d[c.index()];
         d[i] = match ar.node(ExprId(i as u32)) {
-            Node::Const(_) | Node::Time | Node::State(_) | Node::Param(_) | Node::QpDeriv(..) => 0,
+            Node::Const(_)
+            | Node::Time
+            | Node::State(_)
+            | Node::Param(_)
+            | Node::Column(_)
+            | Node::QpDeriv(..) => 0,
             Node::QpSol(k) => u32::from(is_var(k)),
             Node::Add(a, b) | Node::Switch(_, a, b) => g(a).max(g(b)),
             Node::Neg(a) => g(a),

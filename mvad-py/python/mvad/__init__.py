@@ -18,6 +18,8 @@ Every method takes ``params`` (overrides by name) and the run options ``rtol``, 
 ``mode``: how derivatives are computed, ``forward`` (the default: sensitivities carried along
 the run), ``adjoint`` (a primal run and one backward sweep, cost flat in the number of
 parameters) or ``auto`` (adjoint from 50 parameters on). Both give the same numbers.
+``tables`` replaces data tables the model declares: ``{"NAME": "FILE.csv"}`` or
+``{"NAME": {"COL": array, ...}}`` (``mvad.load(path, tables=...)`` binds them once).
 
 Errors: ``mvad.ModelError`` (a ``ValueError``) for a model that does not compile, its message
 holding ``FILE:LINE:COL: error: ...``; ``ValueError`` for a bad request; ``mvad.SolveError``

@@ -269,7 +269,9 @@ fn replay_events<M: HybridModel, K: EventSink>(
     let mut index = 0;
     for item in tape.items() {
         let Item::Jump(j) = item else { continue };
-        let JumpKind::Event(k) = j.kind else { continue };
+        let JumpKind::Event(k, _) = j.kind else {
+            continue;
+        };
         let (x_before, x_after) = tape.jump_states(j);
         work.approach(model, p, j, x_before, x_after);
         let gt = work.crossing_grad(model, p, j);

@@ -41,8 +41,9 @@ pub(crate) const MAX_COEFS: usize = 10;
 /// What fired at a jump.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum JumpKind {
-    /// User event k (its reset, mode switch and costs).
-    Event(usize),
+    /// User event k at its occurrence j (its reset, mode switch and costs; j is the table row
+    /// of an `at each` event, see [`crate::model::Trigger`]).
+    Event(usize, usize),
     /// Switching function σ_j crossed zero: bit j flips, the reset is the identity.
     Switch(usize),
 }

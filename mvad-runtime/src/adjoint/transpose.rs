@@ -124,12 +124,14 @@ where
         model.rhs(after, &mut self.f_plus);
     }
 
-    /// ∂g/∂t of the guard or switching function that fired, with ∇ₓ into `gx` and ∂θ into
-    /// `gp`, at (t, x⁻).
+    /// ∂g/∂t of the guard (g = t − τ for a time event) or switching function that fired, with
+    /// ∇ₓ into `gx` and ∂θ into `gp`, at (t, x⁻).
     pub(super) fn crossing_grad(&mut self, model: &M, p: &OVector<f64, M::P>, jump: &Jump) -> f64 {
         let (t, x) = (jump.t, &self.xm);
         match jump.kind {
-            JumpKind::Event(k) => model.guard_grad(k, t, x, p, &mut self.gx, &mut self.gp),
+            JumpKind::Event(k, occ) => {
+                crate::sens::event_guard_grad(model, k, occ, t, x, p, &mut self.gx, &mut self.gp)
+            }
             JumpKind::Switch(j) => model.switch_grad(j, t, x, p, &mut self.gx, &mut self.gp),
         }
     }
@@ -164,16 +166,16 @@ where
         c += cw * (l_minus - l_plus);
     }
     match jump.kind {
-        JumpKind::Event(k) => {
+        JumpKind::Event(k, occ) => {
             // λ̃ = λ⁺ + w φ_xᵀ, and w φ_θ into grad.
             w.mu.copy_from(lam);
             if info.events[k].has_cost && cw != 0.0 {
-                let phi_t = model.event_cost_grad(k, t, &w.xp, p, &mut w.cx, &mut w.cp);
+                let phi_t = model.event_cost_grad(k, occ, t, &w.xp, p, &mut w.cx, &mut w.cp);
                 w.mu.axpy(cw, &w.cx, 1.0);
                 grad.axpy(cw, &w.cp, 1.0);
                 c += cw * phi_t;
             }
-            let mu_rt = model.reset_vjp(k, t, &w.xm, p, &w.mu, &mut w.vx, &mut w.vp);
+            let mu_rt = model.reset_vjp(k, occ, t, &w.xm, p, &w.mu, &mut w.vx, &mut w.vp);
             c += w.vx.dot(&w.f_minus) + mu_rt - lam.dot(&w.f_plus);
             lam.copy_from(&w.vx);
             *grad += &w.vp;
@@ -185,7 +187,7 @@ where
     let ratio = c / gdot;
     if !(ratio.is_finite() && gdot != 0.0) {
         let what = match jump.kind {
-            JumpKind::Event(k) => format!(
+            JumpKind::Event(k, _) => format!(
                 "event-time sensitivity of event `{}` (tangential crossing: ∇g·f + ∂g/∂t = {gdot:e})",
                 info.events[k].name
             ),
@@ -199,7 +201,7 @@ where
     grad.axpy(-ratio, &w.gp, 1.0);
     if !(lam.iter().all(|v| v.is_finite()) && grad.iter().all(|v| v.is_finite())) {
         let what = match jump.kind {
-            JumpKind::Event(k) => format!("adjoint jump of event `{}`", info.events[k].name),
+            JumpKind::Event(k, _) => format!("adjoint jump of event `{}`", info.events[k].name),
             JumpKind::Switch(j) => format!("adjoint jump of switching function {j}"),
         };
         return Err(SolveError::NonFinite { t, what });

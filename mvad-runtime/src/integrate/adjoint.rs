@@ -349,6 +349,13 @@ where
         self.rhs.eval_at(t, &self.hist.x, y, out);
     }
 
+    /// A mode whose flow is a function of θ alone and no running cost: f_x = 0, so λ is
+    /// constant and ġ = −f_θᵀλ too (the segment is one exact step backwards).
+    #[inline]
+    fn constant_rate(&self) -> bool {
+        !self.rhs.has_rc && self.rhs.model.flow_is_constant(self.rhs.mode)
+    }
+
     #[inline]
     fn evals(&self) -> usize {
         self.rhs.evals

@@ -91,19 +91,23 @@ impl Controller {
 
 impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// Hairer's initial step heuristic (HNW I, II.4) from k[0] = F(t, y), in the direction of
-    /// `span` and bounded by |span|; returns the magnitude.
+    /// `span` and bounded by |span|; returns the magnitude. Its absolute fallbacks (1e-6 when
+    /// y or F is negligible) assume t of order one: every guess is raised to 100 ulp-scales of
+    /// t (100·ε·|t|), so a segment starting at t = 10⁹ with y = 0 does not begin below the
+    /// resolution of t and report a step-size underflow.
     pub(super) fn initial_step(&mut self, span: f64) -> f64 {
         let (dir, span) = (span.signum(), span.abs());
         let all = self.sys.all_parts();
         let order = self.scheme.error_order() - 1.0;
         let d0 = self.scaled_norm(&self.y, &self.y);
         let d1 = self.scaled_norm(&self.k[0], &self.y);
+        let floor = 100.0 * f64::EPSILON * self.t.abs();
         let mut h0 = if d0 < 1e-5 || d1 < 1e-5 {
             1e-6
         } else {
             0.01 * d0 / d1
         };
-        h0 = h0.min(span);
+        h0 = h0.max(floor).min(span);
         // Explicit Euler probe: ynew = y + h0 k0, k[1] = F(t + h0, ynew).
         let h0s = dir * h0;
         self.ynew.combine(&self.y, h0s, &[1.0], &self.k[..1], all);
@@ -120,7 +124,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         } else {
             (0.01 / dm).powf(1.0 / (order + 1.0))
         };
-        (100.0 * h0).min(h1).min(span).max(f64::MIN_POSITIVE)
+        (100.0 * h0)
+            .min(h1)
+            .max(floor)
+            .min(span)
+            .max(f64::MIN_POSITIVE)
     }
 
     /// Weighted RMS norm of `v` with scale atol + rtol |y|, over the controlled parts.

@@ -2,7 +2,7 @@
 //!
 //! After a step from (t_prev, Y₀) to (t, Y₁) of signed length h = t − t_prev, Y(t_prev + θh)
 //! for θ ∈ [0, 1] is the continuous extension of the scheme that took the step: 4th order for
-//! Tsit5 and Rodas5P, 9th for Verner (or, while Verner's interpolation stages are pending,
+//! Tsit5 and Rodas5P, the line Y₀ + θh·F₀ (exact) for an exact step, 9th for Verner (or, while Verner's interpolation stages are pending,
 //! the cubic Hermite interpolant of (Y₀, F₀, Y₁, F₁)). Works for either direction of time.
 
 use super::explicit::Tableau;
@@ -27,6 +27,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             Scheme::Tsit5 => TSIT5.dense_primary(k, y0, h, theta, out),
             Scheme::Verner9 => VERNER9.dense_primary(k, y0, h, theta, out),
             Scheme::Rodas5P => rosenbrock::dense_primary(k, y0, y1, theta, out),
+            Scheme::Exact => Sys::Vector::combine_primary(out, y0, h, &[theta], &k[..1]),
         }
     }
 
@@ -57,7 +58,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// The degree in θ of the dense output [`Integrator::dense_x`] gives now: 4 for Tsit5 and
-    /// Rodas5P, 9 for Verner (3 while its interpolation stages are pending), 0 right after a
+    /// Rodas5P, 1 for an exact step, 9 for Verner (3 while its interpolation stages are pending), 0 right after a
     /// restart (see [`Integrator::dense_poly`]).
     pub fn dense_degree(&self) -> usize {
         if self.dense_h == 0.0 {
@@ -69,6 +70,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 Scheme::Tsit5 => TSIT5.degree(),
                 Scheme::Verner9 => VERNER9.degree(),
                 Scheme::Rodas5P => rosenbrock::DENSE_DEGREE,
+                Scheme::Exact => 1,
             }
         }
     }
@@ -100,6 +102,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             Scheme::Tsit5 => TSIT5.poly_primary(k, y0, h, coefs),
             Scheme::Verner9 => VERNER9.poly_primary(k, y0, h, coefs),
             Scheme::Rodas5P => rosenbrock::poly_primary(k, y0, y1, coefs),
+            Scheme::Exact => {
+                // Y₀ + θ h F₀.
+                y0.primary_into(&mut coefs[0]);
+                let f0 = &k[0];
+                Sys::Vector::mix5_primary(&mut coefs[1], &[h, 0.0, 0.0, 0.0, 0.0], [f0; 5]);
+            }
         }
         deg
     }
@@ -202,5 +210,6 @@ fn dense_into<V: StageVector>(
         Scheme::Tsit5 => TSIT5.dense(k, y0, h, theta, all, out),
         Scheme::Verner9 => VERNER9.dense(k, y0, h, theta, all, out),
         Scheme::Rodas5P => rosenbrock::dense(k, y0, y1, theta, all, out),
+        Scheme::Exact => out.combine(y0, h, &[theta], &k[..1], all),
     }
 }

@@ -261,6 +261,13 @@ where
         self.rhs.eval(t, y, out);
     }
 
+    /// A mode whose flow is a function of θ alone ([`HybridModel::flow_is_constant`]) and no
+    /// running cost: F = (f(θ), f_θ(θ), 0, 0).
+    #[inline]
+    fn constant_rate(&self) -> bool {
+        !self.rhs.has_rc && self.rhs.model.flow_is_constant(self.rhs.mode)
+    }
+
     #[inline]
     fn evals(&self) -> usize {
         self.rhs.evals

@@ -26,6 +26,11 @@
 //!   (`verner.rs`, a table for the same loop).
 //! - [`Scheme::Rodas5P`]: a stiffly accurate linearly implicit method of order 5(4) with a
 //!   4th-order dense output that uses the system's Jacobian (`rosenbrock.rs`).
+//! - [`Scheme::Exact`]: for a segment on which F is constant ([`OdeSystem::constant_rate`]: a
+//!   mode whose flow is a function of θ alone, no running cost), Y(t + h) = Y + h·F is the
+//!   exact solution (x and S are linear in t); one step reaches the stop time, with no error
+//!   estimate and no step-size control, and the dense output is the same line. Whatever the
+//!   method, the integrator uses it from every restart in such a mode.
 //! - [`Method::Auto`] (default) starts with Tsit5 and runs Hairer's stiffness test
 //!   (h·‖k₇ − k₆‖/‖y₇ − y₆‖ against the real stability boundary of Tsit5) and, every 20 steps,
 //!   h·ρ(f_x) from a power iteration on the Jacobian (this catches steps held near 1/ρ by
@@ -128,6 +133,8 @@ pub enum Scheme {
     Verner9,
     /// Rodas5P (linearly implicit).
     Rodas5P,
+    /// Y + h·F for a constant F: exact, one step to the stop time (see the module doc).
+    Exact,
 }
 
 impl Scheme {
@@ -146,6 +153,8 @@ impl Scheme {
             Scheme::Tsit5 => Method::Tsit5,
             Scheme::Verner9 => Method::Verner9,
             Scheme::Rodas5P => Method::Rosenbrock,
+            // Exact steps stand in for whatever method was asked for.
+            Scheme::Exact => Method::Auto,
         }
     }
 
@@ -166,6 +175,8 @@ impl Scheme {
                 Some(VERNER9.fsal_slot()),
             ),
             Scheme::Rodas5P => (5.0, rosenbrock::STAGES, rosenbrock::STAGES, None),
+            // F is constant: the next step's first stage is this one's.
+            Scheme::Exact => (1.0, 1, 1, Some(0)),
         }
     }
 
@@ -213,6 +224,8 @@ pub struct Integrator<Sys: OdeSystem> {
     max_steps: usize,
     requested: Method,
     scheme: Scheme,
+    /// The adaptive scheme to return to when a restart leaves a segment of exact steps.
+    adaptive: Scheme,
     /// Scheme that produced the last accepted step (the one `dense` uses).
     dense_scheme: Scheme,
     t: f64,
@@ -276,6 +289,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             max_steps: opts.max_steps,
             requested: opts.method,
             scheme,
+            adaptive: scheme,
             dense_scheme: scheme,
             t: 0.0,
             t_prev: 0.0,
@@ -309,9 +323,18 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at
-    /// (t, y). The scheme in use is kept.
+    /// (t, y). The adaptive scheme in use is kept; [`Scheme::Exact`] replaces it while the
+    /// system's F is constant.
     pub fn restart_at(&mut self, t: f64, y: &Sys::Vector) {
         self.carry_global_error();
+        if self.scheme != Scheme::Exact {
+            self.adaptive = self.scheme;
+        }
+        self.scheme = if self.sys.constant_rate() {
+            Scheme::Exact
+        } else {
+            self.adaptive
+        };
         self.t = t;
         self.t_prev = t;
         self.dense_h = 0.0;
@@ -382,6 +405,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.h
     }
 
+    /// Raises the budget of step attempts by `extra` (the driver grants each row of a data
+    /// table its own allowance: a long table needs at least one step per row).
+    pub fn extend_step_budget(&mut self, extra: usize) {
+        self.max_steps = self.max_steps.saturating_add(extra);
+    }
+
     /// Seeds the magnitude of the next step attempt, e.g. with the step size in use before an
     /// event (call it after a restart, which otherwise starts from Hairer's heuristic; the
     /// error control still rejects and shrinks a seed that is too large). A value that is not
@@ -405,7 +434,10 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let dir = if t_stop > self.t { 1.0 } else { -1.0 };
         self.carry_global_error();
         self.ensure_k0()?;
-        if self.h == 0.0 {
+        if self.scheme == Scheme::Exact {
+            // Exact: the first attempt lands on t_stop.
+            self.h = f64::INFINITY;
+        } else if self.h == 0.0 {
             self.h = self.initial_step(t_stop - self.t);
         }
         // Where the last non-finite attempt of this step came from (see `nonfinite_source`).
@@ -417,6 +449,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             let landing = h * 1.01 >= span;
             if landing {
                 h = span;
+            } else {
+                // The step the time grid takes: t + h is rounded to a double, so the step is
+                // (t + h) − t (exact by Sterbenz). Far from t = 0 (t = 10⁹: ulp 1.2e-7) the
+                // requested h and the grid's differ, and stepping the state by one while the
+                // clock moves by the other loses accuracy in every step.
+                h = ((self.t + dir * h) - self.t).abs();
             }
             if h.is_nan() || h <= 10.0 * f64::EPSILON * self.t.abs() || h < 1e-300 {
                 // Shrinking towards a point where the flow stops being defined (√ of a
@@ -451,8 +489,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             let k = self.scheme.error_order();
             if err <= 1.0 {
                 let fac = self.ctrl.accepted(err, k);
+                let exact = self.scheme == Scheme::Exact;
                 self.accept(dir * h, landing, t_stop);
-                self.carry_pending = Some(dir * h);
+                // An exact step makes no error, and its flow (a function of θ alone) moves
+                // none: there is nothing to carry.
+                self.carry_pending = (!exact).then_some(dir * h);
                 self.h = h * fac;
                 self.update_stiffness();
                 return Ok(());
@@ -558,7 +599,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             Scheme::Tsit5 => self.explicit_attempt(&TSIT5, h),
             Scheme::Verner9 => self.explicit_attempt(&VERNER9, h),
             Scheme::Rodas5P => self.rosenbrock_attempt(h),
+            Scheme::Exact => self.exact_attempt(h),
         }
+    }
+
+    /// Y₁ = Y₀ + h·F₀ for a constant F (exact); the error estimate is zero.
+    fn exact_attempt(&mut self, h: f64) -> f64 {
+        let all = self.sys.all_parts();
+        self.ynew.copy_from(&self.y);
+        self.ynew.axpy(h, &self.k[0], all);
+        0.0
     }
 
     /// Commits the attempted step of signed length h.
@@ -583,7 +633,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
 
     /// Auto switching between Tsit5 and Rodas5P after an accepted step.
     fn update_stiffness(&mut self) {
-        if self.requested != Method::Auto {
+        if self.requested != Method::Auto || self.scheme == Scheme::Exact {
             return;
         }
         match self.scheme {
@@ -637,7 +687,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                     self.ctrl.reset(self.scheme.error_order());
                 }
             }
-            Scheme::Verner9 => {}
+            Scheme::Verner9 | Scheme::Exact => {}
         }
     }
 

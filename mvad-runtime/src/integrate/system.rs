@@ -154,6 +154,12 @@ pub trait OdeSystem {
     fn controls_all(&self) -> bool;
     /// `out = F(t, y)`.
     fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector);
+    /// Whether F is the same at every (t, Y) until the next restart (then Y(t + h) =
+    /// Y + h·F exactly, and the integrator takes [`crate::integrate::Scheme::Exact`] steps).
+    /// The default, `false`, is always safe.
+    fn constant_rate(&self) -> bool {
+        false
+    }
     /// Evaluations of F so far (including those for difference quotients).
     fn evals(&self) -> usize;
     /// The weighted RMS norm of the local error `e` of a step from `y0` to `y1`,

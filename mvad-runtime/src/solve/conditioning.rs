@@ -17,22 +17,38 @@ impl<M: HybridModel> Driver<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// Carries the estimate through user event k at t. Expects what `apply_event` has computed
+    /// Carries the estimate through occurrence j of user event k at t. Expects what `apply_event` has computed
     /// up to the event's costs: x⁻ in `y.x`, x⁺ in `x_plus`, f⁻, f⁺, ∇g at x⁻ in `gx`, the old
     /// bits in `sw` and the new in `sw_next`; `rate` = ∇g·f⁻ + ∂g/∂t and ℓ⁺ = `l_plus`.
-    pub(super) fn error_through_event(&mut self, k: usize, t: f64, rate: f64, l_plus: f64) {
+    pub(super) fn error_through_event(
+        &mut self,
+        k: usize,
+        j: usize,
+        t: f64,
+        rate: f64,
+        l_plus: f64,
+    ) {
         if self.integ.global_error_mut().is_none() {
             return;
         }
         let (model, p) = (self.model, self.p);
         if !self.sens {
             // `event_reset` computes R_x and R_t only for the sensitivities.
-            model.reset_jac(k, t, &self.y.x, p, &mut self.rx, &mut self.rp, &mut self.rt);
+            model.reset_jac(
+                k,
+                j,
+                t,
+                &self.y.x,
+                p,
+                &mut self.rx,
+                &mut self.rp,
+                &mut self.rt,
+            );
         }
         let l_minus = self.running_cost_minus(t);
         let phi_t = model.info().events[k]
             .has_cost
-            .then(|| model.event_cost_grad(k, t, &self.x_plus, p, &mut self.cx, &mut self.cp));
+            .then(|| model.event_cost_grad(k, j, t, &self.x_plus, p, &mut self.cx, &mut self.cp));
         self.error_jump(true, rate, (l_minus, l_plus), phi_t);
     }
 

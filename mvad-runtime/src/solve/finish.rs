@@ -49,7 +49,7 @@ where
                 rec.close_segment(t_end, self.mode, &self.sw);
                 rec.finish(t_end, &y.x, self.mode, &self.sw);
             }
-            cost = y.q + self.c_ev;
+            cost = y.q + self.c_ev.value();
             if sens {
                 grad.copy_from(&y.qp);
                 grad += &self.g_ev;

@@ -29,17 +29,20 @@ mod finish;
 mod jump;
 mod qp;
 mod record;
+mod schedule;
 mod zeno;
 
 use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
-use crate::event::{Scanner, Watch};
-use crate::integrate::{AugState, Forward, Integrator, OdeSystem};
+use crate::event::{Crossing, Scanner, Watch};
+use crate::integrate::{AugState, Forward, Integrator, OdeSystem, Scheme};
 use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::reduce::CompensatedSum;
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, GradientMode, Options, Solution};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 use record::Recorder;
+use schedule::Schedule;
 use std::time::Instant;
 use zeno::Zeno;
 
@@ -178,6 +181,13 @@ where
     Ok(())
 }
 
+/// The resolution of the time t in the event loop, 16 ulp: a located crossing is that close
+/// to the true one, a state event's state is snapped onto its guard only that far, and a time
+/// event due that soon after an instant joins it (no step that short can be taken).
+fn time_resolution(t: f64) -> f64 {
+    16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE
+}
+
 /// All state and buffers of one run (allocated once in `new`).
 struct Driver<'a, M: HybridModel>
 where
@@ -200,6 +210,9 @@ where
     /// Scratch: switching functions at exactly zero when the bits are first decided.
     sw_undecided: Switches,
     scanner: Scanner,
+    /// Every watched function active since the last restart is an affine guard (see
+    /// [`HybridModel::guard_is_affine`]): on an exact step the scanner needs only its ends.
+    affine_watch: bool,
     xs: OVector<f64, M::N>,
     xe: OVector<f64, M::N>,
     x_plus: OVector<f64, M::N>,
@@ -219,11 +232,15 @@ where
     obs_minus: Vec<f64>,
     obs_plus: Vec<f64>,
     /// Accumulated event costs Σ φ_k and their total derivatives.
-    c_ev: f64,
+    c_ev: CompensatedSum,
     g_ev: OVector<f64, M::P>,
     fired: Vec<bool>,
+    /// Occurrence indices and next times of the events (the time events' source).
+    schedule: Schedule,
     /// User events applied so far.
     nevents: usize,
+    /// Of those, the `at each` events (which never count towards `max_events`).
+    table_events: usize,
     diagnostics: Vec<Diagnostic>,
     switch_crossings: usize,
     zeno: Zeno<M>,
@@ -279,6 +296,7 @@ where
             sw_next: Switches::new(info.switches),
             sw_undecided: Switches::new(info.switches),
             scanner: Scanner::new(nev, info.switches),
+            affine_watch: false,
             xs: vn(),
             xe: vn(),
             x_plus: vn(),
@@ -297,10 +315,12 @@ where
             cp: vp(),
             obs_minus: vec![0.0; nobs],
             obs_plus: vec![0.0; nobs],
-            c_ev: 0.0,
+            c_ev: CompensatedSum::default(),
             g_ev: vp(),
             fired: vec![false; nev],
+            schedule: Schedule::new(nev),
             nevents: 0,
+            table_events: 0,
             diagnostics: Vec::new(),
             switch_crossings: 0,
             zeno: Zeno::new(model),
@@ -338,6 +358,9 @@ where
     fn switch_bits(&mut self, t: f64, x_is_plus: bool, keep: bool) {
         let nsw = self.model.info().switches;
         self.sw_next.clear();
+        if nsw == 0 {
+            return;
+        }
         self.sw_undecided.clear();
         let mut undecided = false;
         for j in 0..nsw {
@@ -404,8 +427,12 @@ where
     fn restart(&mut self, t: f64) -> Result<(), SolveError> {
         let info = self.model.info();
         let nev = info.events.len();
+        self.affine_watch = true;
         for w in 0..self.scanner.len() {
-            let active = w >= nev || info.events[w].armed_in(self.mode);
+            // Time events are not watched: the loop steps onto their times.
+            let active =
+                w >= nev || (info.events[w].armed_in(self.mode) && !info.events[w].is_time_event());
+            self.affine_watch &= !active || (w < nev && self.model.guard_is_affine(w));
             let v = if active {
                 Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
             } else {
@@ -433,9 +460,9 @@ where
         SolveError::NonFinite { t, what }
     }
 
-    /// The event loop: step, scan the step's dense output for crossings, truncate at the
-    /// earliest, apply it (user events first; switch flips only when no user event fires
-    /// there), restart, until T or a stop at an accumulation.
+    /// The event loop: step towards T or the next time of a time event, scan the step's
+    /// dense output for crossings, truncate at the earliest, apply what fires there (see
+    /// [`Driver::fire_at`]), restart, until T or a stop at an accumulation.
     fn run(&mut self, sink: &mut impl EventSink) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
@@ -446,18 +473,35 @@ where
         }
         self.switch_bits(0.0, false, false);
         std::mem::swap(&mut self.sw, &mut self.sw_next);
+        self.schedule.start(model, p)?;
         self.restart(0.0)?;
         let nev = info.events.len();
-        while self.integ.t() < self.t_end {
-            self.integ.step(self.t_end)?;
-            // Simultaneity is judged relative to the time resolution where the events are,
-            // never to the horizon: the answer must not depend on how far T lies beyond them.
-            let sim_tol = self.opts.simultaneous_tol * self.integ.t().abs().max(1.0);
+        loop {
+            let t = self.integ.t();
+            let t_next = self.schedule.next_in_mode(model, p, self.mode, t)?;
+            if t_next <= t + time_resolution(t) {
+                // The last step landed on a time event (or one is due at the start).
+                self.y.copy_from(self.integ.y());
+                if let Some(rec) = &mut self.rec {
+                    rec.close_segment(t, self.mode, &self.sw);
+                }
+                self.scanner.found.clear();
+                if self.fire_at(t, sink)? {
+                    return Ok(());
+                }
+                continue;
+            }
+            if t >= self.t_end {
+                return Ok(());
+            }
+            self.integ.step(self.t_end.min(t_next))?;
             // The step's full dense output is needed only to sample guards or to record.
             if self.rec.is_some() || self.scanner.active.iter().any(|&a| a) {
                 self.integ.ensure_dense();
             }
             let (t0, t1) = (self.integ.t_prev(), self.integ.t());
+            let sim_tol = self.simultaneity(t1);
+            let linear = self.affine_watch && self.integ.scheme() == Scheme::Exact;
             let sw = &self.sw;
             {
                 let integ = &self.integ;
@@ -479,7 +523,7 @@ where
                     integ.dense_x(t, xe);
                     Self::signed(model, p, nev, sw, w, t, xe)
                 };
-                let res = self.scanner.scan(t0, t1, sample, eval, sim_tol);
+                let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
                 if let Err((w, t)) = res {
                     return Err(self.guard_nonfinite(w, t));
                 }
@@ -500,45 +544,76 @@ where
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(te, self.mode, &self.sw);
             }
-            let nfound = self.scanner.found.len();
-            let mut user = 0;
-            let mut stop = false;
-            for i in 0..nfound {
-                let c = self.scanner.found[i];
-                if let Watch::Event(k) = self.scanner.watch(c.w) {
-                    user += 1;
-                    stop |= self.apply_event(k, te, sink)?;
-                }
-            }
-            if user == 0 {
-                for i in 0..nfound {
-                    let c = self.scanner.found[i];
-                    if let Watch::Switch(j) = self.scanner.watch(c.w) {
-                        self.apply_switch(j, te)?;
-                    }
-                }
-            }
-            if user > 1 {
-                self.report_simultaneous(te);
-            }
-            let total = self.nevents + self.switch_crossings;
-            if total > self.opts.max_events {
-                return Err(SolveError::MaxEvents {
-                    t: te,
-                    count: self.opts.max_events,
-                });
-            }
-            if stop {
+            if self.fire_at(te, sink)? {
                 return Ok(());
             }
-            // Seed the first step after the jump with the step size in use before it (the
-            // error control still shrinks a seed that is too long): Hairer's start-up
-            // heuristic would otherwise spend 3–4 growing steps on every segment.
-            let h_seed = self.integ.last_step_size();
-            self.restart(te)?;
-            self.integ.set_step_size(h_seed);
         }
-        Ok(())
+    }
+
+    /// The window within which events at t count as simultaneous: relative to the time
+    /// resolution where the events are, never to the horizon (the answer must not depend on
+    /// how far T lies beyond them).
+    fn simultaneity(&self, t: f64) -> f64 {
+        self.opts.simultaneous_tol * t.abs().max(1.0)
+    }
+
+    /// Applies everything that fires at t, `self.y` holding x(t⁻): the crossings in
+    /// `scanner.found` and the time events armed in the current mode that are due by
+    /// t + [`time_resolution`]; user events in declaration order, switch flips only when
+    /// no user event fires. Then checks the event budget and restarts. Returns true when the
+    /// run must stop (an accumulation).
+    fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<bool, SolveError> {
+        let info = self.model.info();
+        // A time event joins this instant only if it is due within the resolution of t (a
+        // step to it would be too short to take); one a little later fires at its own time.
+        let due = t + time_resolution(t);
+        for (k, ev) in info.events.iter().enumerate() {
+            if ev.is_time_event() && ev.armed_in(self.mode) && self.schedule.time(k) <= due {
+                self.scanner.found.push(Crossing { w: k, t });
+            }
+        }
+        self.scanner.found.sort_unstable_by_key(|c| c.w);
+        let nfound = self.scanner.found.len();
+        let mut user = 0;
+        let mut stop = false;
+        for i in 0..nfound {
+            let c = self.scanner.found[i];
+            if let Watch::Event(k) = self.scanner.watch(c.w) {
+                user += 1;
+                stop |= self.apply_event(k, t, sink)?;
+            }
+        }
+        if user == 0 {
+            for i in 0..nfound {
+                let c = self.scanner.found[i];
+                if let Watch::Switch(j) = self.scanner.watch(c.w) {
+                    self.apply_switch(j, t)?;
+                }
+            }
+        }
+        if user > 1 {
+            self.report_simultaneous(t);
+        }
+        // Events from a table never count: their number is the table's, not a flood. Nor
+        // does one state event (or switch crossing) per table row: a queue drains once per
+        // arrival at most. A flood is many more than that.
+        let total = self.nevents - self.table_events + self.switch_crossings;
+        if total > self.opts.max_events.saturating_add(self.table_events) {
+            return Err(SolveError::MaxEvents {
+                t,
+                count: self.opts.max_events,
+            });
+        }
+        if stop {
+            return Ok(true);
+        }
+        // Seed the first step after the jump with the step size in use before it (the
+        // error control still shrinks a seed that is too long): Hairer's start-up
+        // heuristic would otherwise spend 3–4 growing steps on every segment.
+        let h_seed = self.integ.last_step_size();
+        self.restart(t)?;
+        self.integ.set_step_size(h_seed);
+        Ok(false)
     }
 
     /// The `simultaneous_events` diagnostic for the user events among the crossings found

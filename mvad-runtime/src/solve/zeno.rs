@@ -197,7 +197,7 @@ where
         grazing: bool,
         cosine: f64,
     ) -> Option<(f64, f64)> {
-        let c = self.y.q + self.c_ev;
+        let c = self.y.q + self.c_ev.value();
         let snap = self.zeno.slot();
         snap.t = t;
         snap.x.copy_from(&self.x_plus);

@@ -382,11 +382,21 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
             .1
     }
-    fn reset(&self, k: usize, t: f64, x: &V, p: &V, xp: &mut V) {
+    fn reset(&self, k: usize, _j: usize, t: f64, x: &V, p: &V, xp: &mut V) {
         self.spec
             .reset(k, t, x.as_slice(), p.as_slice(), xp.as_mut_slice());
     }
-    fn reset_jac(&self, k: usize, t: f64, x: &V, p: &V, rx: &mut Mx, rp: &mut Mx, rt: &mut V) {
+    fn reset_jac(
+        &self,
+        k: usize,
+        _j: usize,
+        t: f64,
+        x: &V,
+        p: &V,
+        rx: &mut Mx,
+        rp: &mut Mx,
+        rt: &mut V,
+    ) {
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
         let mut r = vec![D::c(0.0); self.n()];
         self.spec.reset(k, td, &xd, &pd, &mut r);
@@ -435,10 +445,19 @@ impl<T: Spec> HybridModel for AdModel<T> {
         })
         .0
     }
-    fn event_cost(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
+    fn event_cost(&self, k: usize, _j: usize, t: f64, x: &V, p: &V) -> f64 {
         self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
     }
-    fn event_cost_grad(&self, k: usize, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
+    fn event_cost_grad(
+        &self,
+        k: usize,
+        _j: usize,
+        t: f64,
+        x: &V,
+        p: &V,
+        cx: &mut V,
+        cp: &mut V,
+    ) -> f64 {
         self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.event_cost(k, t, x, p))
             .1
     }
@@ -494,6 +513,7 @@ pub fn ev(
         target,
         has_reset: true,
         has_cost,
+        trigger: mvad_runtime::Trigger::Guard,
     }
 }
 

@@ -11,7 +11,6 @@ use clap::Args;
 use mvad::json::grad_json;
 use mvad::qp::QpLayerInfo;
 use mvad::runtime::solution::Solution;
-use mvad::runtime::solve::solve;
 use mvad::setup::check_mode;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::DefaultAllocator;
@@ -20,7 +19,7 @@ use super::output::{
     diagnostics_text, g, json_text, more_events, param_header, Table, MAX_EVENT_ROWS,
 };
 use super::qp_output::qp_text;
-use super::{setup, setup_err, solve_err, CmdResult, Common};
+use super::{setup, setup_err, solve_listing, CmdResult, Common};
 
 /// Arguments of `mvad grad`.
 #[derive(Args, Debug)]
@@ -42,7 +41,7 @@ where
 {
     let mut s = setup(model, &args.common)?;
     s.opts.gradient_mode = check_mode(&args.mode).map_err(setup_err)?;
-    let sol = solve(model, &s.params, &s.opts).map_err(solve_err)?;
+    let sol = solve_listing(model, &s, &args.common)?;
     let info = model.info();
     if args.common.json {
         Ok(json_text(&grad_json(info, model.qps(), &sol, &s.wrt)))
@@ -89,7 +88,7 @@ pub fn grad_text(
     s.push_str(&t.render());
     s.push_str(&qp_text(qps, &sol.qp));
 
-    s.push_str(&format!("\nevents ({}):\n", sol.events.len()));
+    s.push_str(&format!("\nevents ({}):\n", sol.stats.events));
     if !sol.events.is_empty() {
         // t' and the atoms are forward quantities: an adjoint run's events have neither.
         let with_dt = sol.events.iter().all(|e| !e.dt.is_empty());
@@ -127,7 +126,7 @@ pub fn grad_text(
             t.row(row);
         }
         s.push_str(&t.render());
-        s.push_str(&more_events(sol.events.len()));
+        s.push_str(&more_events(sol.stats.events));
 
         // Jumps and atoms of the observables that jump.
         let mut t = Table::new(&param_header(
@@ -163,7 +162,7 @@ pub fn grad_text(
         } else {
             s.push_str("\natoms α = −J t' of the observables that jump:\n");
             s.push_str(&t.render());
-            s.push_str(&more_events(sol.events.len()));
+            s.push_str(&more_events(sol.stats.events));
         }
     }
     let diags = diagnostics_text(&sol.diagnostics);

@@ -12,8 +12,9 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use mvad::runtime::error::SolveError;
-use mvad::runtime::solution::{GradientMode, Method};
+use mvad::runtime::solution::{GradientMode, Method, Solution};
 use mvad::setup::{params_with, resolve, Request, Setup, SetupError, Spelling};
+use mvad::table::TableSource;
 use mvad::{HybridModel, ModelAlloc, ModelInfo};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
@@ -95,6 +96,40 @@ pub struct Common {
     /// Print one JSON object instead of tables.
     #[arg(long)]
     pub json: bool,
+    /// Read data table NAME from FILE instead of the file the model names (repeatable).
+    #[arg(long = "table", value_name = "NAME=FILE")]
+    pub table: Vec<String>,
+    /// List every event in the JSON output (by default the first 1000; `stats.events`
+    /// always counts all of them).
+    #[arg(long = "all-events")]
+    pub all_events: bool,
+}
+
+impl Common {
+    /// The `--table NAME=FILE` replacements.
+    pub fn tables(&self) -> Result<Vec<(String, TableSource)>, CliError> {
+        self.table
+            .iter()
+            .map(|item| match item.split_once('=') {
+                Some((name, file)) if !name.trim().is_empty() && !file.trim().is_empty() => Ok((
+                    name.trim().to_string(),
+                    TableSource::File(PathBuf::from(file.trim())),
+                )),
+                _ => Err(CliError::Input(format!(
+                    "error: --table expects NAME=FILE, got `{item}`"
+                ))),
+            })
+            .collect()
+    }
+
+    /// How many events the JSON output lists.
+    pub fn event_limit(&self) -> usize {
+        if self.all_events {
+            usize::MAX
+        } else {
+            mvad::json::MAX_JSON_EVENTS
+        }
+    }
 }
 
 /// Why a command did not succeed, with the exit status it maps to.
@@ -134,13 +169,14 @@ pub type CmdResult = Result<String, CliError>;
 
 /// Parses `args` and runs the command; never panics on any input.
 ///
-/// `load` turns the model path into a model, or into the rendered error (exit 2).
+/// `load` turns the model path and the `--table` replacements into a model, or into the
+/// rendered error (exit 2).
 pub fn run<I, M, L>(args: I, load: L) -> ExitCode
 where
     I: IntoIterator<Item = OsString>,
     M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
-    L: FnOnce(&Path) -> Result<M, String>,
+    L: FnOnce(&Path, &[(String, TableSource)]) -> Result<M, String>,
 {
     let cli = match Cli::try_parse_from(args) {
         Ok(cli) => cli,
@@ -208,7 +244,7 @@ fn dispatch<M, L>(cli: &Cli, load: L) -> CmdResult
 where
     M: HybridModel + Clone + Send,
     DefaultAllocator: ModelAlloc<M::N, M::P>,
-    L: FnOnce(&Path) -> Result<M, String>,
+    L: FnOnce(&Path, &[(String, TableSource)]) -> Result<M, String>,
 {
     let Some(common) = cli.common() else {
         return match &cli.command {
@@ -216,7 +252,8 @@ where
             _ => Err(CliError::Input("error: no model given".into())),
         };
     };
-    let model = load(&common.model).map_err(CliError::Input)?;
+    let tables = common.tables()?;
+    let model = load(&common.model, &tables).map_err(CliError::Input)?;
     let file = common.model.display().to_string();
     match &cli.command {
         Command::Check(a) => check::run(&model, &file, a),
@@ -299,6 +336,7 @@ where
         atol: common.atol,
         method: Method::from_name(&common.method).unwrap_or_default(),
         grazing_tol: common.grazing_tol,
+        tables: common.tables()?,
         // `grad` sets its own `--mode`; every other command is forward mode's.
         mode: GradientMode::Forward,
     };
@@ -357,6 +395,19 @@ pub fn check_step(step: f64) -> Result<(), CliError> {
             "error: --step must be in (0, 1), got {step}"
         )))
     }
+}
+
+/// Solves at the setup's parameters, keeping the first `common.event_limit()` events only
+/// (`mvad::json::solve_listing`).
+pub fn solve_listing<M: HybridModel>(
+    model: &M,
+    s: &Setup<M>,
+    common: &Common,
+) -> Result<Solution, CliError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    mvad::json::solve_listing(model, &s.params, &s.opts, common.event_limit()).map_err(solve_err)
 }
 
 /// Maps a runtime failure to an exit status: bad input (options, parameters, horizon)

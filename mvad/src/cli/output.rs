@@ -138,7 +138,7 @@ pub const MAX_LISTED_TIMES: usize = 5;
 pub fn more_events(total: usize) -> String {
     if total > MAX_EVENT_ROWS {
         format!(
-            "… and {} more events (--json prints all)\n",
+            "… and {} more events (--json lists 1000, --all-events all)\n",
             total - MAX_EVENT_ROWS
         )
     } else {
@@ -232,7 +232,7 @@ mod tests {
         assert_eq!(more_events(MAX_EVENT_ROWS), "");
         assert_eq!(
             more_events(12_000),
-            "… and 11980 more events (--json prints all)\n"
+            "… and 11980 more events (--json lists 1000, --all-events all)\n"
         );
     }
 

@@ -84,6 +84,7 @@ where
         let events: Vec<Value> = sol
             .events
             .iter()
+            .take(args.common.event_limit())
             .map(|e| trajectory_event_json(info, e))
             .collect();
         m.insert("events".into(), Value::Array(events));

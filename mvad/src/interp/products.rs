@@ -177,11 +177,26 @@ impl ModelAdjoint for InterpretedModel {
         );
     }
 
-    fn reset_vjp(&self, event: usize, t: f64, x: &X, p: &X, mu: &X, vx: &mut X, vp: &mut X) -> f64 {
+    #[allow(clippy::too_many_arguments)]
+    fn reset_vjp(
+        &self,
+        event: usize,
+        j: usize,
+        t: f64,
+        x: &X,
+        p: &X,
+        mu: &X,
+        vx: &mut X,
+        vp: &mut X,
+    ) -> f64 {
         let (n, np) = (self.n, self.p);
         let sizes = mu.len() == n && vx.len() == n && vp.len() == np;
+        let row = self.tables.row(event, j);
         let mut sc = self.scratch.borrow_mut();
-        let at = pt0(t, x, p);
+        let at = At {
+            row: &row,
+            ..pt0(t, x, p)
+        };
         let e = self.events.get(event).filter(|_| sizes);
         let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
             vx.fill(f64::NAN);

@@ -1,0 +1,417 @@
+//! Data tables: CSV files read once (the `csv` crate) into columns of `f64`, and bound to
+//! the columns a model reads.
+//!
+//! A table file has a header row of column names (identifiers), then numeric rows; blank
+//! lines and lines starting with `#` are skipped. Every error is located in the file, as
+//! `FILE:LINE:COL: error: MESSAGE` with the line quoted and a caret under the offending
+//! field: a file that cannot be read, a bad number, a row of the wrong length, a missing
+//! column, times that decrease.
+//!
+//! Both doors take their tables at run time: a loaded model reads the files its `table`
+//! declarations name (or the ones `--table NAME=FILE` gives), and a model compiled by
+//! `hybrid!` is built from a struct with one [`Table`] per declaration, so one binary runs
+//! on any data.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use mvad_dsl::diag::{render, Diagnostic};
+use mvad_dsl::Span;
+
+/// Where a table came from, for error messages (the file name and its text).
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Source {
+    file: String,
+    /// The text (empty for tables built in memory).
+    text: String,
+    /// Byte offset of each data row's line, and of the header (`header`).
+    row_starts: Vec<usize>,
+    header: usize,
+}
+
+/// Where a table's data come from when a caller replaces the file its declaration names
+/// (`--table NAME=FILE`, or `tables=` in Python).
+#[derive(Clone, Debug, PartialEq)]
+pub enum TableSource {
+    /// A CSV file (relative to the working directory).
+    File(PathBuf),
+    /// Columns already in memory.
+    Data(Table),
+}
+
+/// A data table: named columns of equal length.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Table {
+    names: Vec<String>,
+    columns: Vec<Vec<f64>>,
+    source: Source,
+}
+
+/// A located error in a table (or a table that could not be read); `Display` gives the
+/// rendered text, `FILE:LINE:COL: error: ...` first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableError {
+    /// The file name (or the table's name for a table built in memory).
+    pub file: String,
+    /// 1-based line and column.
+    pub line: usize,
+    /// 1-based column (in characters).
+    pub col: usize,
+    /// What is wrong.
+    pub message: String,
+    rendered: String,
+}
+
+impl fmt::Display for TableError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.rendered.trim_end())
+    }
+}
+
+impl std::error::Error for TableError {}
+
+impl TableError {
+    fn located(src: &Source, span: Span, message: String) -> TableError {
+        let diag = Diagnostic::new(span, message.clone());
+        let rendered = render(&src.file, &src.text, std::slice::from_ref(&diag));
+        let (line, col) = mvad_dsl::SourceFile::new(&src.file, &src.text).line_col(span.start);
+        TableError {
+            file: src.file.clone(),
+            line,
+            col,
+            message,
+            rendered,
+        }
+    }
+
+    fn unlocated(file: &str, message: String) -> TableError {
+        TableError {
+            file: file.to_string(),
+            line: 1,
+            col: 1,
+            rendered: format!("{file}:1:1: error: {message}"),
+            message,
+        }
+    }
+}
+
+impl Table {
+    /// A table from columns held in memory (`name` is used in error messages); every column
+    /// must have the same length.
+    pub fn from_columns(name: &str, columns: Vec<(String, Vec<f64>)>) -> Result<Table, TableError> {
+        let rows = columns.first().map_or(0, |(_, c)| c.len());
+        if let Some((n, c)) = columns.iter().find(|(_, c)| c.len() != rows) {
+            return Err(TableError::unlocated(
+                name,
+                format!("column `{n}` has {} rows, the first column {rows}", c.len()),
+            ));
+        }
+        let (names, columns) = columns.into_iter().unzip();
+        Ok(Table {
+            names,
+            columns,
+            source: Source {
+                file: name.to_string(),
+                ..Source::default()
+            },
+        })
+    }
+
+    /// Reads a CSV file.
+    pub fn read_csv(path: &Path) -> Result<Table, TableError> {
+        let file = path.display().to_string();
+        let bytes = std::fs::read(path)
+            .map_err(|e| TableError::unlocated(&file, format!("cannot read the table: {e}")))?;
+        let text = match String::from_utf8(bytes) {
+            Ok(t) => t,
+            Err(e) => {
+                let at = e.utf8_error().valid_up_to();
+                let text = String::from_utf8_lossy(e.as_bytes()).into_owned();
+                let src = Source {
+                    file,
+                    text,
+                    ..Source::default()
+                };
+                return Err(TableError::located(
+                    &src,
+                    Span::new(at, at + 1),
+                    "the table is not valid UTF-8 text".into(),
+                ));
+            }
+        };
+        Table::parse_csv(&file, text)
+    }
+
+    /// Parses CSV text; `file` names it in error messages.
+    pub fn parse_csv(file: &str, text: String) -> Result<Table, TableError> {
+        let mut src = Source {
+            file: file.to_string(),
+            text,
+            ..Source::default()
+        };
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .comment(Some(b'#'))
+            // Fields are trimmed here, not by the reader (its trimming allocates per record).
+            .flexible(true)
+            .from_reader(src.text.as_bytes());
+        let mut record = csv::StringRecord::new();
+        let mut names: Vec<String> = Vec::new();
+        let mut columns: Vec<Vec<f64>> = Vec::new();
+        loop {
+            let more = match reader.read_record(&mut record) {
+                Ok(m) => m,
+                Err(e) => {
+                    let at = e.position().map_or(0, |p| p.byte() as usize);
+                    let msg = format!("unreadable CSV: {e}");
+                    return Err(TableError::located(&src, Span::new(at, at + 1), msg));
+                }
+            };
+            if !more {
+                break;
+            }
+            let start = record.position().map_or(0, |p| p.byte() as usize);
+            if record.len() == 1 && record[0].trim().is_empty() {
+                continue; // a blank line
+            }
+            if names.is_empty() {
+                src.header = start;
+                for (i, field) in record.iter().map(str::trim).enumerate() {
+                    if !is_identifier(field) {
+                        let span = field_span(&src.text, start, i);
+                        let msg = format!(
+                            "column name `{field}` is not an identifier (letters, digits and `_`, \
+                             not starting with a digit)"
+                        );
+                        return Err(TableError::located(&src, span, msg));
+                    }
+                    if names.iter().any(|n| n == field) {
+                        let span = field_span(&src.text, start, i);
+                        let msg = format!("column `{field}` appears twice in the header");
+                        return Err(TableError::located(&src, span, msg));
+                    }
+                    names.push(field.to_string());
+                }
+                columns = vec![Vec::new(); names.len()];
+                continue;
+            }
+            if record.len() != names.len() {
+                let span = field_span(&src.text, start, record.len().min(names.len()));
+                let msg = format!(
+                    "this row has {} fields, the header {}",
+                    record.len(),
+                    names.len()
+                );
+                return Err(TableError::located(&src, span, msg));
+            }
+            for (i, field) in record.iter().map(str::trim).enumerate() {
+                match field.parse::<f64>() {
+                    Ok(v) if v.is_finite() => columns[i].push(v),
+                    _ => {
+                        let span = field_span(&src.text, start, i);
+                        let msg =
+                            format!("`{field}` in column `{}` is not a finite number", names[i]);
+                        return Err(TableError::located(&src, span, msg));
+                    }
+                }
+            }
+            src.row_starts.push(start);
+        }
+        if names.is_empty() {
+            let msg = "the table has no header row of column names".to_string();
+            return Err(TableError::located(&src, Span::new(0, 0), msg));
+        }
+        Ok(Table {
+            names,
+            columns,
+            source: src,
+        })
+    }
+
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.columns.first().map_or(0, Vec::len)
+    }
+
+    /// The column names, in file order.
+    pub fn column_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The values of column `name`.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        let i = self.names.iter().position(|n| n == name)?;
+        Some(&self.columns[i])
+    }
+
+    /// The error "the table has no column `name`", located at its header.
+    fn missing_column(&self, table: &str, name: &str) -> TableError {
+        let msg = format!(
+            "table `{table}` has no column `{name}`; its columns are {}",
+            self.names.join(", ")
+        );
+        let end = self.source.text[self.source.header..]
+            .find(['\n', '\r'])
+            .map_or(self.source.text.len(), |i| self.source.header + i);
+        TableError::located(&self.source, Span::new(self.source.header, end), msg)
+    }
+
+    /// The error "column `name` decreases" at row `row`.
+    fn decreasing(&self, table: &str, name: &str, row: usize, event: &str) -> TableError {
+        let i = self.names.iter().position(|n| n == name).unwrap_or(0);
+        let c = &self.columns[i];
+        let msg = format!(
+            "column `{name}` of table `{table}` decreases here ({} after {}): the times of \
+             event `{event}` must not decrease",
+            c[row],
+            c[row - 1]
+        );
+        match self.source.row_starts.get(row) {
+            Some(&start) => {
+                TableError::located(&self.source, field_span(&self.source.text, start, i), msg)
+            }
+            None => TableError::unlocated(&self.source.file, msg),
+        }
+    }
+}
+
+/// What a model needs from its tables.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TableNeeds<'a> {
+    /// The declared table names, in declaration order.
+    pub tables: Vec<&'a str>,
+    /// The columns read, as (table index, column name); column c of the model is entry c.
+    pub columns: Vec<(usize, &'a str)>,
+    /// Columns that are the bare times of an `at each` event: (column index, event name).
+    pub times: Vec<(usize, &'a str)>,
+}
+
+/// The columns a model reads, taken from its tables (one per declared table, in declaration
+/// order), with the number of rows of each table. Checks that every column exists and that
+/// the columns used bare as `at each` times do not decrease.
+pub fn bind_columns(
+    needs: &TableNeeds<'_>,
+    tables: &[&Table],
+) -> Result<(Vec<Vec<f64>>, Vec<usize>), TableError> {
+    let mut columns = Vec::with_capacity(needs.columns.len());
+    for &(t, name) in &needs.columns {
+        let (Some(table), Some(decl)) = (tables.get(t), needs.tables.get(t)) else {
+            return Err(TableError::unlocated(
+                name,
+                format!("no table given for column `{name}`"),
+            ));
+        };
+        match table.column(name) {
+            Some(c) => columns.push(c.to_vec()),
+            None => return Err(table.missing_column(decl, name)),
+        }
+    }
+    for &(c, event) in &needs.times {
+        let (t, name) = needs.columns[c];
+        if let Some(row) = columns[c].windows(2).position(|w| w[1] < w[0]) {
+            return Err(tables[t].decreasing(needs.tables[t], name, row + 1, event));
+        }
+    }
+    Ok((columns, tables.iter().map(|t| t.rows()).collect()))
+}
+
+/// Whether `s` is a column name: a letter or `_`, then letters, digits and `_`.
+fn is_identifier(s: &str) -> bool {
+    let mut chars = s.chars();
+    chars
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+/// The byte span of field `i` of the line starting at `start` (fields split at commas,
+/// blanks trimmed; the line's end for a missing field).
+fn field_span(text: &str, start: usize, i: usize) -> Span {
+    let end = text[start..]
+        .find(['\n', '\r'])
+        .map_or(text.len(), |k| start + k);
+    let line = &text[start..end];
+    let mut offset = 0;
+    for (k, field) in line.split(',').enumerate() {
+        if k == i {
+            let lead = field.len() - field.trim_start().len();
+            let a = start + offset + lead;
+            return Span::new(a, a + field.trim().len().max(1));
+        }
+        offset += field.len() + 1;
+    }
+    Span::new(end, end + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Table, TableError> {
+        Table::parse_csv("q.csv", text.to_string())
+    }
+
+    #[test]
+    fn reads_columns_skipping_comments_and_blank_lines() {
+        let t = parse("# arrivals\nt, s\n0.5, 1\n\n1.25,2e-1\n").expect("parses");
+        assert_eq!(t.rows(), 2);
+        assert_eq!(t.column("t"), Some(&[0.5, 1.25][..]));
+        assert_eq!(t.column("s"), Some(&[1.0, 0.2][..]));
+        assert_eq!(t.column("x"), None);
+    }
+
+    #[test]
+    fn errors_are_located_in_the_file() {
+        let e = parse("t,s\n1,2\n3,abc\n").unwrap_err();
+        assert_eq!((e.line, e.col), (3, 3), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("q.csv:3:3: error: `abc` in column `s` is not a finite number"),
+            "{e}"
+        );
+        assert!(e.to_string().contains("^^^"), "{e}");
+        let e = parse("t,s\n1,2\n3\n").unwrap_err();
+        assert_eq!(e.line, 3, "{e}");
+        let e = parse("t,1s\n").unwrap_err();
+        assert_eq!((e.line, e.col), (1, 3), "{e}");
+        let e = parse("# nothing\n").unwrap_err();
+        assert!(e.message.contains("no header"), "{e}");
+        let e = Table::read_csv(Path::new("/nonexistent/q.csv")).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent/q.csv:1:1: error: cannot read"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn binding_checks_columns_and_monotone_times() {
+        let t = parse("t,s\n1,2\n3,4\n2,5\n").expect("parses");
+        let needs = TableNeeds {
+            tables: vec!["arrivals"],
+            columns: vec![(0, "s"), (0, "t")],
+            times: vec![],
+        };
+        let (cols, rows) = bind_columns(&needs, &[&t]).expect("binds");
+        assert_eq!(cols, vec![vec![2.0, 4.0, 5.0], vec![1.0, 3.0, 2.0]]);
+        assert_eq!(rows, vec![3]);
+        let needs = TableNeeds {
+            times: vec![(1, "arrive")],
+            ..needs
+        };
+        let e = bind_columns(&needs, &[&t]).unwrap_err();
+        assert_eq!((e.line, e.col), (4, 1), "{e}");
+        assert!(e.message.contains("decreases"), "{e}");
+        let needs = TableNeeds {
+            tables: vec!["arrivals"],
+            columns: vec![(0, "w")],
+            times: vec![],
+        };
+        let e = bind_columns(&needs, &[&t]).unwrap_err();
+        assert_eq!((e.line, e.col), (1, 1), "{e}");
+        assert!(
+            e.message.contains("no column `w`; its columns are t, s"),
+            "{e}"
+        );
+    }
+}
