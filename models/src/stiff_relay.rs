@@ -174,6 +174,47 @@ mod tests {
         }
     }
 
+    /// Every entry of dC/dθ and C within 10× rtol of the closed form at every decade
+    /// rtol = 1e-3 … 1e-12 with the default options (`auto`, atol 1e-10), with no diagnostic:
+    /// issue 11's check of the stiff relay, whose dC/dτ was once 4.5× off at rtol ≥ 1e-6.
+    #[test]
+    fn every_gradient_entry_is_within_10x_rtol_at_every_decade_with_default_options() {
+        let m = StiffRelay::new();
+        let pp = StiffRelayParams::default();
+        let (c, g) = cost_closed(pp.tau, pp.rate, pp.lo, pp.hi);
+        for k in 3..=12 {
+            let rtol = 10f64.powi(-k);
+            let opts = Options {
+                rtol,
+                ..Options::default()
+            };
+            let sol = solve(&m, &pp.to_vector(), &opts).expect("runs");
+            let errs: Vec<f64> = sol
+                .gradient
+                .iter()
+                .zip(g)
+                .map(|(a, b)| ((a - b) / b).abs())
+                .collect();
+            let ec = ((sol.cost - c) / c).abs();
+            eprintln!(
+                "rtol {rtol:e}: dC/dθ rel errors {errs:?}, C {ec:.1e}, {} steps",
+                sol.stats.steps
+            );
+            assert!(
+                sol.diagnostics.is_empty(),
+                "rtol {rtol:e}: {:?}",
+                sol.diagnostics
+            );
+            assert!(ec <= 10.0 * rtol, "rtol {rtol:e}: C rel err {ec:.1e}");
+            for (j, e) in errs.iter().enumerate() {
+                assert!(
+                    *e <= 10.0 * rtol,
+                    "rtol {rtol:e}: dC/dθ[{j}] rel err {e:.1e}"
+                );
+            }
+        }
+    }
+
     /// dC/dτ of C = ∫₀³ y² dt in closed form: after k switches y is the τ = 0 triangle wave
     /// delayed by 2τk, so dC/dτ = Σ_k −2k·[y₀²] over segment k = −2·3·(0 − 0.25) = 1.5
     /// (segments 1 and 2 run between ±0.5, so only the last one, k = 3, counts).

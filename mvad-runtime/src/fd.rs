@@ -83,10 +83,11 @@ where
             ),
         });
     }
-    // Primal runs only.
+    // Primal runs only, without the global error estimate (a difference needs C alone).
     let opts = Options {
         sensitivities: false,
         record: false,
+        global_error: false,
         ..opts.clone()
     };
     let cp = solve_with(model, &plus, &opts, &mut ())?.cost;

@@ -39,8 +39,8 @@ pub use qp::{QpError, QpSolver};
 pub use sample::{sample, Samples};
 pub use sink::{EventCounts, EventSink, EventView, FirstEvents, Stream};
 pub use solution::{
-    Diagnostic, DiagnosticKind, EventRecord, GradientMode, Method, Options, Segment, Solution,
-    Stats, Trajectory,
+    Diagnostic, DiagnosticKind, ErrorEstimate, EventRecord, GradientMode, Method, Options, Segment,
+    Solution, Stats, Trajectory,
 };
 pub use solve::{solve, solve_with};
 pub use vjp::{vjp, Cotangents, Vjp};

@@ -119,6 +119,11 @@ pub struct Options {
     /// weighted by |θ_j| (on by default: a step size chosen for x alone can leave S wrong
     /// at every tolerance, e.g. a stiff lag whose S_τ ~ 1/τ is resolved only near events).
     pub sens_error_control: bool,
+    /// Carry a global error estimate along the run (the steps' local error estimates
+    /// transported to T by the linearised flow) and raise an `ill_conditioned` diagnostic when
+    /// it exceeds what the tolerances ask for by more than [`ILL_CONDITIONED_FACTOR`] (on by
+    /// default: local error control bounds each step's error, not the error at T).
+    pub global_error: bool,
     /// Compute sensitivities at all (false: primal simulation only).
     pub sensitivities: bool,
     /// Keep every accepted step with its dense output (for trajectories and measures).
@@ -142,6 +147,7 @@ impl Default for Options {
             max_events: 100_000,
             max_steps: 1_000_000,
             sens_error_control: true,
+            global_error: true,
             sensitivities: true,
             record: false,
             simultaneous_tol: 1e-12,
@@ -149,6 +155,11 @@ impl Default for Options {
         }
     }
 }
+
+/// An `ill_conditioned` diagnostic is raised when the run's global error estimate of C or of
+/// dC/dθ exceeds this many times the tolerance atol + rtol·|value| (the estimate is usually an
+/// overestimate by 10 to 200×, so the true error then exceeds the tolerance severalfold).
+pub const ILL_CONDITIONED_FACTOR: f64 = 1e3;
 
 /// Kinds of diagnostics (the spec's names).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -170,6 +181,10 @@ pub enum DiagnosticKind {
     /// A qp constraint is weakly active (slack and multiplier both zero): the solution map
     /// has a kink, and the gradient is one-sided.
     Kink,
+    /// The global error estimate of C or dC/dθ exceeds [`ILL_CONDITIONED_FACTOR`] times the
+    /// tolerance: the steps' errors reach T amplified (or not damped), so local error control
+    /// does not bound the answer's error.
+    IllConditioned,
 }
 
 impl DiagnosticKind {
@@ -184,6 +199,7 @@ impl DiagnosticKind {
             DiagnosticKind::MaxSteps => "max_steps",
             DiagnosticKind::SimultaneousEvents => "simultaneous_events",
             DiagnosticKind::Kink => "kink",
+            DiagnosticKind::IllConditioned => "ill_conditioned",
         }
     }
 }
@@ -233,6 +249,21 @@ pub struct EventRecord {
     /// α_k = −J_k t_k': `atoms[i][j]` for observable i and parameter j (rows empty when `dt`
     /// is).
     pub atoms: Vec<Vec<f64>>,
+}
+
+/// The run's global error estimate at T (see `integrate/global_error.rs`): absolute errors,
+/// usually an overestimate of the true ones.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ErrorEstimate {
+    /// Estimated error of C.
+    pub cost: f64,
+    /// Estimated error of dC/dθ, per parameter (empty without sensitivities).
+    pub gradient: Vec<f64>,
+    /// |error of C| / (atol + rtol |C|).
+    pub cost_ratio: f64,
+    /// max_j w_j |error of dC/dθ_j| / (atol + rtol max_j w_j |dC/dθ_j|), w_j = |θ_j| (1 for
+    /// θ_j = 0), the weighting of the sensitivities' error control (0 without sensitivities).
+    pub gradient_ratio: f64,
 }
 
 /// Work counters.
@@ -288,8 +319,10 @@ pub struct Solution {
     pub mode_final: usize,
     /// The user events that fired, in time order (switch crossings are not listed).
     pub events: Vec<EventRecord>,
-    /// Warnings of a run that finished (grazing, zeno, simultaneous_events).
+    /// Warnings of a run that finished (grazing, zeno, simultaneous_events, ill_conditioned).
     pub diagnostics: Vec<Diagnostic>,
+    /// The global error estimate of the run (`Options::global_error`), if it was carried.
+    pub error_estimate: Option<ErrorEstimate>,
     /// Work counters.
     pub stats: Stats,
     /// Dense record of x and S when `Options::record` was set.

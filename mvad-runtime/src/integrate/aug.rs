@@ -325,7 +325,7 @@ where
 /// sensitivities of size 1e8 whose rounding floor (ε·1e8) lies above any absolute
 /// tolerance, and one of size 1e8 has sensitivities too small to be controlled at all;
 /// weighted, every column is held to the accuracy the state itself is held to.
-pub(super) fn sens_weight(theta: f64) -> f64 {
+pub(crate) fn sens_weight(theta: f64) -> f64 {
     if theta != 0.0 && theta.is_finite() {
         theta.abs()
     } else {

@@ -126,6 +126,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// the cut.
     pub fn truncate(&mut self, t_cut: f64) {
         let t_cut = t_cut.clamp(self.t_prev.min(self.t), self.t_prev.max(self.t));
+        // The step ends at t_cut: the global error estimate is carried that far.
+        if self.carry_pending.is_some() {
+            self.carry_pending = Some(t_cut - self.t_prev);
+            self.carry_global_error();
+        }
         if t_cut == self.t {
             return;
         }

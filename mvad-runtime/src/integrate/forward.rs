@@ -38,6 +38,7 @@
 //! The S and q_θ orders are verified empirically in the tests.
 
 use super::aug::{weighted_rms, AugState};
+use super::global_error::GlobalError;
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem};
 use super::Integrator;
@@ -60,6 +61,11 @@ where
     /// dimension is dynamic (so no stage operation or copy touches n·p unused entries).
     sp: M::P,
     imp: ImplicitWork<M::N, M::P>,
+    /// The run's global error estimate (`Options::global_error`), with the tolerances that
+    /// weigh its split along the flow.
+    global: Option<GlobalError<M::N, M::P>>,
+    atol: f64,
+    rtol: f64,
 }
 
 /// Everything F needs, apart from the Rosenbrock buffers so both can be borrowed at once.
@@ -121,7 +127,8 @@ where
     fn sized(model: &'a M, p: &'a OVector<f64, M::P>, opts: &Options, narrow: bool) -> Self {
         let n = model.nstates();
         let np = model.nparams();
-        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
+        // The global error estimate factorises I − h f_x on stiff steps, whatever the method.
+        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock) || opts.global_error;
         let narrow = narrow && !opts.sensitivities && M::P::try_to_usize().is_none();
         let sp = if narrow { M::P::from_usize(0) } else { np };
         let zero_s = narrow && used && model.info().has_running_cost;
@@ -165,6 +172,9 @@ where
                 dt: AugState::zeros(rn, rsp),
                 base_valid: false,
             },
+            global: opts.global_error.then(|| GlobalError::new(n, sp)),
+            atol: opts.atol,
+            rtol: opts.rtol,
         }
     }
 
@@ -399,6 +409,44 @@ where
         ok_x && ok_s
     }
 
+    /// [`GlobalError::carry`] with f_x and ℓ_x at (t₀, x₀). The step's own
+    /// Rosenbrock Jacobian is gone by the time a step is carried (the step is carried once it
+    /// is known where it ends: at the next step, at a truncation, or at the end of the run), so
+    /// f_x and ℓ_x are evaluated here.
+    fn carry_global_error(
+        &mut self,
+        t0: f64,
+        y0: &Self::Vector,
+        f0: &Self::Vector,
+        h: f64,
+        le: &Self::Vector,
+    ) {
+        let Forward {
+            rhs,
+            imp,
+            global,
+            sens_err,
+            ..
+        } = self;
+        let Some(ge) = global else {
+            return;
+        };
+        let (model, p) = (rhs.model, rhs.p);
+        let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, p);
+        model.rhs_jac_x(pt, &mut imp.w.jac);
+        if rhs.has_rc {
+            model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut imp.lx0, &mut imp.lp0);
+        }
+        // f_x and ℓ_x now hold the carried step's start, not the next step's.
+        imp.base_valid = false;
+        let tols = (self.atol, self.rtol);
+        let autonomous = !model.rhs_depends_on_t(rhs.mode);
+        let pattern = &model.info().jacobian_sparsity[rhs.mode];
+        ge.carry(
+            le, f0, y0, tols, &mut imp.w, pattern, &imp.lx0, h, *sens_err, autonomous,
+        );
+    }
+
     fn invalidate(&mut self) {
         self.imp.base_valid = false;
         self.imp.w.invalidate();
@@ -454,5 +502,9 @@ where
     /// Current frozen switch bits.
     pub fn switches(&self) -> &Switches {
         &self.sys.rhs.sw
+    }
+    /// The run's global error estimate (`None` when `Options::global_error` is off).
+    pub fn global_error_mut(&mut self) -> Option<&mut GlobalError<M::N, M::P>> {
+        self.sys.global.as_mut()
     }
 }

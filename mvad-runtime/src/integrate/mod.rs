@@ -59,14 +59,17 @@ mod control;
 mod dense;
 mod explicit;
 mod forward;
+mod global_error;
 mod rosenbrock;
 pub mod system;
 mod tsit5;
 mod verner;
 
 pub use adjoint::{AdjState, Backward};
+pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
+pub use global_error::{GlobalError, Saltation};
 pub use system::{ImplicitSystem, OdeSystem, StageVector};
 
 use crate::solution::{Method, Options, Stats};
@@ -248,6 +251,9 @@ pub struct Integrator<Sys: OdeSystem> {
     r: Sys::Vector,
     /// Stage derivatives k_i (and for Verner, the interpolation stages).
     k: Vec<Sys::Vector>,
+    /// Signed length of the last accepted step while the system's global error estimate has
+    /// not been carried over it (see [`Integrator::carry_global_error`]).
+    carry_pending: Option<f64>,
     /// k[0] = F(t, y) holds (computed or taken over from the FSAL stage).
     k0_valid: bool,
     /// The last accepted step left F(t, y) in this stage slot (Tsit5: k₇; Verner: the first
@@ -299,6 +305,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             r: zero(),
             k: (0..slots).map(|_| zero()).collect(),
             k0_valid: false,
+            carry_pending: None,
             fsal_slot: None,
             ctrl: Controller::new(),
             lazy_dense: false,
@@ -319,6 +326,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// (t, y). The adaptive scheme in use is kept; [`Scheme::Exact`] replaces it while the
     /// system's F is constant.
     pub fn restart_at(&mut self, t: f64, y: &Sys::Vector) {
+        self.carry_global_error();
         if self.scheme != Scheme::Exact {
             self.adaptive = self.scheme;
         }
@@ -424,6 +432,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             return Ok(());
         }
         let dir = if t_stop > self.t { 1.0 } else { -1.0 };
+        self.carry_global_error();
         self.ensure_k0()?;
         if self.scheme == Scheme::Exact {
             // Exact: the first attempt lands on t_stop.
@@ -480,7 +489,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             let k = self.scheme.error_order();
             if err <= 1.0 {
                 let fac = self.ctrl.accepted(err, k);
+                let exact = self.scheme == Scheme::Exact;
                 self.accept(dir * h, landing, t_stop);
+                // An exact step makes no error, and its flow (a function of θ alone) moves
+                // none: there is nothing to carry.
+                self.carry_pending = (!exact).then_some(dir * h);
                 self.h = h * fac;
                 self.update_stiffness();
                 return Ok(());
@@ -508,6 +521,18 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let t_end = self.t + h;
         self.accept(h, true, t_end);
         Ok(err)
+    }
+
+    /// Carries the system's global error estimate over the last accepted step, if that is
+    /// still pending. A step is carried once it is known where it ends: when the next step
+    /// starts, when [`Integrator::truncate`] cuts it (over the cut length), at a restart, or
+    /// when the caller asks before reading the estimate (at the end of a run). Until then
+    /// t_prev, y_prev, k[0] = F(t_prev, y_prev) and the local error estimate are the step's.
+    pub fn carry_global_error(&mut self) {
+        if let Some(h) = self.carry_pending.take() {
+            self.sys
+                .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
+        }
     }
 
     /// Makes k[0] = F(t, y): from the FSAL stage of the last explicit step, or by evaluating.

@@ -207,6 +207,19 @@ pub trait ImplicitSystem: OdeSystem {
         r: &Self::Vector,
         k: &mut Self::Vector,
     ) -> bool;
+    /// Carries the system's global error estimate, if it keeps one, over the accepted step
+    /// from (t₀, Y₀) of signed length h (the step as it stands after any truncation), with
+    /// F(t₀, Y₀) = `f0` and the step's local error estimate `le` (see `global_error.rs`).
+    /// Does nothing by default.
+    fn carry_global_error(
+        &mut self,
+        _t0: f64,
+        _y0: &Self::Vector,
+        _f0: &Self::Vector,
+        _h: f64,
+        _le: &Self::Vector,
+    ) {
+    }
     /// Forgets J, F_t and the factors (new step start, restart, truncation).
     fn invalidate(&mut self);
     /// Evaluates the Jacobian of the primary flow at (t, y) and returns an estimate of its

@@ -21,6 +21,7 @@ where
     pub(super) fn finish(mut self) -> Result<(Solution, Option<Tape>), SolveError> {
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
         let mut fw = FinalWork::new(model);
+        self.integ.carry_global_error();
         let mut x_final = self.integ.y().x.clone();
         let mut s_final = self.integ.y().s.clone();
         let mut grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
@@ -74,6 +75,7 @@ where
                 what: "cost".into(),
             });
         }
+        let error_estimate = self.error_at_end(cost, &grad, &x_final, &f_end);
         let mut stats: Stats = self.integ.stats().clone();
         stats.events = self.nevents;
         stats.switch_crossings = self.switch_crossings;
@@ -94,6 +96,7 @@ where
             mode_final: self.mode,
             events: Vec::new(),
             diagnostics: self.diagnostics,
+            error_estimate,
             stats,
             trajectory,
         };

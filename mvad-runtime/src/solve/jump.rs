@@ -50,6 +50,7 @@ where
         let mode_before = self.mode;
         self.event_reset(k, j, t)?;
         let l_plus = self.event_costs(k, j, t)?;
+        self.error_through_event(k, j, t, approach.rate, l_plus);
         // Time events neither accumulate nor get stuck: their times are given.
         let zeno_stop = if timed {
             None
@@ -387,6 +388,7 @@ where
                 self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
             }
         }
+        self.error_through_switch(j, t);
         if let Some(rec) = &mut self.rec {
             let (x, modes) = (&self.y.x, (self.mode, self.mode));
             rec.jump(JumpKind::Switch(j), t, x, x, modes, &self.sw, &self.sw_next);

@@ -24,6 +24,7 @@
 //! [`zeno`] accumulations; [`record`] the trajectory record; [`finish`] the end of the run.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
+mod conditioning;
 mod finish;
 mod jump;
 mod qp;

@@ -1,0 +1,193 @@
+//! The driver's part of the global error estimate (the integrator carries it over the steps, see
+//! `integrate/global_error.rs`): its jump at every user event and switch crossing, and at T the
+//! estimated errors of C and dC/dθ, with an `ill_conditioned` diagnostic when either exceeds
+//! [`ILL_CONDITIONED_FACTOR`] times the tolerance atol + rtol·|value|.
+//!
+//! The parameters are weighed as the sensitivities' error control weighs them (column j by
+//! w_j = |θ_j|, 1 for θ_j = 0), so the gradient's error is measured as the change of C it
+//! predicts for relative changes of θ: max_j w_j |e_j| against max_j w_j |dC/dθ_j|.
+
+use super::Driver;
+use crate::integrate::{sens_weight, Saltation};
+use crate::model::{HybridModel, ModelAlloc};
+use crate::solution::{Diagnostic, DiagnosticKind, ErrorEstimate, ILL_CONDITIONED_FACTOR};
+use nalgebra::{Const, DefaultAllocator, OVector};
+
+impl<M: HybridModel> Driver<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Carries the estimate through occurrence j of user event k at t. Expects what `apply_event` has computed
+    /// up to the event's costs: x⁻ in `y.x`, x⁺ in `x_plus`, f⁻, f⁺, ∇g at x⁻ in `gx`, the old
+    /// bits in `sw` and the new in `sw_next`; `rate` = ∇g·f⁻ + ∂g/∂t and ℓ⁺ = `l_plus`.
+    pub(super) fn error_through_event(
+        &mut self,
+        k: usize,
+        j: usize,
+        t: f64,
+        rate: f64,
+        l_plus: f64,
+    ) {
+        if self.integ.global_error_mut().is_none() {
+            return;
+        }
+        let (model, p) = (self.model, self.p);
+        if !self.sens {
+            // `event_reset` computes R_x and R_t only for the sensitivities.
+            model.reset_jac(
+                k,
+                j,
+                t,
+                &self.y.x,
+                p,
+                &mut self.rx,
+                &mut self.rp,
+                &mut self.rt,
+            );
+        }
+        let l_minus = self.running_cost_minus(t);
+        let phi_t = model.info().events[k]
+            .has_cost
+            .then(|| model.event_cost_grad(k, j, t, &self.x_plus, p, &mut self.cx, &mut self.cp));
+        self.error_jump(true, rate, (l_minus, l_plus), phi_t);
+    }
+
+    /// Carries the estimate through the crossing of switching function j at t (identity
+    /// reset): x in `y.x`, f⁻ and f⁺ computed, the old bits in `sw` and the new in `sw_next`.
+    pub(super) fn error_through_switch(&mut self, j: usize, t: f64) {
+        if self.integ.global_error_mut().is_none() {
+            return;
+        }
+        let (model, p) = (self.model, self.p);
+        // `apply_switch` leaves ∇σ_j in `gx` only with sensitivities.
+        let gt = model.switch_grad(j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        let rate = self.gx.dot(&self.f_minus) + gt;
+        let l_minus = self.running_cost_minus(t);
+        let l_plus = if model.info().has_running_cost {
+            model.running_cost(&self.sw_next, t, &self.y.x, p)
+        } else {
+            0.0
+        };
+        self.error_jump(false, rate, (l_minus, l_plus), None);
+    }
+
+    /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, R_x and R_t from
+    /// them too when `reset` (else the identity), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event
+    /// cost, φ_t with φ_x in `cx`.
+    fn error_jump(
+        &mut self,
+        reset: bool,
+        rate: f64,
+        (l_minus, l_plus): (f64, f64),
+        phi_t: Option<f64>,
+    ) {
+        let s = Saltation {
+            rx: reset.then_some(&self.rx),
+            rt: reset.then_some(&self.rt),
+            f_minus: &self.f_minus,
+            f_plus: &self.f_plus,
+            gx: &self.gx,
+            rate,
+            l_minus,
+            l_plus,
+            cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
+        };
+        if let Some(ge) = self.integ.global_error_mut() {
+            ge.jump(&s, self.sens);
+        }
+    }
+
+    /// ℓ at (t, x⁻) under the old bits (0 without a running cost).
+    fn running_cost_minus(&self, t: f64) -> f64 {
+        if self.model.info().has_running_cost {
+            self.model.running_cost(&self.sw, t, &self.y.x, self.p)
+        } else {
+            0.0
+        }
+    }
+
+    /// The estimated errors at T of the run's C and dC/dθ (`grad`, meaningful with
+    /// sensitivities), with x(T) and f(T); pushes the `ill_conditioned` diagnostic when they
+    /// exceed what the tolerances ask for. `None` when no estimate was carried.
+    pub(super) fn error_at_end(
+        &mut self,
+        cost: f64,
+        grad: &OVector<f64, M::P>,
+        x_final: &OVector<f64, M::N>,
+        f_end: &OVector<f64, M::N>,
+    ) -> Option<ErrorEstimate> {
+        let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
+        let info = model.info();
+        let l_end = if info.has_running_cost {
+            model.running_cost(&self.sw, t_end, x_final, p)
+        } else {
+            0.0
+        };
+        let phi_x = if info.has_final_cost {
+            model.final_cost_grad(t_end, x_final, p, &mut self.cx, &mut self.cp);
+            Some(&self.cx)
+        } else {
+            None
+        };
+        let mut e_grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
+        let e_cost = self
+            .integ
+            .global_error_mut()?
+            .at_end(f_end, l_end, phi_x, sens, &mut e_grad);
+        let (atol, rtol) = (self.opts.atol, self.opts.rtol);
+        let cost_ratio = e_cost.abs() / (atol + rtol * cost.abs());
+        let weighted_max = |v: &OVector<f64, M::P>| {
+            v.iter()
+                .zip(p.iter())
+                .map(|(g, th)| (g * sens_weight(*th)).abs())
+                .fold(0.0, f64::max)
+        };
+        let (g_err, g_size) = if sens {
+            (weighted_max(&e_grad), weighted_max(grad))
+        } else {
+            (0.0, 0.0)
+        };
+        let gradient_ratio = g_err / (atol + rtol * g_size);
+        let mut parts = Vec::new();
+        if cost_ratio > ILL_CONDITIONED_FACTOR {
+            parts.push(describe("C", e_cost.abs(), cost.abs(), cost_ratio));
+        }
+        if gradient_ratio > ILL_CONDITIONED_FACTOR {
+            parts.push(describe("dC/dθ", g_err, g_size, gradient_ratio));
+        }
+        if !parts.is_empty() {
+            self.diagnostics.push(Diagnostic {
+                kind: DiagnosticKind::IllConditioned,
+                t: t_end,
+                message: format!(
+                    "global error estimate of {} (rtol {rtol:e}, atol {atol:e}): the steps' \
+                     local errors reach T amplified, or not damped, by the flow, so local error \
+                     control does not bound the result; tighten rtol and compare",
+                    parts.join(" and of ")
+                ),
+            });
+        }
+        Some(ErrorEstimate {
+            cost: e_cost,
+            gradient: if sens {
+                e_grad.iter().copied().collect()
+            } else {
+                Vec::new()
+            },
+            cost_ratio,
+            gradient_ratio,
+        })
+    }
+}
+
+/// "dC/dθ: 3.9e-3 relative, 2.6e5 × the tolerance".
+fn describe(what: &str, err: f64, size: f64, ratio: f64) -> String {
+    if size > 0.0 {
+        format!(
+            "{what}: {:.1e} relative, {ratio:.1e} × the tolerance",
+            err / size
+        )
+    } else {
+        format!("{what}: {err:.1e} absolute, {ratio:.1e} × the tolerance")
+    }
+}
