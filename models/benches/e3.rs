@@ -17,7 +17,7 @@ use criterion::{criterion_group, Criterion};
 use models::qp_kink::QpKink;
 use mvad::solution::Options;
 use mvad::solve::solve;
-use mvad::HybridModel;
+use mvad::{At, HybridModel};
 use nalgebra::SVector;
 use std::hint::black_box;
 
@@ -42,8 +42,8 @@ fn e3(c: &mut Criterion) {
         let p = &points[i % points.len()];
         i += 1;
         let (mut cx, mut cp) = (SVector::<f64, 0>::zeros(), SVector::<f64, 1>::zeros());
-        let j = model.final_cost(0.0, &x, black_box(p));
-        model.final_cost_grad(0.0, &x, p, &mut cx, &mut cp);
+        let j = model.final_cost(At::new(0.0, &x, black_box(p)));
+        model.final_cost_grad(At::new(0.0, &x, p), &mut cx, &mut cp);
         let kink = model.qp_kink();
         (j, cp[0], kink)
     };
@@ -88,8 +88,8 @@ fn main() {
             let p = &points[i % points.len()];
             acc += if which == "layer" {
                 let (mut cx, mut cp) = (SVector::<f64, 0>::zeros(), SVector::<f64, 1>::zeros());
-                model.final_cost(0.0, &x, black_box(p))
-                    + model.final_cost_grad(0.0, &x, p, &mut cx, &mut cp)
+                model.final_cost(At::new(0.0, &x, black_box(p)))
+                    + model.final_cost_grad(At::new(0.0, &x, p), &mut cx, &mut cp)
                     + cp[0]
                     + model.qp_kink().map_or(0.0, |_| 1.0)
             } else {

@@ -6,8 +6,8 @@
 pub mod counting;
 
 use crate::model::{
-    Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
-    ModelSens, Point, Switches,
+    At, Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
+    ModelSens, Occurrence, Point, Switches,
 };
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -125,30 +125,30 @@ impl HybridModel for Ball {
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
         false
     }
-    fn guard(&self, _k: usize, _t: f64, x: &X, _p: &Th) -> f64 {
+    fn guard(&self, _k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { x, .. } = at;
         x[0]
     }
-    fn guard_grad(&self, _k: usize, _t: f64, _x: &X, _p: &Th, gx: &mut X, gp: &mut Th) -> f64 {
+    fn guard_grad(&self, _k: usize, _at: At<'_, Self::N, Self::P>, gx: &mut X, gp: &mut Th) -> f64 {
         gx.fill(0.0);
         gx[0] = 1.0;
         gp.fill(0.0);
         0.0
     }
-    fn reset(&self, _k: usize, _j: usize, _t: f64, x: &X, p: &Th, xplus: &mut X) {
+    fn reset(&self, _occ: Occurrence, at: At<'_, Self::N, Self::P>, xplus: &mut X) {
+        let At { x, p, .. } = at;
         xplus[0] = x[0];
         xplus[1] = -p[0] * x[1];
     }
     fn reset_jac(
         &self,
-        _k: usize,
-        _j: usize,
-        _t: f64,
-        x: &X,
-        p: &Th,
+        _occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         rx: &mut OMatrix<f64, N, N>,
         rp: &mut OMatrix<f64, N, P>,
         rt: &mut X,
     ) {
+        let At { x, p, .. } = at;
         rx.fill(0.0);
         rx[(0, 0)] = 1.0;
         rx[(1, 1)] = -p[0];
@@ -156,58 +156,62 @@ impl HybridModel for Ball {
         rp[(1, 0)] = -x[1];
         rt.fill(0.0);
     }
-    fn switch_value(&self, _j: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
+    fn switch_value(&self, _j: usize, _at: At<'_, Self::N, Self::P>) -> f64 {
         0.0
     }
-    fn switch_grad(&self, _j: usize, _t: f64, _x: &X, _p: &Th, gx: &mut X, gp: &mut Th) -> f64 {
+    fn switch_grad(
+        &self,
+        _j: usize,
+        _at: At<'_, Self::N, Self::P>,
+        gx: &mut X,
+        gp: &mut Th,
+    ) -> f64 {
         zero_grad(gx, gp)
     }
-    fn observe(&self, _t: f64, x: &X, _p: &Th, y: &mut [f64]) {
+    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+        let At { x, .. } = at;
         y[0] = x[0];
         y[1] = x[1];
     }
-    fn observe_jac(&self, _t: f64, _x: &X, _p: &Th, yx: &mut [f64], yp: &mut [f64]) {
+    fn observe_jac(&self, _at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
         yx.fill(0.0);
         yx[0] = 1.0; // ∂height/∂h
         yx[3] = 1.0; // ∂velocity/∂v
         yp.fill(0.0);
     }
-    fn running_cost(&self, _sw: &Switches, _t: f64, x: &X, _p: &Th) -> f64 {
+    fn running_cost(&self, _sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { x, .. } = at;
         x[0]
     }
     fn running_cost_value_grad(
         &self,
         _sw: &Switches,
-        _t: f64,
-        x: &X,
-        _p: &Th,
+        at: At<'_, Self::N, Self::P>,
         lx: &mut X,
         lp: &mut Th,
     ) -> f64 {
+        let At { x, .. } = at;
         lx.fill(0.0);
         lx[0] = 1.0;
         lp.fill(0.0);
         x[0]
     }
-    fn event_cost(&self, _k: usize, _j: usize, _t: f64, _x: &X, _p: &Th) -> f64 {
+    fn event_cost(&self, _occ: Occurrence, _at: At<'_, Self::N, Self::P>) -> f64 {
         0.0
     }
     fn event_cost_grad(
         &self,
-        _k: usize,
-        _j: usize,
-        _t: f64,
-        _x: &X,
-        _p: &Th,
+        _occ: Occurrence,
+        _at: At<'_, Self::N, Self::P>,
         cx: &mut X,
         cp: &mut Th,
     ) -> f64 {
         zero_grad(cx, cp)
     }
-    fn final_cost(&self, _t: f64, _x: &X, _p: &Th) -> f64 {
+    fn final_cost(&self, _at: At<'_, Self::N, Self::P>) -> f64 {
         0.0
     }
-    fn final_cost_grad(&self, _t: f64, _x: &X, _p: &Th, cx: &mut X, cp: &mut Th) -> f64 {
+    fn final_cost_grad(&self, _at: At<'_, Self::N, Self::P>, cx: &mut X, cp: &mut Th) -> f64 {
         zero_grad(cx, cp)
     }
 }

@@ -13,8 +13,8 @@ pub mod fixtures;
 pub mod model;
 
 pub use model::{
-    Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
-    ModelSecondOrder, ModelSens, Point, Switches, Trigger,
+    At, Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
+    ModelSecondOrder, ModelSens, Occurrence, Point, Switches, Trigger,
 };
 
 pub mod adjoint;

@@ -16,7 +16,7 @@
 //! smooth on each step) and add Σ_k φ(t_k) α_k.
 
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{At, HybridModel, ModelAlloc};
 use crate::reduce::{aitken_iterated, integrate_adaptive};
 use crate::solution::{DiagnosticKind, Solution, Trajectory, TRAJ_NODES};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
@@ -78,7 +78,7 @@ where
             let t = a + (b - a) * i as f64 / (TRAJ_NODES - 1) as f64;
             let node = &traj.data[(k * TRAJ_NODES + i) * len..(k * TRAJ_NODES + i + 1) * len];
             x.as_mut_slice().copy_from_slice(&node[..n]);
-            model.observe_jac(t, &x, params, &mut yx, &mut yp);
+            model.observe_jac(At::new(t, &x, params), &mut yx, &mut yp);
             let at = nodes.len();
             nodes.extend_from_slice(&yp[observable * np..(observable + 1) * np]);
             add_density(

@@ -30,7 +30,9 @@
 use crate::qp::{QpError, QpLayerInfo, QpState, Side};
 
 pub mod differences;
+mod point;
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
+pub use point::{At, Occurrence, Point, Switches};
 
 /// Bound alias for the allocators a model's dimensions need (one line in every where-clause).
 pub trait ModelAlloc<N: Dim, P: Dim>:
@@ -42,135 +44,6 @@ impl<N: Dim, P: Dim, A> ModelAlloc<N, P> for A where
     A: Allocator<N> + Allocator<P> + Allocator<N, N> + Allocator<N, P> + Allocator<P, N>
 {
 }
-
-/// Frozen branches of the switching functions: bit j set iff σ_j's positive branch is active.
-///
-/// Any number of switching functions: bits 0..64 live in an inline word (so a model with at
-/// most 64 kinks never touches the heap, and generated code reads its bits from
-/// [`Switches::low_word`] with a constant mask); bits 64.. live in words allocated once, by
-/// [`Switches::new`], for the run. Copy one into another with `clone_from`, which reuses the
-/// destination's words, so no step or event allocates.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
-pub struct Switches {
-    lo: u64,
-    hi: Vec<u64>,
-}
-
-impl Switches {
-    /// All branches negative, with room for `n` switching functions.
-    pub fn new(n: usize) -> Self {
-        Switches {
-            lo: 0,
-            hi: vec![0; n.saturating_sub(64).div_ceil(64)],
-        }
-    }
-    /// Bits 0..64 from a word (for at most 64 switching functions).
-    pub fn from_bits(bits: u64) -> Self {
-        Switches {
-            lo: bits,
-            hi: Vec::new(),
-        }
-    }
-    /// Bits 0..64 (bit j of the word is bit j of the set).
-    #[inline(always)]
-    pub fn low_word(&self) -> u64 {
-        self.lo
-    }
-    /// Bit j: whether σ_j's positive branch is active (false beyond the allocated words).
-    #[inline(always)]
-    pub fn get(&self, j: usize) -> bool {
-        if j < 64 {
-            self.lo >> j & 1 != 0
-        } else {
-            self.hi
-                .get((j - 64) / 64)
-                .is_some_and(|w| w >> ((j - 64) % 64) & 1 != 0)
-        }
-    }
-    /// Sets bit j to `on` (grows the words if j is beyond them: allocate with [`Switches::new`]).
-    pub fn set(&mut self, j: usize, on: bool) {
-        let (w, b) = if j < 64 {
-            (&mut self.lo, j)
-        } else {
-            let k = (j - 64) / 64;
-            if k >= self.hi.len() {
-                self.hi.resize(k + 1, 0);
-            }
-            (&mut self.hi[k], (j - 64) % 64)
-        };
-        if on {
-            *w |= 1 << b;
-        } else {
-            *w &= !(1 << b);
-        }
-    }
-    /// Flips bit j.
-    pub fn flip(&mut self, j: usize) {
-        let on = self.get(j);
-        self.set(j, !on);
-    }
-    /// Clears every bit (keeps the words).
-    pub fn clear(&mut self) {
-        self.lo = 0;
-        if !self.hi.is_empty() {
-            self.hi.fill(0);
-        }
-    }
-    /// Bits 64.. as words: bit j ≥ 64 is bit (j − 64) % 64 of word (j − 64) / 64.
-    pub fn high_words(&self) -> &[u64] {
-        &self.hi
-    }
-}
-
-/// One evaluation point of the flow: mode m, frozen branches, t, x and θ.
-///
-/// The flow-side methods ([`HybridModel::rhs`] and its derivatives, and the capability
-/// products) take one `Point` instead of five arguments, so every source of flow
-/// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
-/// words, passed by value.
-pub struct Point<'a, N: Dim, P: Dim>
-where
-    DefaultAllocator: Allocator<N> + Allocator<P>,
-{
-    /// The mode m.
-    pub mode: usize,
-    /// The frozen branches of the switching functions.
-    pub sw: &'a Switches,
-    /// Time t.
-    pub t: f64,
-    /// State x.
-    pub x: &'a OVector<f64, N>,
-    /// Parameters θ.
-    pub p: &'a OVector<f64, P>,
-}
-
-impl<'a, N: Dim, P: Dim> Point<'a, N, P>
-where
-    DefaultAllocator: Allocator<N> + Allocator<P>,
-{
-    /// The point (m, sw, t, x, θ).
-    #[inline(always)]
-    pub fn new(
-        mode: usize,
-        sw: &'a Switches,
-        t: f64,
-        x: &'a OVector<f64, N>,
-        p: &'a OVector<f64, P>,
-    ) -> Self {
-        Point { mode, sw, t, x, p }
-    }
-}
-
-impl<N: Dim, P: Dim> Clone for Point<'_, N, P>
-where
-    DefaultAllocator: Allocator<N> + Allocator<P>,
-{
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<N: Dim, P: Dim> Copy for Point<'_, N, P> where DefaultAllocator: Allocator<N> + Allocator<P> {}
 
 /// The direction in which a guard g = LHS − RHS fires.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -371,13 +244,7 @@ where
     // ---- events -----------------------------------------------------------------------
 
     /// g_k(t, x, θ) = LHS − RHS of event k's guard.
-    fn guard(
-        &self,
-        event: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-    ) -> f64;
+    fn guard(&self, event: usize, at: At<'_, Self::N, Self::P>) -> f64;
     /// Whether the guard of event k is affine in (x, t) (its derivatives in x and t are
     /// functions of θ alone): on a segment of a constant flow
     /// ([`HybridModel::flow_is_constant`]) it is then affine in t and the event loop samples
@@ -390,34 +257,24 @@ where
     fn guard_grad(
         &self,
         event: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         gx: &mut OVector<f64, Self::N>,
         gp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// x⁺ = R_k(t, x⁻, θ) (the identity for states the reset block does not assign), at
     /// occurrence j of event k (see [`Trigger`]: for `at each` the table row whose values
     /// the reset reads).
-    #[allow(clippy::too_many_arguments)]
     fn reset(
         &self,
-        event: usize,
-        occurrence: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         xplus: &mut OVector<f64, Self::N>,
     );
     /// ∂R_k/∂x into `rx`, ∂R_k/∂θ into `rp`, ∂R_k/∂t into `rt`, at occurrence j.
-    #[allow(clippy::too_many_arguments)]
     fn reset_jac(
         &self,
-        event: usize,
-        occurrence: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         rx: &mut OMatrix<f64, Self::N, Self::N>,
         rp: &mut OMatrix<f64, Self::N, Self::P>,
         rt: &mut OVector<f64, Self::N>,
@@ -426,39 +283,30 @@ where
     /// τ_kj(θ): the time of occurrence j of time event k (for `at each`, row j of its table;
     /// for `every`, start + j·period; for `at`, j = 0). The default, for models without time
     /// events, is NaN.
-    fn event_time(&self, event: usize, occurrence: usize, p: &OVector<f64, Self::P>) -> f64 {
-        let _ = (event, occurrence, p);
+    fn event_time(&self, occ: Occurrence, p: &OVector<f64, Self::P>) -> f64 {
+        let _ = (occ, p);
         f64::NAN
     }
     /// ∂τ_kj/∂θ into `dtau` (NaN by default, like [`HybridModel::event_time`]).
     fn event_time_grad(
         &self,
-        event: usize,
-        occurrence: usize,
+        occ: Occurrence,
         p: &OVector<f64, Self::P>,
         dtau: &mut OVector<f64, Self::P>,
     ) {
-        let _ = (event, occurrence, p);
+        let _ = (occ, p);
         dtau.fill(f64::NAN);
     }
 
     // ---- switching functions ----------------------------------------------------------
 
     /// σ_j(t, x, θ).
-    fn switch_value(
-        &self,
-        j: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-    ) -> f64;
+    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64;
     /// ∇ₓσ_j into `gx`, ∂θσ_j into `gp`; returns ∂ₜσ_j.
     fn switch_grad(
         &self,
         j: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         gx: &mut OVector<f64, Self::N>,
         gp: &mut OVector<f64, Self::P>,
     ) -> f64;
@@ -466,71 +314,43 @@ where
     // ---- observables ------------------------------------------------------------------
 
     /// y = h(t, x, θ), one entry per observable.
-    fn observe(&self, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>, y: &mut [f64]);
+    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]);
     /// ∂h/∂x (row-major nobs×n) and ∂h/∂θ (row-major nobs×p).
-    fn observe_jac(
-        &self,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-        yx: &mut [f64],
-        yp: &mut [f64],
-    );
+    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]);
 
     // ---- cost -------------------------------------------------------------------------
 
-    /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors).
-    fn running_cost(
-        &self,
-        sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-    ) -> f64;
+    /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors), with the
+    /// frozen branches `sw`.
+    fn running_cost(&self, sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64;
     /// ℓ_x into `lx`, ℓ_θ into `lp`; returns the value ℓ (not ∂ℓ/∂t, which no caller needs).
     fn running_cost_value_grad(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         lx: &mut OVector<f64, Self::N>,
         lp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// φ_k(t, x⁺, θ): the `sum(EVENT, ..)` terms of event k, evaluated after its reset, at
     /// occurrence j.
-    fn event_cost(
-        &self,
-        event: usize,
-        occurrence: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-    ) -> f64;
+    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64;
     /// φ_x into `cx`, φ_θ into `cp`; returns φ_t (at occurrence j).
-    #[allow(clippy::too_many_arguments)]
     fn event_cost_grad(
         &self,
-        event: usize,
-        occurrence: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// Φ(T, x(T), θ): the `final(..)` terms.
-    fn final_cost(&self, t: f64, x: &OVector<f64, Self::N>, p: &OVector<f64, Self::P>) -> f64;
+    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64;
     /// Φ_x into `cx`, Φ_θ into `cp`; returns Φ_t.
     fn final_cost_grad(
         &self,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
-
     // ---- optimisation layers (qp) ------------------------------------------------------
     //
     // A model's qps are solved inside its evaluation methods (see `crate::qp::QpBank`); the
@@ -542,13 +362,8 @@ where
     }
     /// Every qp solved at (t, x, θ): solutions, multipliers and constraint statuses, for
     /// reports (it may allocate); the first failure as (qp index, error).
-    fn qp_states(
-        &self,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
-    ) -> Result<Vec<QpState>, (usize, QpError)> {
-        let _ = (t, x, p);
+    fn qp_states(&self, at: At<'_, Self::N, Self::P>) -> Result<Vec<QpState>, (usize, QpError)> {
+        let _ = at;
         Ok(Vec::new())
     }
     /// Chooses the one-sided derivative the qps give at a kink from now on (right by
@@ -577,7 +392,6 @@ where
     DefaultAllocator: ModelAlloc<Self::N, Self::P>,
 {
     /// f = f_m(t, x, θ) and Ṡ = f_x S + f_θ (n×p) at `pt`, with the frozen branches `pt.sw`.
-    #[allow(clippy::too_many_arguments)]
     fn rhs_sens(
         &self,
         pt: Point<'_, Self::N, Self::P>,
@@ -587,12 +401,11 @@ where
     ) where
         Self: HybridModel,
     {
-        let Point { mode, sw, t, x, p } = pt;
         let n = self.nstates();
         let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
-        self.rhs(Point::new(mode, sw, t, x, p), f);
-        self.rhs_jac_x(Point::new(mode, sw, t, x, p), &mut fx);
-        self.rhs_jac_p(Point::new(mode, sw, t, x, p), ds);
+        self.rhs(pt, f);
+        self.rhs_jac_x(pt, &mut fx);
+        self.rhs_jac_p(pt, ds);
         ds.gemm(1.0, &fx, s, 1.0);
     }
 }
@@ -607,7 +420,6 @@ where
 {
     /// λᵀf_x into `vx` (n) and λᵀf_θ into `vp` (p), for f = f_m(t, x, θ) at `pt`:
     /// vx_j = Σᵢ λᵢ ∂fᵢ/∂x_j, vp_k = Σᵢ λᵢ ∂fᵢ/∂θ_k. Both outputs are overwritten.
-    #[allow(clippy::too_many_arguments)]
     fn rhs_vjp(
         &self,
         pt: Point<'_, Self::N, Self::P>,
@@ -617,12 +429,11 @@ where
     ) where
         Self: HybridModel,
     {
-        let Point { mode, sw, t, x, p } = pt;
         let (n, np) = (self.nstates(), self.nparams());
         let mut fx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
         let mut fp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
-        self.rhs_jac_x(Point::new(mode, sw, t, x, p), &mut fx);
-        self.rhs_jac_p(Point::new(mode, sw, t, x, p), &mut fp);
+        self.rhs_jac_x(pt, &mut fx);
+        self.rhs_jac_p(pt, &mut fp);
         fx.tr_mul_to(lambda, vx);
         fp.tr_mul_to(lambda, vp);
     }
@@ -632,14 +443,10 @@ where
     /// returns μᵀ∂R_k/∂t: vx_j = Σᵢ μᵢ ∂Rᵢ/∂x_j, vp_k = Σᵢ μᵢ ∂Rᵢ/∂θ_k. Both outputs are
     /// overwritten. The transpose of the reset's linearisation, for the adjoint's jump at an
     /// event. The default forms ∂R/∂x, ∂R/∂θ and ∂R/∂t densely (it allocates them).
-    #[allow(clippy::too_many_arguments)]
     fn reset_vjp(
         &self,
-        event: usize,
-        occurrence: usize,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         mu: &OVector<f64, Self::N>,
         vx: &mut OVector<f64, Self::N>,
         vp: &mut OVector<f64, Self::P>,
@@ -651,7 +458,7 @@ where
         let mut rx = OMatrix::<f64, Self::N, Self::N>::zeros_generic(n, n);
         let mut rp = OMatrix::<f64, Self::N, Self::P>::zeros_generic(n, np);
         let mut rt = OVector::<f64, Self::N>::zeros_generic(n, nalgebra::Const::<1>);
-        self.reset_jac(event, occurrence, t, x, p, &mut rx, &mut rp, &mut rt);
+        self.reset_jac(occ, at, &mut rx, &mut rp, &mut rt);
         rx.tr_mul_to(mu, vx);
         rp.tr_mul_to(mu, vp);
         mu.dot(&rt)
@@ -664,7 +471,6 @@ where
     /// The default is a central difference of `rhs_vjp` with step ε = min(h_v, h_t) — h_v the
     /// step of the [`ModelSecondOrder`] defaults along v, h_t theirs in t — and allocates
     /// scratch; a model with symbolic second derivatives can give it exactly.
-    #[allow(clippy::too_many_arguments)]
     fn rhs_vjp_dir(
         &self,
         pt: Point<'_, Self::N, Self::P>,
@@ -683,13 +489,10 @@ where
     /// dℓ/dε (zeros and 0 without a running cost). The default is the central difference of
     /// [`HybridModel::running_cost_value_grad`] with the step of
     /// [`ModelAdjoint::rhs_vjp_dir`]; it allocates scratch.
-    #[allow(clippy::too_many_arguments)]
     fn running_cost_grad_dir(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         v: &OVector<f64, Self::N>,
         lx: &mut OVector<f64, Self::N>,
         lp: &mut OVector<f64, Self::P>,
@@ -697,7 +500,7 @@ where
     where
         Self: HybridModel,
     {
-        differences::running_cost_grad_dir(self, sw, t, x, p, v, lx, lp)
+        differences::running_cost_grad_dir(self, sw, at, v, lx, lp)
     }
 
     /// μᵀ∂x₀/∂θ into `vp` (p), overwritten: the initial state's share of an adjoint
@@ -735,7 +538,6 @@ where
 {
     /// (∂/∂x (f_x S + f_θ)) · v into `out` (n×p): out = Σᵢ vᵢ ∂(f_x S + f_θ)/∂xᵢ, the
     /// derivative of the sensitivity right-hand side along the state direction v.
-    #[allow(clippy::too_many_arguments)]
     fn rhs_sens_dir_x(
         &self,
         pt: Point<'_, Self::N, Self::P>,
@@ -764,37 +566,31 @@ where
     /// (∂/∂x (ℓ_x S + ℓ_θ)) · v into `out` (p): out = Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ, the
     /// derivative of the running cost's sensitivity integrand along v (with the frozen
     /// branches `sw`; zeros without a running cost).
-    #[allow(clippy::too_many_arguments)]
     fn running_cost_sens_dir_x(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         s: &OMatrix<f64, Self::N, Self::P>,
         v: &OVector<f64, Self::N>,
         out: &mut OVector<f64, Self::P>,
     ) where
         Self: HybridModel,
     {
-        differences::running_cost_sens_dir_x(self, sw, t, x, p, s, v, out);
+        differences::running_cost_sens_dir_x(self, sw, at, s, v, out);
     }
 
     /// ∂ₜ(ℓ_x S + ℓ_θ) into `out` (p), at fixed x and S, with the frozen branches `sw`;
     /// returns ∂ₜℓ (zeros and 0 without a running cost).
-    #[allow(clippy::too_many_arguments)]
     fn running_cost_sens_dt(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &OVector<f64, Self::N>,
-        p: &OVector<f64, Self::P>,
+        at: At<'_, Self::N, Self::P>,
         s: &OMatrix<f64, Self::N, Self::P>,
         out: &mut OVector<f64, Self::P>,
     ) -> f64
     where
         Self: HybridModel,
     {
-        differences::running_cost_sens_dt(self, sw, t, x, p, s, out)
+        differences::running_cost_sens_dt(self, sw, at, s, out)
     }
 }

@@ -19,7 +19,7 @@
 //! error (B' + B k ρ'/ρ) ρᵏ is not geometric): it is the derivative of the sum of the series,
 //! Σ_i ∂a_∞/∂a_i · da_i/dθ ([`aitken_weights`]), exact when a_k is exactly geometric.
 
-use crate::model::{HybridModel, ModelAlloc, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Switches};
 use nalgebra::{DefaultAllocator, OMatrix, OVector};
 
 /// Aitken's Δ² applied repeatedly: each pass maps every three consecutive values to their
@@ -251,21 +251,21 @@ where
 {
     let info = model.info();
     let phi = if info.has_final_cost {
-        model.final_cost(t, x, p)
+        model.final_cost(At::new(t, x, p))
     } else {
         0.0
     };
     if let Some(grad) = grad {
         let mut rate = 0.0;
         if info.has_final_cost {
-            let phi_t = model.final_cost_grad(t, x, p, &mut work.cx, &mut work.cp);
+            let phi_t = model.final_cost_grad(At::new(t, x, p), &mut work.cx, &mut work.cp);
             // Φ_x S + Φ_θ
             grad.gemv_tr(1.0, s, &work.cx, 1.0);
             *grad += &work.cp;
             rate += work.cx.dot(xdot) + phi_t;
         }
         if info.has_running_cost {
-            rate += model.running_cost(sw, t, x, p);
+            rate += model.running_cost(sw, At::new(t, x, p));
         }
         if rate != 0.0 {
             grad.axpy(rate, dt_end, 1.0);

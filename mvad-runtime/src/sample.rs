@@ -12,7 +12,7 @@
 
 use crate::error::SolveError;
 use crate::measure::add_density;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{At, HybridModel, ModelAlloc};
 use crate::solution::{Solution, Trajectory};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -93,13 +93,13 @@ where
         if !traj.sample_into(t, x.as_mut_slice(), &mut s) {
             return Err(SolveError::NotRecorded);
         }
-        model.observe(t, &x, params, &mut y);
+        model.observe(At::new(t, &x, params), &mut y);
         out.states.extend_from_slice(x.as_slice());
         out.observables.extend_from_slice(&y);
         if p == 0 {
             continue;
         }
-        model.observe_jac(t, &x, params, &mut yx, &mut yp);
+        model.observe_jac(At::new(t, &x, params), &mut yx, &mut yp);
         for o in 0..m {
             row.copy_from_slice(&yp[o * p..(o + 1) * p]);
             add_density(&yx[o * n..(o + 1) * n], &s, &mut row);

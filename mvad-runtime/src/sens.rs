@@ -24,7 +24,7 @@
 //!
 //! All functions write into caller-provided buffers and allocate nothing.
 
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 /// The gradient of what event k crosses at its occurrence j, at (t, x): ∇ₓg into `gx`, ∂θg
@@ -47,11 +47,11 @@ where
 {
     if model.info().events[k].is_time_event() {
         gx.fill(0.0);
-        model.event_time_grad(k, j, p, gp);
+        model.event_time_grad(Occurrence::new(k, j), p, gp);
         gp.neg_mut();
         1.0
     } else {
-        model.guard_grad(k, t, x, p, gx, gp)
+        model.guard_grad(k, At::new(t, x, p), gx, gp)
     }
 }
 

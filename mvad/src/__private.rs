@@ -8,8 +8,8 @@ pub use mvad_runtime::qp::{
     ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side,
 };
 pub use mvad_runtime::{
-    Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
-    ModelSens, Point, Switches, Trigger,
+    At, Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
+    ModelSens, Occurrence, Point, Switches, Trigger,
 };
 pub use nalgebra::{Const, OMatrix, OVector};
 

@@ -20,7 +20,9 @@ use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Inputs, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
 use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
-use mvad_runtime::{EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Switches, Trigger};
+use mvad_runtime::{
+    At, EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Occurrence, Switches, Trigger,
+};
 use nalgebra::{DMatrix, DVector, Dyn};
 
 use products::SecondTapes;
@@ -251,7 +253,7 @@ impl InterpretedModel {
 
     /// Has the qp bank solve every qp at the point of `at` (on the frozen active sets of a
     /// flow's point; with derivatives if `derivs`).
-    fn evaluate_qps(&self, at: &At<'_>, derivs: bool) {
+    fn evaluate_qps(&self, at: &TapeAt<'_>, derivs: bool) {
         let Point { t, x, p, .. } = at.pt;
         self.qp_bank
             .borrow_mut()
@@ -261,7 +263,7 @@ impl InterpretedModel {
     /// The closure that writes qp q's data (and Jacobian) at the point of `at`.
     fn qp_fill<'s>(
         &'s self,
-        at: &'s At<'_>,
+        at: &'s TapeAt<'_>,
     ) -> impl FnMut(usize, &mut [f64], Option<&mut [f64]>) + 's {
         move |q, data, jac| {
             let mut regs = self.qp_regs.borrow_mut();
@@ -274,7 +276,7 @@ impl InterpretedModel {
     }
 
     /// Runs `tape` into `regs` with the row of `at`, first solving the qps it reads.
-    fn run(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64]) -> bool {
+    fn run(&self, tape: &Tape, at: &TapeAt<'_>, regs: &mut [f64]) -> bool {
         if !tape.reads_qp() {
             let inputs = Inputs {
                 qp: QpValues::NONE,
@@ -297,7 +299,7 @@ impl InterpretedModel {
     }
 
     /// Runs `tape` and writes its dense output (zeros included) into `out`; NaN on failure.
-    fn eval(&self, tape: &Tape, at: &At<'_>, regs: &mut [f64], out: &mut [f64]) {
+    fn eval(&self, tape: &Tape, at: &TapeAt<'_>, regs: &mut [f64], out: &mut [f64]) {
         let ok = self.run(tape, at, regs);
         let fill = if ok { 0.0 } else { f64::NAN };
         out.iter_mut().take(tape.len()).for_each(|o| *o = fill);
@@ -314,7 +316,7 @@ impl InterpretedModel {
     fn with<R>(
         &self,
         tape: &Tape,
-        at: &At<'_>,
+        at: &TapeAt<'_>,
         f: impl FnOnce(bool, &[f64], &mut [f64]) -> R,
     ) -> R {
         let mut sc = self.scratch.borrow_mut();
@@ -324,7 +326,7 @@ impl InterpretedModel {
     }
 
     /// Writes a vector kernel into `v` (dense, zeros included).
-    fn vec_out(&self, tape: &Tape, at: &At<'_>, v: &mut X) {
+    fn vec_out(&self, tape: &Tape, at: &TapeAt<'_>, v: &mut X) {
         let mut sc = self.scratch.borrow_mut();
         self.eval(tape, at, &mut sc.regs, v.as_mut_slice());
     }
@@ -347,13 +349,13 @@ impl InterpretedModel {
         }
     }
 
-    fn mat(&self, tape: &Tape, at: &At<'_>, m: &mut M, cols: usize) {
+    fn mat(&self, tape: &Tape, at: &TapeAt<'_>, m: &mut M, cols: usize) {
         self.with(tape, at, |ok, regs, _| {
             Self::mat_out(tape, ok, regs, m, cols, 0)
         });
     }
 
-    fn scalar(&self, tape: &Tape, at: &At<'_>) -> f64 {
+    fn scalar(&self, tape: &Tape, at: &TapeAt<'_>) -> f64 {
         let mut sc = self.scratch.borrow_mut();
         let mut out = [0.0];
         self.eval(tape, at, &mut sc.regs, &mut out);
@@ -361,7 +363,7 @@ impl InterpretedModel {
     }
 
     /// Gradient kernel into `gx`, `gp`; returns the last slot.
-    fn grad(&self, g: &GradTapes, at: &At<'_>, gx: &mut X, gp: &mut X) -> f64 {
+    fn grad(&self, g: &GradTapes, at: &TapeAt<'_>, gx: &mut X, gp: &mut X) -> f64 {
         let (n, p) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out, .. } = &mut *sc;
@@ -384,7 +386,7 @@ fn copy_into(dst: &mut [f64], src: &[f64]) {
 /// An evaluation point for the tapes: [`Point`] carries switch bits 0..64, `hi` the rest;
 /// `frozen` is the whole switch set at a flow's point (qps are then solved on it); `row` the
 /// current row's column values (event methods of `at each` events).
-struct At<'a> {
+struct TapeAt<'a> {
     pt: Point<'a>,
     hi: &'a [u64],
     frozen: Option<&'a Switches>,
@@ -392,12 +394,12 @@ struct At<'a> {
 }
 
 /// The point (t, x, θ) under the frozen branches `sw` (flows and ℓ).
-fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
-    At {
+fn at_sw<'a>(at: At<'a, Dyn, Dyn>, sw: &'a Switches) -> TapeAt<'a> {
+    TapeAt {
         pt: Point {
-            t,
-            x: x.as_slice(),
-            p: p.as_slice(),
+            t: at.t,
+            x: at.x.as_slice(),
+            p: at.p.as_slice(),
             sw: sw.low_word(),
         },
         hi: sw.high_words(),
@@ -406,13 +408,18 @@ fn at_sw<'a>(t: f64, x: &'a X, p: &'a X, sw: &'a Switches) -> At<'a> {
     }
 }
 
+/// The flow point `pt` under its frozen branches.
+fn at_pt(pt: mvad_runtime::Point<'_, Dyn, Dyn>) -> TapeAt<'_> {
+    at_sw(pt.at(), pt.sw)
+}
+
 /// The point (t, x, θ) for pointwise functions (no frozen branches).
-fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
-    At {
+fn pt0(at: At<'_, Dyn, Dyn>) -> TapeAt<'_> {
+    TapeAt {
         pt: Point {
-            t,
-            x: x.as_slice(),
-            p: p.as_slice(),
+            t: at.t,
+            x: at.x.as_slice(),
+            p: at.p.as_slice(),
             sw: 0,
         },
         hi: &[],
@@ -422,16 +429,13 @@ fn pt0<'a>(t: f64, x: &'a X, p: &'a X) -> At<'a> {
 }
 
 /// The point (t, x, θ) at a table row, for the reset and event cost of an event.
-fn pt_row<'a>(t: f64, x: &'a X, p: &'a X, row: &'a [f64]) -> At<'a> {
-    At {
-        row,
-        ..pt0(t, x, p)
-    }
+fn pt_row<'a>(at: At<'a, Dyn, Dyn>, row: &'a [f64]) -> TapeAt<'a> {
+    TapeAt { row, ..pt0(at) }
 }
 
 /// The point for functions of θ alone (x₀, T).
-fn pt_theta(p: &X) -> At<'_> {
-    At {
+fn pt_theta(p: &X) -> TapeAt<'_> {
+    TapeAt {
         pt: Point {
             t: 0.0,
             x: &[],
@@ -481,30 +485,30 @@ impl HybridModel for InterpretedModel {
     }
 
     fn rhs(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, f: &mut X) {
-        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         match self.mode(mode) {
-            Some(m) => self.vec_out(&m.rhs, &at_sw(t, x, p, sw), f),
+            Some(m) => self.vec_out(&m.rhs, &at_pt(pt), f),
             None => f.fill(f64::NAN),
         }
     }
     fn rhs_jac_x(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fx: &mut M) {
-        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         match self.mode(mode) {
-            Some(m) => self.mat(&m.jac_x, &at_sw(t, x, p, sw), fx, self.n),
+            Some(m) => self.mat(&m.jac_x, &at_pt(pt), fx, self.n),
             None => fx.fill(f64::NAN),
         }
     }
     fn rhs_jac_p(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, fp: &mut M) {
-        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         match self.mode(mode) {
-            Some(m) => self.mat(&m.jac_p, &at_sw(t, x, p, sw), fp, self.p),
+            Some(m) => self.mat(&m.jac_p, &at_pt(pt), fp, self.p),
             None => fp.fill(f64::NAN),
         }
     }
     fn rhs_dt(&self, pt: mvad_runtime::Point<'_, Self::N, Self::P>, ft: &mut X) {
-        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         match self.mode(mode) {
-            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &at_sw(t, x, p, sw), ft),
+            Some(m) if m.depends_on_t => self.vec_out(&m.dt, &at_pt(pt), ft),
             Some(_) => ft.fill(0.0),
             None => ft.fill(f64::NAN),
         }
@@ -516,18 +520,24 @@ impl HybridModel for InterpretedModel {
         self.mode(mode).is_some_and(|m| m.constant)
     }
 
-    fn guard(&self, event: usize, t: f64, x: &X, p: &X) -> f64 {
+    fn guard(&self, event: usize, at: At<'_, Self::N, Self::P>) -> f64 {
         match self.events.get(event) {
-            Some(e) => self.scalar(&e.guard.value, &pt0(t, x, p)),
+            Some(e) => self.scalar(&e.guard.value, &pt0(at)),
             None => f64::NAN,
         }
     }
     fn guard_is_affine(&self, event: usize) -> bool {
         self.events.get(event).is_some_and(|e| e.affine_guard)
     }
-    fn guard_grad(&self, event: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
+    fn guard_grad(
+        &self,
+        event: usize,
+        at: At<'_, Self::N, Self::P>,
+        gx: &mut X,
+        gp: &mut X,
+    ) -> f64 {
         match self.events.get(event) {
-            Some(e) => self.grad(&e.guard, &pt0(t, x, p), gx, gp),
+            Some(e) => self.grad(&e.guard, &pt0(at), gx, gp),
             None => {
                 gx.fill(f64::NAN);
                 gp.fill(f64::NAN);
@@ -535,25 +545,23 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn reset(&self, event: usize, j: usize, t: f64, x: &X, p: &X, xplus: &mut X) {
+    fn reset(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>, xplus: &mut X) {
+        let Occurrence { event, j } = occ;
         let row = self.tables.row(event, j);
         match self.events.get(event) {
-            Some(e) => self.vec_out(&e.reset, &pt_row(t, x, p, &row), xplus),
+            Some(e) => self.vec_out(&e.reset, &pt_row(at, &row), xplus),
             None => xplus.fill(f64::NAN),
         }
     }
-    #[allow(clippy::too_many_arguments)]
     fn reset_jac(
         &self,
-        event: usize,
-        j: usize,
-        t: f64,
-        x: &X,
-        p: &X,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         rx: &mut M,
         rp: &mut M,
         rt: &mut X,
     ) {
+        let Occurrence { event, j } = occ;
         let Some(e) = self.events.get(event) else {
             rx.fill(f64::NAN);
             rp.fill(f64::NAN);
@@ -563,7 +571,7 @@ impl HybridModel for InterpretedModel {
         let (n, np) = (self.n, self.p);
         let tape = &e.reset_jac;
         let row = self.tables.row(event, j);
-        self.with(tape, &pt_row(t, x, p, &row), |ok, regs, out| {
+        self.with(tape, &pt_row(at, &row), |ok, regs, out| {
             Self::mat_out(tape, ok, regs, rx, n, 0);
             Self::mat_out(tape, ok, regs, rp, np, n * n);
             out[..n].fill(if ok { 0.0 } else { f64::NAN });
@@ -578,15 +586,18 @@ impl HybridModel for InterpretedModel {
         });
     }
 
-    fn event_time(&self, event: usize, j: usize, p: &X) -> f64 {
+    fn event_time(&self, occ: Occurrence, p: &X) -> f64 {
+        let Occurrence { event, j } = occ;
         self.time_of(event, j, p)
     }
-    fn event_time_grad(&self, event: usize, j: usize, p: &X, dtau: &mut X) {
+    fn event_time_grad(&self, occ: Occurrence, p: &X, dtau: &mut X) {
+        let Occurrence { event, j } = occ;
         self.time_grad_of(event, j, p, dtau);
     }
 
-    fn switch_value(&self, j: usize, t: f64, x: &X, p: &X) -> f64 {
-        let at = pt0(t, x, p);
+    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { t, x, p } = at;
+        let at = pt0(at);
         match self.switches.get(j) {
             Some(s) => self.scalar(&s.value, &at),
             // Past the kinks' switching functions: the qps' constraints.
@@ -599,8 +610,9 @@ impl HybridModel for InterpretedModel {
             ),
         }
     }
-    fn switch_grad(&self, j: usize, t: f64, x: &X, p: &X, gx: &mut X, gp: &mut X) -> f64 {
-        let at = pt0(t, x, p);
+    fn switch_grad(&self, j: usize, at: At<'_, Self::N, Self::P>, gx: &mut X, gp: &mut X) -> f64 {
+        let At { t, x, p } = at;
+        let at = pt0(at);
         match self.switches.get(j) {
             Some(s) => self.grad(s, &at, gx, gp),
             None => {
@@ -613,22 +625,22 @@ impl HybridModel for InterpretedModel {
         }
     }
 
-    fn observe(&self, t: f64, x: &X, p: &X, y: &mut [f64]) {
+    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
         if y.len() < self.info.observables.len() {
             return;
         }
         let mut sc = self.scratch.borrow_mut();
-        let at = pt0(t, x, p);
+        let at = pt0(at);
         self.eval(&self.observe, &at, &mut sc.regs, y);
     }
-    fn observe_jac(&self, t: f64, x: &X, p: &X, yx: &mut [f64], yp: &mut [f64]) {
+    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
         let nobs = self.info.observables.len();
         let (n, np) = (self.n, self.p);
         if yx.len() < nobs * n || yp.len() < nobs * np {
             return;
         }
         let tape = &self.observe_jac;
-        self.with(tape, &pt0(t, x, p), |ok, regs, _| {
+        self.with(tape, &pt0(at), |ok, regs, _| {
             let fill = if ok { 0.0 } else { f64::NAN };
             yx.iter_mut().take(nobs * n).for_each(|v| *v = fill);
             yp.iter_mut().take(nobs * np).for_each(|v| *v = fill);
@@ -648,23 +660,21 @@ impl HybridModel for InterpretedModel {
         });
     }
 
-    fn running_cost(&self, sw: &Switches, t: f64, x: &X, p: &X) -> f64 {
+    fn running_cost(&self, sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64 {
         match &self.running_cost {
-            Some(c) => self.scalar(&c.value, &at_sw(t, x, p, sw)),
+            Some(c) => self.scalar(&c.value, &at_sw(at, sw)),
             None => 0.0,
         }
     }
     fn running_cost_value_grad(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &X,
-        p: &X,
+        at: At<'_, Self::N, Self::P>,
         lx: &mut X,
         lp: &mut X,
     ) -> f64 {
         match &self.running_cost {
-            Some(c) => self.grad(c, &at_sw(t, x, p, sw), lx, lp),
+            Some(c) => self.grad(c, &at_sw(at, sw), lx, lp),
             None => {
                 lx.fill(0.0);
                 lp.fill(0.0);
@@ -672,27 +682,25 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn event_cost(&self, event: usize, j: usize, t: f64, x: &X, p: &X) -> f64 {
+    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64 {
+        let Occurrence { event, j } = occ;
         let row = self.tables.row(event, j);
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.scalar(&c.value, &pt_row(t, x, p, &row)),
+            Some(c) => self.scalar(&c.value, &pt_row(at, &row)),
             None => 0.0,
         }
     }
-    #[allow(clippy::too_many_arguments)]
     fn event_cost_grad(
         &self,
-        event: usize,
-        j: usize,
-        t: f64,
-        x: &X,
-        p: &X,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         cx: &mut X,
         cp: &mut X,
     ) -> f64 {
+        let Occurrence { event, j } = occ;
         let row = self.tables.row(event, j);
         match self.events.get(event).and_then(|e| e.cost.as_ref()) {
-            Some(c) => self.grad(c, &pt_row(t, x, p, &row), cx, cp),
+            Some(c) => self.grad(c, &pt_row(at, &row), cx, cp),
             None => {
                 cx.fill(0.0);
                 cp.fill(0.0);
@@ -700,15 +708,15 @@ impl HybridModel for InterpretedModel {
             }
         }
     }
-    fn final_cost(&self, t: f64, x: &X, p: &X) -> f64 {
+    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64 {
         match &self.final_cost {
-            Some(c) => self.scalar(&c.value, &pt0(t, x, p)),
+            Some(c) => self.scalar(&c.value, &pt0(at)),
             None => 0.0,
         }
     }
-    fn final_cost_grad(&self, t: f64, x: &X, p: &X, cx: &mut X, cp: &mut X) -> f64 {
+    fn final_cost_grad(&self, at: At<'_, Self::N, Self::P>, cx: &mut X, cp: &mut X) -> f64 {
         match &self.final_cost {
-            Some(c) => self.grad(c, &pt0(t, x, p), cx, cp),
+            Some(c) => self.grad(c, &pt0(at), cx, cp),
             None => {
                 cx.fill(0.0);
                 cp.fill(0.0);
@@ -720,8 +728,8 @@ impl HybridModel for InterpretedModel {
     fn qps(&self) -> &[QpLayerInfo] {
         &self.qp_info
     }
-    fn qp_states(&self, t: f64, x: &X, p: &X) -> Result<Vec<QpState>, (usize, QpError)> {
-        self.evaluate_qps(&pt0(t, x, p), false);
+    fn qp_states(&self, at: At<'_, Self::N, Self::P>) -> Result<Vec<QpState>, (usize, QpError)> {
+        self.evaluate_qps(&pt0(at), false);
         self.qp_bank.borrow().states()
     }
     fn set_qp_side(&self, side: Side) {
@@ -740,7 +748,7 @@ impl ModelSens for InterpretedModel {
         f: &mut X,
         ds: &mut M,
     ) {
-        let mvad_runtime::Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         let Some(m) = self.mode(mode) else {
             f.fill(f64::NAN);
             ds.fill(f64::NAN);
@@ -755,7 +763,7 @@ impl ModelSens for InterpretedModel {
         }
         let mut sc = self.scratch.borrow_mut();
         let Scratch { regs, out, .. } = &mut *sc;
-        let at = at_sw(t, x, p, sw);
+        let at = at_pt(pt);
         self.eval(&m.sens, &at, regs, out);
         copy_into(f.as_mut_slice(), &out[..n]);
         let fp = &out[n + nnz..n + nnz + n * np];

@@ -65,7 +65,9 @@ impl Rng {
     }
 }
 
-use mvad::{HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelSecondOrder, ModelSens};
+use mvad::{
+    At, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelSecondOrder, ModelSens, Occurrence,
+};
 use nalgebra::{DefaultAllocator, OMatrix, OVector};
 
 /// A model with the capability defaults: `Defaults(m)` answers every core method as `m` does
@@ -132,8 +134,8 @@ where
     fn flow_is_constant(&self, mode: usize) -> bool {
         self.0.flow_is_constant(mode)
     }
-    fn guard(&self, k: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
-        self.0.guard(k, t, x, p)
+    fn guard(&self, k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+        self.0.guard(k, at)
     }
     fn guard_is_affine(&self, k: usize) -> bool {
         self.0.guard_is_affine(k)
@@ -141,91 +143,77 @@ where
     fn guard_grad(
         &self,
         k: usize,
-        t: f64,
-        x: &Xv<M>,
-        p: &Pv<M>,
+        at: At<'_, Self::N, Self::P>,
         gx: &mut Xv<M>,
         gp: &mut Pv<M>,
     ) -> f64 {
-        self.0.guard_grad(k, t, x, p, gx, gp)
+        self.0.guard_grad(k, at, gx, gp)
     }
-    fn reset(&self, k: usize, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>, xplus: &mut Xv<M>) {
-        self.0.reset(k, j, t, x, p, xplus)
+    fn reset(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>, xplus: &mut Xv<M>) {
+        self.0.reset(occ, at, xplus)
     }
-    #[allow(clippy::too_many_arguments)]
     fn reset_jac(
         &self,
-        k: usize,
-        j: usize,
-        t: f64,
-        x: &Xv<M>,
-        p: &Pv<M>,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         rx: &mut Nn<M>,
         rp: &mut Np<M>,
         rt: &mut Xv<M>,
     ) {
-        self.0.reset_jac(k, j, t, x, p, rx, rp, rt)
+        self.0.reset_jac(occ, at, rx, rp, rt)
     }
-    fn event_time(&self, k: usize, j: usize, p: &Pv<M>) -> f64 {
-        self.0.event_time(k, j, p)
+    fn event_time(&self, occ: Occurrence, p: &Pv<M>) -> f64 {
+        self.0.event_time(occ, p)
     }
-    fn event_time_grad(&self, k: usize, j: usize, p: &Pv<M>, dtau: &mut Pv<M>) {
-        self.0.event_time_grad(k, j, p, dtau)
+    fn event_time_grad(&self, occ: Occurrence, p: &Pv<M>, dtau: &mut Pv<M>) {
+        self.0.event_time_grad(occ, p, dtau)
     }
-    fn switch_value(&self, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
-        self.0.switch_value(j, t, x, p)
+    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+        self.0.switch_value(j, at)
     }
     fn switch_grad(
         &self,
         j: usize,
-        t: f64,
-        x: &Xv<M>,
-        p: &Pv<M>,
+        at: At<'_, Self::N, Self::P>,
         gx: &mut Xv<M>,
         gp: &mut Pv<M>,
     ) -> f64 {
-        self.0.switch_grad(j, t, x, p, gx, gp)
+        self.0.switch_grad(j, at, gx, gp)
     }
-    fn observe(&self, t: f64, x: &Xv<M>, p: &Pv<M>, y: &mut [f64]) {
-        self.0.observe(t, x, p, y)
+    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+        self.0.observe(at, y)
     }
-    fn observe_jac(&self, t: f64, x: &Xv<M>, p: &Pv<M>, yx: &mut [f64], yp: &mut [f64]) {
-        self.0.observe_jac(t, x, p, yx, yp)
+    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
+        self.0.observe_jac(at, yx, yp)
     }
-    fn running_cost(&self, sw: &mvad::Switches, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
-        self.0.running_cost(sw, t, x, p)
+    fn running_cost(&self, sw: &mvad::Switches, at: At<'_, Self::N, Self::P>) -> f64 {
+        self.0.running_cost(sw, at)
     }
     fn running_cost_value_grad(
         &self,
         sw: &mvad::Switches,
-        t: f64,
-        x: &Xv<M>,
-        p: &Pv<M>,
+        at: At<'_, Self::N, Self::P>,
         lx: &mut Xv<M>,
         lp: &mut Pv<M>,
     ) -> f64 {
-        self.0.running_cost_value_grad(sw, t, x, p, lx, lp)
+        self.0.running_cost_value_grad(sw, at, lx, lp)
     }
-    fn event_cost(&self, k: usize, j: usize, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
-        self.0.event_cost(k, j, t, x, p)
+    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64 {
+        self.0.event_cost(occ, at)
     }
-    #[allow(clippy::too_many_arguments)]
     fn event_cost_grad(
         &self,
-        k: usize,
-        j: usize,
-        t: f64,
-        x: &Xv<M>,
-        p: &Pv<M>,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         cx: &mut Xv<M>,
         cp: &mut Pv<M>,
     ) -> f64 {
-        self.0.event_cost_grad(k, j, t, x, p, cx, cp)
+        self.0.event_cost_grad(occ, at, cx, cp)
     }
-    fn final_cost(&self, t: f64, x: &Xv<M>, p: &Pv<M>) -> f64 {
-        self.0.final_cost(t, x, p)
+    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64 {
+        self.0.final_cost(at)
     }
-    fn final_cost_grad(&self, t: f64, x: &Xv<M>, p: &Pv<M>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64 {
-        self.0.final_cost_grad(t, x, p, cx, cp)
+    fn final_cost_grad(&self, at: At<'_, Self::N, Self::P>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64 {
+        self.0.final_cost_grad(at, cx, cp)
     }
 }

@@ -5,7 +5,7 @@
 //! in x and t, and frozen switch bits picking the branch of each.
 
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc, Switches};
+use mvad::{At, HybridModel, ModelAlloc, Occurrence, Switches};
 use mvad_tests::Defaults;
 use nalgebra::{Const, DefaultAllocator, Matrix2x1, OMatrix, OVector, Vector1, Vector2, U1, U2};
 
@@ -108,7 +108,13 @@ fn reset_products_of(m: &impl HybridModel<N = U2, P = U2>) {
     let (xv, pv) = (Vector2::new(2.0, -0.5), Vector2::new(a, b));
     let mu = Vector2::new(1.5, -2.0);
     let (mut vx, mut vp) = (Vector2::zeros(), Vector2::zeros());
-    let vt = m.reset_vjp(0, 0, t, &xv, &pv, &mu, &mut vx, &mut vp);
+    let vt = m.reset_vjp(
+        Occurrence::new(0, 0),
+        At::new(t, &xv, &pv),
+        &mu,
+        &mut vx,
+        &mut vp,
+    );
     // R = (a x y + t, b t): R_x = [[a y, a x], [0, 0]], R_θ = [[x y, 0], [0, t]], R_t = (1, b).
     let (x, y) = (xv[0], xv[1]);
     let want_x = [mu[0] * a * y, mu[0] * a * x];
@@ -156,14 +162,14 @@ both_doors! {
 }
 
 /// x, θ and S (column-major) of a model at a point.
-type At<M> = (
+type Vecs<M> = (
     OVector<f64, <M as mvad::ModelDims>::N>,
     OVector<f64, <M as mvad::ModelDims>::P>,
     OMatrix<f64, <M as mvad::ModelDims>::N, <M as mvad::ModelDims>::P>,
 );
 
 /// Vectors of a model's sizes from slices.
-fn vecs<M: HybridModel>(m: &M, x: &[f64], p: &[f64], s: &[f64]) -> At<M>
+fn vecs<M: HybridModel>(m: &M, x: &[f64], p: &[f64], s: &[f64]) -> Vecs<M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
@@ -222,14 +228,14 @@ where
     close("Timed ∂ₜṠ", out.as_slice(), &want, tol);
     // Σᵢ vᵢ ∂(ℓ_x S + ℓ_θ)/∂xᵢ = v₀ (2bt S₀· + (0, 2xt)) + v₁ (1, 0).
     let mut o = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
-    m.running_cost_sens_dir_x(&sw, t, &xv, &pv, &sv, &v, &mut o);
+    m.running_cost_sens_dir_x(&sw, At::new(t, &xv, &pv), &sv, &v, &mut o);
     let want = [
         v[0] * 2.0 * b * t * s0a + v[1],
         v[0] * (2.0 * b * t * s0b + 2.0 * x * t),
     ];
     close("Timed D v", o.as_slice(), &want, tol);
     // ∂ₜ(ℓ_x S + ℓ_θ) = (2bx, 0)·S + (0, x²); ∂ₜℓ = b x².
-    let lt = m.running_cost_sens_dt(&sw, t, &xv, &pv, &sv, &mut o);
+    let lt = m.running_cost_sens_dt(&sw, At::new(t, &xv, &pv), &sv, &mut o);
     close(
         "Timed ∂ₜq̇_θ",
         o.as_slice(),
@@ -267,7 +273,7 @@ where
             tol,
         );
         let mut o = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
-        m.running_cost_sens_dir_x(&sw, 0.3, &xv, &pv, &sv, &vv, &mut o);
+        m.running_cost_sens_dir_x(&sw, At::new(0.3, &xv, &pv), &sv, &vv, &mut o);
         close("Kinked D v", o.as_slice(), &[sign * v], tol);
         let (mut vx, mut vp) = (xv.clone(), pv.clone());
         m.rhs_vjp(

@@ -14,7 +14,7 @@
 //! central differences of the first-derivative kernels (`rhs_sens`, `running_cost_value_grad`).
 
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{At, HybridModel, ModelAlloc, Occurrence};
 use mvad_tests::{model_files, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -244,12 +244,12 @@ where
     // ∂ₓ(ℓ_x S + ℓ_θ)·v, ∂ₜ(ℓ_x S + ℓ_θ) and ∂ₜℓ against differences of ℓ and its gradient.
     let lsens = |t: f64, x: &OVector<f64, M::N>| {
         let (mut lx, mut lp) = (zn(), zp());
-        let l = m.running_cost_value_grad(sw, t, x, &pv, &mut lx, &mut lp);
+        let l = m.running_cost_value_grad(sw, At::new(t, x, &pv), &mut lx, &mut lp);
         lp.gemv_tr(1.0, &s, &lx, 1.0);
         (l, lp.as_slice().to_vec())
     };
     let mut out = zp();
-    m.running_cost_sens_dir_x(sw, t, &x, &pv, &s, &v, &mut out);
+    m.running_cost_sens_dir_x(sw, At::new(t, &x, &pv), &s, &v, &mut out);
     compare(
         "D v",
         out.as_slice(),
@@ -257,7 +257,7 @@ where
         &lsens(t, &xd).1,
         2.0 * h,
     );
-    let lt = m.running_cost_sens_dt(sw, t, &x, &pv, &s, &mut out);
+    let lt = m.running_cost_sens_dt(sw, At::new(t, &x, &pv), &s, &mut out);
     let ((lu, su), (ld, sd)) = (lsens(tu, &x), lsens(td, &x));
     compare("∂ₜq̇_θ", out.as_slice(), &su, &sd, tu - td);
     compare("∂ₜℓ", &[lt], &[lu], &[ld], tu - td);
@@ -267,9 +267,21 @@ where
     for k in 0..info.events.len() {
         let what = |w: &str| format!("{} event {k} {w}", info.name);
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(
+            Occurrence::new(k, 0),
+            At::new(t, &x, &pv),
+            &mut rx,
+            &mut rp,
+            &mut rt,
+        );
         let (mut vx, mut vpp) = (zn(), zp());
-        let vt = m.reset_vjp(k, 0, t, &x, &pv, &lam, &mut vx, &mut vpp);
+        let vt = m.reset_vjp(
+            Occurrence::new(k, 0),
+            At::new(t, &x, &pv),
+            &lam,
+            &mut vx,
+            &mut vpp,
+        );
         assert_vjp(&what("μᵀR_x"), vx.as_slice(), &rows(&rx), mu);
         assert_vjp(&what("μᵀR_θ"), vpp.as_slice(), &rows(&rp), mu);
         assert_vjp(&what("μᵀR_t"), &[vt], rt.as_slice(), mu);
@@ -376,10 +388,10 @@ where
         if info.events[k].is_time_event() {
             // A time event has no guard: its time τ_kj(θ) (occurrence 1, so a period counts)
             // and ∂τ/∂θ; NaN for a table that is not bound here.
-            let tau = |q: &Pt| vec![m.event_time(k, 1, &vp(m, &q.p))];
+            let tau = |q: &Pt| vec![m.event_time(Occurrence::new(k, 1), &vp(m, &q.p))];
             if tau(pt)[0].is_finite() {
                 let mut dtau = zp();
-                m.event_time_grad(k, 1, &pv, &mut dtau);
+                m.event_time_grad(Occurrence::new(k, 1), &pv, &mut dtau);
                 fd_check(&format!("{what} time"), pt, Wrt::P, dtau.as_slice(), &tau);
             }
         } else {
@@ -387,18 +399,28 @@ where
                 m,
                 pt,
                 &format!("{what} guard"),
-                |t, x, p| m.guard(k, t, x, p),
-                |gx, gp| m.guard_grad(k, t, &x, &pv, gx, gp),
+                |t, x, p| m.guard(k, At::new(t, x, p)),
+                |gx, gp| m.guard_grad(k, At::new(t, &x, &pv), gx, gp),
             );
         }
 
         let r = |q: &Pt| {
             let mut xp = zn();
-            m.reset(k, 0, q.t, &vn(m, &q.x), &vp(m, &q.p), &mut xp);
+            m.reset(
+                Occurrence::new(k, 0),
+                At::new(q.t, &vn(m, &q.x), &vp(m, &q.p)),
+                &mut xp,
+            );
             xp.as_slice().to_vec()
         };
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, 0, t, &x, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(
+            Occurrence::new(k, 0),
+            At::new(t, &x, &pv),
+            &mut rx,
+            &mut rp,
+            &mut rt,
+        );
         fd_check_xpt(
             &format!("{what} reset"),
             pt,
@@ -410,8 +432,8 @@ where
             m,
             pt,
             &format!("{what} cost"),
-            |t, x, p| m.event_cost(k, 0, t, x, p),
-            |cx, cp| m.event_cost_grad(k, 0, t, &x, &pv, cx, cp),
+            |t, x, p| m.event_cost(Occurrence::new(k, 0), At::new(t, x, p)),
+            |cx, cp| m.event_cost_grad(Occurrence::new(k, 0), At::new(t, &x, &pv), cx, cp),
         );
     }
 
@@ -421,8 +443,8 @@ where
             m,
             pt,
             &format!("{} switch {j}", info.name),
-            |t, x, p| m.switch_value(j, t, x, p),
-            |gx, gp| m.switch_grad(j, t, &x, &pv, gx, gp),
+            |t, x, p| m.switch_value(j, At::new(t, x, p)),
+            |gx, gp| m.switch_grad(j, At::new(t, &x, &pv), gx, gp),
         );
     }
 
@@ -430,18 +452,18 @@ where
     let nobs = info.observables.len();
     let y = |q: &Pt| {
         let mut y = vec![0.0; nobs];
-        m.observe(q.t, &vn(m, &q.x), &vp(m, &q.p), &mut y);
+        m.observe(At::new(q.t, &vn(m, &q.x), &vp(m, &q.p)), &mut y);
         y
     };
     let (mut yx, mut yp) = (vec![9.0; nobs * n], vec![9.0; nobs * p]);
-    m.observe_jac(t, &x, &pv, &mut yx, &mut yp);
+    m.observe_jac(At::new(t, &x, &pv), &mut yx, &mut yp);
     fd_check(&format!("{} observe", info.name), pt, Wrt::X, &yx, &y);
     fd_check(&format!("{} observe", info.name), pt, Wrt::P, &yp, &y);
 
     // Costs.
-    let l = |q: &Pt| vec![m.running_cost(sw, q.t, &vn(m, &q.x), &vp(m, &q.p))];
+    let l = |q: &Pt| vec![m.running_cost(sw, At::new(q.t, &vn(m, &q.x), &vp(m, &q.p)))];
     let (mut lx, mut lp) = (zn(), zp());
-    let lv = m.running_cost_value_grad(sw, t, &x, &pv, &mut lx, &mut lp);
+    let lv = m.running_cost_value_grad(sw, At::new(t, &x, &pv), &mut lx, &mut lp);
     assert_eq!(lv, l(pt)[0], "running_cost_value_grad returns ℓ");
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
@@ -449,8 +471,8 @@ where
         m,
         pt,
         &format!("{} Φ", info.name),
-        |t, x, p| m.final_cost(t, x, p),
-        |cx, cp| m.final_cost_grad(t, &x, &pv, cx, cp),
+        |t, x, p| m.final_cost(At::new(t, x, p)),
+        |cx, cp| m.final_cost_grad(At::new(t, &x, &pv), cx, cp),
     );
 
     // x₀(θ) and T(θ).
@@ -475,7 +497,7 @@ where
 {
     let (x, p) = (vn(m, &pt.x), vp(m, &pt.p));
     (0..m.info().switches)
-        .filter(|&j| m.switch_value(j, pt.t, &x, &p) > 0.0)
+        .filter(|&j| m.switch_value(j, At::new(pt.t, &x, &p)) > 0.0)
         .fold(0, |w, j| w | (1 << j))
 }
 

@@ -9,7 +9,7 @@
 
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
 use mvad::interp::InterpretedModel;
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{At, HybridModel, ModelAlloc, Occurrence};
 use mvad_tests::{model_source, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -79,52 +79,69 @@ where
         put(format!("sens_ds{mode}"), ds.as_slice());
     }
     for k in 0..info.events.len() {
-        put(format!("g{k}"), &[m.guard(k, t, &xv, &pv)]);
+        put(format!("g{k}"), &[m.guard(k, At::new(t, &xv, &pv))]);
         let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.guard_grad(k, t, &xv, &pv, &mut gx, &mut gp);
+        let gt = m.guard_grad(k, At::new(t, &xv, &pv), &mut gx, &mut gp);
         put(format!("gx{k}"), gx.as_slice());
         put(format!("gp{k}"), gp.as_slice());
         put(format!("gt{k}"), &[gt]);
         let mut xp = zn();
-        m.reset(k, 0, t, &xv, &pv, &mut xp);
+        m.reset(Occurrence::new(k, 0), At::new(t, &xv, &pv), &mut xp);
         put(format!("R{k}"), xp.as_slice());
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(k, 0, t, &xv, &pv, &mut rx, &mut rp, &mut rt);
+        m.reset_jac(
+            Occurrence::new(k, 0),
+            At::new(t, &xv, &pv),
+            &mut rx,
+            &mut rp,
+            &mut rt,
+        );
         put(format!("Rx{k}"), rx.as_slice());
         put(format!("Rp{k}"), rp.as_slice());
         put(format!("Rt{k}"), rt.as_slice());
-        put(format!("phi{k}"), &[m.event_cost(k, 0, t, &xv, &pv)]);
+        put(
+            format!("phi{k}"),
+            &[m.event_cost(Occurrence::new(k, 0), At::new(t, &xv, &pv))],
+        );
         let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(k, 0, t, &xv, &pv, &mut cx, &mut cp);
+        let ct = m.event_cost_grad(
+            Occurrence::new(k, 0),
+            At::new(t, &xv, &pv),
+            &mut cx,
+            &mut cp,
+        );
         put(format!("phix{k}"), cx.as_slice());
         put(format!("phip{k}"), cp.as_slice());
         put(format!("phit{k}"), &[ct]);
     }
     for j in 0..info.switches {
-        put(format!("sigma{j}"), &[m.switch_value(j, t, &xv, &pv)]);
+        put(
+            format!("sigma{j}"),
+            &[m.switch_value(j, At::new(t, &xv, &pv))],
+        );
         let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.switch_grad(j, t, &xv, &pv, &mut gx, &mut gp);
+        let gt = m.switch_grad(j, At::new(t, &xv, &pv), &mut gx, &mut gp);
         put(format!("sigmax{j}"), gx.as_slice());
         put(format!("sigmap{j}"), gp.as_slice());
         put(format!("sigmat{j}"), &[gt]);
     }
     let nobs = info.observables.len();
     let mut y = vec![0.0; nobs];
-    m.observe(t, &xv, &pv, &mut y);
+    m.observe(At::new(t, &xv, &pv), &mut y);
     put("y".into(), &y);
     let (mut yx, mut yp) = (vec![7.0; nobs * x.len()], vec![7.0; nobs * p.len()]);
-    m.observe_jac(t, &xv, &pv, &mut yx, &mut yp);
+    m.observe_jac(At::new(t, &xv, &pv), &mut yx, &mut yp);
     put("yx".into(), &yx);
     put("yp".into(), &yp);
-    put("l".into(), &[m.running_cost(sw, t, &xv, &pv)]);
+    put("l".into(), &[m.running_cost(sw, At::new(t, &xv, &pv))]);
     let (mut lx, mut lp) = (zn(), zp());
-    let l2 = m.running_cost_value_grad(sw, t, &xv, &pv, &mut lx, &mut lp);
+    let l2 = m.running_cost_value_grad(sw, At::new(t, &xv, &pv), &mut lx, &mut lp);
     put("lx".into(), lx.as_slice());
     put("lp".into(), lp.as_slice());
     put("l2".into(), &[l2]);
-    put("Phi".into(), &[m.final_cost(t, &xv, &pv)]);
+    put("Phi".into(), &[m.final_cost(At::new(t, &xv, &pv))]);
     let (mut cx, mut cp) = (zn(), zp());
-    let ct = m.final_cost_grad(t, &xv, &pv, &mut cx, &mut cp);
+    let ct = m.final_cost_grad(At::new(t, &xv, &pv), &mut cx, &mut cp);
     put("Phix".into(), cx.as_slice());
     put("Phip".into(), cp.as_slice());
     put("Phit".into(), &[ct]);
@@ -170,7 +187,13 @@ where
     }
     for k in 0..m.info().events.len() {
         let (mut vx, mut vp) = (vec_n(x), zp());
-        let vt = m.reset_vjp(k, 0, t, &xv, &pv, &lam, &mut vx, &mut vp);
+        let vt = m.reset_vjp(
+            Occurrence::new(k, 0),
+            At::new(t, &xv, &pv),
+            &lam,
+            &mut vx,
+            &mut vp,
+        );
         put(format!("reset_vjp_x{k}"), vx.as_slice());
         put(format!("reset_vjp_p{k}"), vp.as_slice());
         put(format!("reset_vjp_t{k}"), &[vt]);
@@ -178,9 +201,9 @@ where
     let mut vp = zp();
     m.initial_state_vjp(&pv, &lam, &mut vp);
     put("x0_vjp".into(), vp.as_slice());
-    m.running_cost_sens_dir_x(sw, t, &xv, &pv, &sv, &v, &mut vp);
+    m.running_cost_sens_dir_x(sw, At::new(t, &xv, &pv), &sv, &v, &mut vp);
     put("Dv".into(), vp.as_slice());
-    let lt = m.running_cost_sens_dt(sw, t, &xv, &pv, &sv, &mut vp);
+    let lt = m.running_cost_sens_dt(sw, At::new(t, &xv, &pv), &sv, &mut vp);
     put("dqp_dt".into(), vp.as_slice());
     put("dl_dt".into(), &[lt]);
     out

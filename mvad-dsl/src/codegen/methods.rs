@@ -97,6 +97,12 @@ impl Gen<'_> {
         let mnn = quote!(#pr::OMatrix<f64, Self::N, Self::N>);
         let mnp = quote!(#pr::OMatrix<f64, Self::N, Self::P>);
         let sw_t = quote!(#pr::Switches);
+        let EvalArgs {
+            at,
+            let_at,
+            occ,
+            let_occ,
+        } = EvalArgs::new(&pr);
         let vecd = |buf: TokenStream| {
             move |s: usize| {
                 let i = usize_lit(s);
@@ -391,22 +397,22 @@ impl Gen<'_> {
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             fn flow_is_constant(&self, mode: usize) -> bool { #constant }
             fn guard_is_affine(&self, event: usize) -> bool { #affine }
-            fn guard(&self, event: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #guard }
-            fn guard_grad(&self, event: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #guard_grad }
-            fn reset(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, xplus: &mut #xv) { #row #reset }
-            fn reset_jac(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #row #reset_jac }
-            fn event_time(&self, event: usize, j: usize, p: &#pv) -> f64 { #row #etime }
-            fn event_time_grad(&self, event: usize, j: usize, p: &#pv, dtau: &mut #pv) { #row #etime_grad }
-            fn switch_value(&self, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #swv }
-            fn switch_grad(&self, j: usize, t: f64, x: &#xv, p: &#pv, gx: &mut #xv, gp: &mut #pv) -> f64 { #swg }
-            fn observe(&self, t: f64, x: &#xv, p: &#pv, y: &mut [f64]) { #obs }
-            fn observe_jac(&self, t: f64, x: &#xv, p: &#pv, yx: &mut [f64], yp: &mut [f64]) { #obs_jac }
-            fn running_cost(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv) -> f64 { #rc }
-            fn running_cost_value_grad(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, lx: &mut #xv, lp: &mut #pv) -> f64 { #rcg }
-            fn event_cost(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv) -> f64 { #row #ecost }
-            fn event_cost_grad(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #row #ecost_grad }
-            fn final_cost(&self, t: f64, x: &#xv, p: &#pv) -> f64 { #fc }
-            fn final_cost_grad(&self, t: f64, x: &#xv, p: &#pv, cx: &mut #xv, cp: &mut #pv) -> f64 { #fcg }
+            fn guard(&self, event: usize, #at) -> f64 { #let_at #guard }
+            fn guard_grad(&self, event: usize, #at, gx: &mut #xv, gp: &mut #pv) -> f64 { #let_at #guard_grad }
+            fn reset(&self, #occ, #at, xplus: &mut #xv) { #let_occ #let_at #row #reset }
+            fn reset_jac(&self, #occ, #at, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #let_occ #let_at #row #reset_jac }
+            fn event_time(&self, #occ, p: &#pv) -> f64 { #let_occ #row #etime }
+            fn event_time_grad(&self, #occ, p: &#pv, dtau: &mut #pv) { #let_occ #row #etime_grad }
+            fn switch_value(&self, j: usize, #at) -> f64 { #let_at #swv }
+            fn switch_grad(&self, j: usize, #at, gx: &mut #xv, gp: &mut #pv) -> f64 { #let_at #swg }
+            fn observe(&self, #at, y: &mut [f64]) { #let_at #obs }
+            fn observe_jac(&self, #at, yx: &mut [f64], yp: &mut [f64]) { #let_at #obs_jac }
+            fn running_cost(&self, sw: &#sw_t, #at) -> f64 { #let_at #rc }
+            fn running_cost_value_grad(&self, sw: &#sw_t, #at, lx: &mut #xv, lp: &mut #pv) -> f64 { #let_at #rcg }
+            fn event_cost(&self, #occ, #at) -> f64 { #let_occ #let_at #row #ecost }
+            fn event_cost_grad(&self, #occ, #at, cx: &mut #xv, cp: &mut #pv) -> f64 { #let_occ #let_at #row #ecost_grad }
+            fn final_cost(&self, #at) -> f64 { #let_at #fc }
+            fn final_cost_grad(&self, #at, cx: &mut #xv, cp: &mut #pv) -> f64 { #let_at #fcg }
         };
         (core, sens_methods)
     }
@@ -496,5 +502,31 @@ pub(super) fn row_binding(k: &ModelKernels) -> TokenStream {
         quote!()
     } else {
         quote!(let row = self.row(j);)
+    }
+}
+
+/// The evaluation-point parameters of the emitted event-side methods and the bindings that
+/// unpack them into the names the kernels read: `at` (an `At`) into `t`, `x`, `p`; `occ`
+/// (an `Occurrence`) into `event`, `j`.
+pub(super) struct EvalArgs {
+    /// `at: At<'_, N, P>`.
+    pub at: TokenStream,
+    /// `let At { t, x, p } = at;`.
+    pub let_at: TokenStream,
+    /// `occ: Occurrence`.
+    pub occ: TokenStream,
+    /// `let Occurrence { event, j } = occ;`.
+    pub let_occ: TokenStream,
+}
+
+impl EvalArgs {
+    /// The four token streams, with the runtime's items under the path `pr`.
+    pub fn new(pr: &TokenStream) -> Self {
+        EvalArgs {
+            at: quote!(at: #pr::At<'_, Self::N, Self::P>),
+            let_at: quote!(let #pr::At { t, x, p } = at;),
+            occ: quote!(occ: #pr::Occurrence),
+            let_occ: quote!(let #pr::Occurrence { event, j } = occ;),
+        }
     }
 }

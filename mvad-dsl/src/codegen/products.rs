@@ -9,6 +9,7 @@ use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 
 use super::emit::Body;
+use super::methods::EvalArgs;
 use super::{lit, usize_lit, Gen};
 use crate::schedule::{Kernel, ModelKernels, SecondOrderKernels};
 
@@ -170,6 +171,12 @@ impl Gen<'_> {
         let pv = quote!(#pr::OVector<f64, Self::P>);
         let lam = quote!(lambda);
         let mu = quote!(mu);
+        let EvalArgs {
+            at,
+            let_at,
+            occ,
+            let_occ,
+        } = EvalArgs::new(&pr);
 
         // λᵀf_x, λᵀf_θ read qps under the frozen bits, as the flow does.
         self.frozen.set(true);
@@ -263,7 +270,7 @@ impl Gen<'_> {
         quote! {
             fn rhs_vjp(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, vx: &mut #xv, vp: &mut #pv) {
                 let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
-            fn reset_vjp(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #row #reset }
+            fn reset_vjp(&self, #occ, #at, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #let_occ #let_at #row #reset }
             fn initial_state_vjp(&self, p: &#pv, mu: &#xv, vp: &mut #pv) { #x0 }
         }
     }
@@ -354,6 +361,7 @@ impl Gen<'_> {
         let pv = quote!(#pr::OVector<f64, Self::P>);
         let mnp = quote!(#pr::OMatrix<f64, Self::N, Self::P>);
         let sw_t = quote!(#pr::Switches);
+        let EvalArgs { at, let_at, .. } = EvalArgs::new(&pr);
         let nan = quote!(out.fill(f64::NAN););
 
         // Flows and ℓ read (static) qps under the frozen bits.
@@ -393,8 +401,8 @@ impl Gen<'_> {
                 let #pr::Point { mode, sw, t, x, p } = pt; #dir }
             fn rhs_sens_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, out: &mut #mnp) {
                 let #pr::Point { mode, sw, t, x, p } = pt; #dt }
-            fn running_cost_sens_dir_x(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, s: &#mnp, v: &#xv, out: &mut #pv) { #rc_dir }
-            fn running_cost_sens_dt(&self, sw: &#sw_t, t: f64, x: &#xv, p: &#pv, s: &#mnp, out: &mut #pv) -> f64 { #rc_dt }
+            fn running_cost_sens_dir_x(&self, sw: &#sw_t, #at, s: &#mnp, v: &#xv, out: &mut #pv) { #let_at #rc_dir }
+            fn running_cost_sens_dt(&self, sw: &#sw_t, #at, s: &#mnp, out: &mut #pv) -> f64 { #let_at #rc_dt }
         }
     }
 }

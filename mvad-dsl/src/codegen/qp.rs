@@ -158,11 +158,9 @@ impl Gen<'_> {
                 }
                 fn qp_states(
                     &self,
-                    t: f64,
-                    x: &#pr::OVector<f64, Self::N>,
-                    p: &#pr::OVector<f64, Self::P>,
+                    at: #pr::At<'_, Self::N, Self::P>,
                 ) -> ::core::result::Result<::std::vec::Vec<#pr::QpState>, (usize, #pr::QpError)> {
-                    self.__qp_eval(t, x.as_slice(), p.as_slice(), ::core::option::Option::None, false).states()
+                    self.__qp_eval(at.t, at.x.as_slice(), at.p.as_slice(), ::core::option::Option::None, false).states()
                 }
                 fn set_qp_side(&self, side: #pr::Side) {
                     self.qp.borrow_mut().set_side(side);

@@ -39,7 +39,7 @@ mod sweep;
 mod transpose;
 
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{At, HybridModel, ModelAlloc};
 use crate::qp::Side;
 use crate::sample::check_times;
 use crate::sink::{EventSink, EventView};
@@ -133,7 +133,10 @@ where
     let mut x = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
     for (i, &t) in cot.times.iter().enumerate() {
         tape.sample(t, x.as_mut_slice());
-        model.observe(t, &x, params, &mut observables[i * nobs..(i + 1) * nobs]);
+        model.observe(
+            At::new(t, &x, params),
+            &mut observables[i * nobs..(i + 1) * nobs],
+        );
     }
     let samples = sorted_samples(cot, nobs);
     let dt_end = horizon_grad(model, params, opts);
@@ -276,8 +279,8 @@ fn replay_events<M: HybridModel, K: EventSink>(
         work.approach(model, p, j, x_before, x_after);
         let gt = work.crossing_grad(model, p, j);
         let (slope, grazing) = work.slope_and_grazing(gt, opts.grazing_tol);
-        model.observe(j.t, work.x_minus(), p, &mut obs_minus);
-        model.observe(j.t, work.x_plus(), p, &mut obs_plus);
+        model.observe(At::new(j.t, work.x_minus(), p), &mut obs_minus);
+        model.observe(At::new(j.t, work.x_plus(), p), &mut obs_plus);
         sink.event(&EventView {
             index,
             event: k,

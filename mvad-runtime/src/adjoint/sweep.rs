@@ -23,7 +23,7 @@ use super::record::{FinalState, Item, Tape};
 use super::transpose::{transpose_jump, JumpWork};
 use crate::error::SolveError;
 use crate::integrate::{AdjState, Integrator, StageVector};
-use crate::model::{HybridModel, ModelAlloc, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -70,7 +70,7 @@ where
             return;
         }
         let (n, np) = (y.lam.len(), y.g.len());
-        model.observe_jac(s.t, &self.x, p, &mut self.yx, &mut self.yp);
+        model.observe_jac(At::new(s.t, &self.x, p), &mut self.yx, &mut self.yp);
         for (i, &wi) in s.w.iter().enumerate() {
             if wi == 0.0 {
                 continue;
@@ -107,14 +107,14 @@ fn terminal<M: HybridModel>(
     let mut rate = 0.0;
     if info.has_final_cost {
         let mut f = x.clone_owned();
-        let phi_t = model.final_cost_grad(fin.t, x, p, &mut y.lam, &mut y.g);
+        let phi_t = model.final_cost_grad(At::new(fin.t, x, p), &mut y.lam, &mut y.g);
         model.rhs(Point::new(fin.mode, &fin.sw, fin.t, x, p), &mut f);
         rate += y.lam.dot(&f) + phi_t;
         y.lam *= cw;
         y.g *= cw;
     }
     if info.has_running_cost {
-        rate += model.running_cost(&fin.sw, fin.t, x, p);
+        rate += model.running_cost(&fin.sw, At::new(fin.t, x, p));
     }
     if rate != 0.0 {
         y.g.axpy(cw * rate, dt_end, 1.0);

@@ -43,7 +43,7 @@
 
 use super::record::{Jump, JumpKind};
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
 /// Scratch for the transposes (allocated once per sweep).
@@ -132,7 +132,9 @@ where
             JumpKind::Event(k, occ) => {
                 crate::sens::event_guard_grad(model, k, occ, t, x, p, &mut self.gx, &mut self.gp)
             }
-            JumpKind::Switch(j) => model.switch_grad(j, t, x, p, &mut self.gx, &mut self.gp),
+            JumpKind::Switch(j) => {
+                model.switch_grad(j, At::new(t, x, p), &mut self.gx, &mut self.gp)
+            }
         }
     }
 }
@@ -161,8 +163,8 @@ where
     // w(ℓ⁻ − ℓ⁺): both sides of the jump, each under its own bits.
     let mut c = 0.0;
     if info.has_running_cost && cw != 0.0 {
-        let l_minus = model.running_cost(&jump.sw_before, t, &w.xm, p);
-        let l_plus = model.running_cost(&jump.sw_after, t, &w.xp, p);
+        let l_minus = model.running_cost(&jump.sw_before, At::new(t, &w.xm, p));
+        let l_plus = model.running_cost(&jump.sw_after, At::new(t, &w.xp, p));
         c += cw * (l_minus - l_plus);
     }
     match jump.kind {
@@ -170,12 +172,23 @@ where
             // λ̃ = λ⁺ + w φ_xᵀ, and w φ_θ into grad.
             w.mu.copy_from(lam);
             if info.events[k].has_cost && cw != 0.0 {
-                let phi_t = model.event_cost_grad(k, occ, t, &w.xp, p, &mut w.cx, &mut w.cp);
+                let phi_t = model.event_cost_grad(
+                    Occurrence::new(k, occ),
+                    At::new(t, &w.xp, p),
+                    &mut w.cx,
+                    &mut w.cp,
+                );
                 w.mu.axpy(cw, &w.cx, 1.0);
                 grad.axpy(cw, &w.cp, 1.0);
                 c += cw * phi_t;
             }
-            let mu_rt = model.reset_vjp(k, occ, t, &w.xm, p, &w.mu, &mut w.vx, &mut w.vp);
+            let mu_rt = model.reset_vjp(
+                Occurrence::new(k, occ),
+                At::new(t, &w.xm, p),
+                &w.mu,
+                &mut w.vx,
+                &mut w.vp,
+            );
             c += w.vx.dot(&w.f_minus) + mu_rt - lam.dot(&w.f_plus);
             lam.copy_from(&w.vx);
             *grad += &w.vp;

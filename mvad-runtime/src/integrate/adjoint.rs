@@ -35,7 +35,7 @@ use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem, StageVector};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
-use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -234,7 +234,7 @@ where
         if self.has_rc && self.cw != 0.0 {
             let (lx, lp) = (&mut self.lx, &mut self.lp);
             self.model
-                .running_cost_value_grad(&self.sw, t, x, self.p, lx, lp);
+                .running_cost_value_grad(&self.sw, At::new(t, x, self.p), lx, lp);
             negate_plus(out.lam.as_mut_slice(), -self.cw, lx.as_slice());
             negate_plus(out.g.as_mut_slice(), -self.cw, lp.as_slice());
         } else {
@@ -432,7 +432,7 @@ where
             let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
             let (lx, lp) = (&mut rhs.lx, &mut rhs.lp);
             rhs.model
-                .running_cost_grad_dir(sw, t, &imp.x0, p, &imp.f0, lx, lp);
+                .running_cost_grad_dir(sw, At::new(t, &imp.x0, p), &imp.f0, lx, lp);
             negate_plus(imp.dt.lam.as_mut_slice(), -rhs.cw, rhs.lx.as_slice());
             negate_plus(imp.dt.g.as_mut_slice(), -rhs.cw, rhs.lp.as_slice());
         } else {

@@ -44,7 +44,7 @@ use super::system::{ImplicitSystem, OdeSystem};
 use super::Integrator;
 #[cfg(doc)]
 use crate::model::ModelSecondOrder;
-use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
@@ -214,16 +214,14 @@ where
         } else if self.sens {
             out.q = self.model.running_cost_value_grad(
                 &self.sw,
-                t,
-                &y.x,
-                self.p,
+                At::new(t, &y.x, self.p),
                 &mut self.lx,
                 &mut self.lp,
             );
             out.qp.copy_from(&self.lp);
             out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
         } else {
-            out.q = self.model.running_cost(&self.sw, t, &y.x, self.p);
+            out.q = self.model.running_cost(&self.sw, At::new(t, &y.x, self.p));
         }
     }
 }
@@ -338,12 +336,12 @@ where
             w.dt.s.fill(0.0);
         }
         if rhs.has_rc {
-            model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut w.lx0, &mut w.lp0);
+            model.running_cost_value_grad(&rhs.sw, At::new(t0, &y0.x, p), &mut w.lx0, &mut w.lp0);
             w.dt.q = if y0.s.ncols() == p.len() {
-                model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &y0.s, &mut w.dt.qp)
+                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &y0.s, &mut w.dt.qp)
             } else {
                 // A narrow primal run: ∂ₜℓ alone, from the full-width zero S.
-                model.running_cost_sens_dt(&rhs.sw, t0, &y0.x, p, &w.s0, &mut w.qp0)
+                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &w.s0, &mut w.qp0)
             };
         } else {
             w.lx0.fill(0.0);
@@ -395,8 +393,13 @@ where
         rhs.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
         k.s += &r.s;
         if rhs.has_rc {
-            rhs.model
-                .running_cost_sens_dir_x(&rhs.sw, t0, &y0.x, rhs.p, &y0.s, &k.x, &mut k.qp);
+            rhs.model.running_cost_sens_dir_x(
+                &rhs.sw,
+                At::new(t0, &y0.x, rhs.p),
+                &y0.s,
+                &k.x,
+                &mut k.qp,
+            );
             k.qp += &r.qp;
         }
         k.s *= hg;
@@ -435,7 +438,12 @@ where
         let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, p);
         model.rhs_jac_x(pt, &mut imp.w.jac);
         if rhs.has_rc {
-            model.running_cost_value_grad(&rhs.sw, t0, &y0.x, p, &mut imp.lx0, &mut imp.lp0);
+            model.running_cost_value_grad(
+                &rhs.sw,
+                At::new(t0, &y0.x, p),
+                &mut imp.lx0,
+                &mut imp.lp0,
+            );
         }
         // f_x and ℓ_x now hold the carried step's start, not the next step's.
         imp.base_valid = false;

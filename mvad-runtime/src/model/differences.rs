@@ -5,7 +5,7 @@
 //! from the KKT system but no second — can use them from its own implementation. They
 //! allocate scratch.
 
-use super::{HybridModel, ModelAlloc, Point, Switches};
+use super::{At, HybridModel, ModelAlloc, Point, Switches};
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Relative size of the perturbation of x in the directional differences of the
@@ -103,13 +103,10 @@ pub fn rhs_vjp_dir<M: HybridModel + ?Sized>(
 /// d/dε (ℓ_x, ℓ_θ)(t + ε, x + εv) at ε = 0 into `lx`, `lp`, returning dℓ/dε, by central
 /// differences with the step of [`flow_points`] (the default of
 /// [`super::ModelAdjoint::running_cost_grad_dir`]).
-#[allow(clippy::too_many_arguments)]
 pub fn running_cost_grad_dir<M: HybridModel + ?Sized>(
     m: &M,
     sw: &Switches,
-    t: f64,
-    x: &OVector<f64, M::N>,
-    p: &OVector<f64, M::P>,
+    at: At<'_, M::N, M::P>,
     v: &OVector<f64, M::N>,
     lx: &mut OVector<f64, M::N>,
     lp: &mut OVector<f64, M::P>,
@@ -117,10 +114,10 @@ pub fn running_cost_grad_dir<M: HybridModel + ?Sized>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let (eps, xu, xd) = flow_points(t, x, v);
+    let (eps, xu, xd) = flow_points(at.t, at.x, v);
     let (mut lx_dn, mut lp_dn) = (lx.clone_owned(), lp.clone_owned());
-    let up = m.running_cost_value_grad(sw, t + eps, &xu, p, lx, lp);
-    let dn = m.running_cost_value_grad(sw, t - eps, &xd, p, &mut lx_dn, &mut lp_dn);
+    let up = m.running_cost_value_grad(sw, At::new(at.t + eps, &xu, at.p), lx, lp);
+    let dn = m.running_cost_value_grad(sw, At::new(at.t - eps, &xd, at.p), &mut lx_dn, &mut lp_dn);
     *lx -= &lx_dn;
     *lp -= &lp_dn;
     *lx /= 2.0 * eps;
@@ -170,25 +167,22 @@ pub fn rhs_sens_dt<M: HybridModel + ?Sized>(
 
 /// (∂/∂x (ℓ_x S + ℓ_θ))·v by a central difference along v (the default of
 /// [`super::ModelSecondOrder::running_cost_sens_dir_x`]).
-#[allow(clippy::too_many_arguments)]
 pub fn running_cost_sens_dir_x<M: HybridModel + ?Sized>(
     m: &M,
     sw: &Switches,
-    t: f64,
-    x: &OVector<f64, M::N>,
-    p: &OVector<f64, M::P>,
+    at: At<'_, M::N, M::P>,
     s: &OMatrix<f64, M::N, M::P>,
     v: &OVector<f64, M::N>,
     out: &mut OVector<f64, M::P>,
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let Some((h, xu, xd)) = dir_points(x, v) else {
+    let Some((h, xu, xd)) = dir_points(at.x, v) else {
         out.fill(0.0);
         return;
     };
-    let (up, dn) = (Point::new(0, sw, t, &xu, p), Point::new(0, sw, t, &xd, p));
-    running_cost_sens_difference(m, up, dn, s, 2.0 * h, out);
+    let (up, dn) = (At { x: &xu, ..at }, At { x: &xd, ..at });
+    running_cost_sens_difference(m, sw, up, dn, s, 2.0 * h, out);
 }
 
 /// ∂ₜ(ℓ_x S + ℓ_θ) by a central difference in t; returns ∂ₜℓ (the default of
@@ -196,21 +190,16 @@ pub fn running_cost_sens_dir_x<M: HybridModel + ?Sized>(
 pub fn running_cost_sens_dt<M: HybridModel + ?Sized>(
     m: &M,
     sw: &Switches,
-    t: f64,
-    x: &OVector<f64, M::N>,
-    p: &OVector<f64, M::P>,
+    at: At<'_, M::N, M::P>,
     s: &OMatrix<f64, M::N, M::P>,
     out: &mut OVector<f64, M::P>,
 ) -> f64
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let h = time_step(t);
-    let (up, dn) = (
-        Point::new(0, sw, t + h, x, p),
-        Point::new(0, sw, t - h, x, p),
-    );
-    running_cost_sens_difference(m, up, dn, s, 2.0 * h, out)
+    let h = time_step(at.t);
+    let (up, dn) = (At { t: at.t + h, ..at }, At { t: at.t - h, ..at });
+    running_cost_sens_difference(m, sw, up, dn, s, 2.0 * h, out)
 }
 
 /// out = (Ṡ(up) − Ṡ(dn))/h2 for Ṡ = f_x S + f_θ (the difference quotient of the defaults).
@@ -232,12 +221,13 @@ fn rhs_sens_difference<M: HybridModel + ?Sized>(
     *out /= h2;
 }
 
-/// out = (q̇_θ(up) − q̇_θ(dn))/h2 for q̇_θ = ℓ_x S + ℓ_θ; returns (ℓ(up) − ℓ(dn))/h2 (the
-/// difference quotients of the defaults; the points' modes are ignored).
+/// out = (q̇_θ(up) − q̇_θ(dn))/h2 for q̇_θ = ℓ_x S + ℓ_θ with the frozen branches `sw`;
+/// returns (ℓ(up) − ℓ(dn))/h2 (the difference quotients of the defaults).
 fn running_cost_sens_difference<M: HybridModel + ?Sized>(
     m: &M,
-    up: Point<'_, M::N, M::P>,
-    dn: Point<'_, M::N, M::P>,
+    sw: &Switches,
+    up: At<'_, M::N, M::P>,
+    dn: At<'_, M::N, M::P>,
     s: &OMatrix<f64, M::N, M::P>,
     h2: f64,
     out: &mut OVector<f64, M::P>,
@@ -247,8 +237,8 @@ where
 {
     let (mut lx, mut lx_dn, mut lp_dn) =
         (up.x.clone_owned(), up.x.clone_owned(), out.clone_owned());
-    let l_up = m.running_cost_value_grad(up.sw, up.t, up.x, up.p, &mut lx, out);
-    let l_dn = m.running_cost_value_grad(dn.sw, dn.t, dn.x, dn.p, &mut lx_dn, &mut lp_dn);
+    let l_up = m.running_cost_value_grad(sw, up, &mut lx, out);
+    let l_dn = m.running_cost_value_grad(sw, dn, &mut lx_dn, &mut lp_dn);
     lx -= &lx_dn;
     *out -= &lp_dn;
     out.gemv_tr(1.0, s, &lx, 1.0);

@@ -9,7 +9,7 @@
 
 use super::Driver;
 use crate::integrate::{sens_weight, Saltation};
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence};
 use crate::solution::{Diagnostic, DiagnosticKind, ErrorEstimate, ILL_CONDITIONED_FACTOR};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
@@ -35,20 +35,22 @@ where
         if !self.sens {
             // `event_reset` computes R_x and R_t only for the sensitivities.
             model.reset_jac(
-                k,
-                j,
-                t,
-                &self.y.x,
-                p,
+                Occurrence::new(k, j),
+                At::new(t, &self.y.x, p),
                 &mut self.rx,
                 &mut self.rp,
                 &mut self.rt,
             );
         }
         let l_minus = self.running_cost_minus(t);
-        let phi_t = model.info().events[k]
-            .has_cost
-            .then(|| model.event_cost_grad(k, j, t, &self.x_plus, p, &mut self.cx, &mut self.cp));
+        let phi_t = model.info().events[k].has_cost.then(|| {
+            model.event_cost_grad(
+                Occurrence::new(k, j),
+                At::new(t, &self.x_plus, p),
+                &mut self.cx,
+                &mut self.cp,
+            )
+        });
         self.error_jump(true, rate, (l_minus, l_plus), phi_t);
     }
 
@@ -60,11 +62,11 @@ where
         }
         let (model, p) = (self.model, self.p);
         // `apply_switch` leaves ∇σ_j in `gx` only with sensitivities.
-        let gt = model.switch_grad(j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
         let rate = self.gx.dot(&self.f_minus) + gt;
         let l_minus = self.running_cost_minus(t);
         let l_plus = if model.info().has_running_cost {
-            model.running_cost(&self.sw_next, t, &self.y.x, p)
+            model.running_cost(&self.sw_next, At::new(t, &self.y.x, p))
         } else {
             0.0
         };
@@ -100,7 +102,8 @@ where
     /// ℓ at (t, x⁻) under the old bits (0 without a running cost).
     fn running_cost_minus(&self, t: f64) -> f64 {
         if self.model.info().has_running_cost {
-            self.model.running_cost(&self.sw, t, &self.y.x, self.p)
+            self.model
+                .running_cost(&self.sw, At::new(t, &self.y.x, self.p))
         } else {
             0.0
         }
@@ -119,12 +122,12 @@ where
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
         let info = model.info();
         let l_end = if info.has_running_cost {
-            model.running_cost(&self.sw, t_end, x_final, p)
+            model.running_cost(&self.sw, At::new(t_end, x_final, p))
         } else {
             0.0
         };
         let phi_x = if info.has_final_cost {
-            model.final_cost_grad(t_end, x_final, p, &mut self.cx, &mut self.cp);
+            model.final_cost_grad(At::new(t_end, x_final, p), &mut self.cx, &mut self.cp);
             Some(&self.cx)
         } else {
             None

@@ -5,7 +5,7 @@
 use super::Driver;
 use crate::adjoint::record::JumpKind;
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::sens;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind};
@@ -122,7 +122,7 @@ where
         if !(gt.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
             && self.gp.iter().all(|v| v.is_finite())
-            && (timed || model.guard(k, t, &self.y.x, p).is_finite()))
+            && (timed || model.guard(k, At::new(t, &self.y.x, p)).is_finite()))
         {
             return Err(SolveError::NonFinite {
                 t,
@@ -166,7 +166,7 @@ where
     /// the time resolution does, and only when it leaves the state on or past the guard.
     fn snap_onto_guard(&mut self, k: usize, t: f64, gt: f64) {
         let (model, p) = (self.model, self.p);
-        let g = model.guard(k, t, &self.y.x, p);
+        let g = model.guard(k, At::new(t, &self.y.x, p));
         let shift = g / (self.gx.dot(&self.f_minus) + gt);
         if shift == 0.0 || shift.abs() > super::time_resolution(t) {
             return;
@@ -176,7 +176,7 @@ where
         self.xs.copy_from(&self.y.x);
         self.xs.axpy(-shift, &self.f_minus, 1.0);
         let d = model.info().events[k].direction.sign();
-        if d * model.guard(k, t, &self.xs, p) >= 0.0 {
+        if d * model.guard(k, At::new(t, &self.xs, p)) >= 0.0 {
             self.y.x.copy_from(&self.xs);
         }
     }
@@ -202,7 +202,11 @@ where
         let (model, p) = (self.model, self.p);
         let info = model.info();
         let ev = &info.events[k];
-        model.reset(k, j, t, &self.y.x, p, &mut self.x_plus);
+        model.reset(
+            Occurrence::new(k, j),
+            At::new(t, &self.y.x, p),
+            &mut self.x_plus,
+        );
         self.nonfinite_x(t, &self.x_plus, || format!("reset of event `{}`", ev.name))?;
         let mode_after = ev.target.unwrap_or(self.mode);
         self.mode = mode_after;
@@ -216,11 +220,8 @@ where
         })?;
         if self.sens {
             model.reset_jac(
-                k,
-                j,
-                t,
-                &self.y.x,
-                p,
+                Occurrence::new(k, j),
+                At::new(t, &self.y.x, p),
                 &mut self.rx,
                 &mut self.rp,
                 &mut self.rt,
@@ -254,8 +255,8 @@ where
         let info = model.info();
         let mut l_plus = 0.0;
         if info.has_running_cost {
-            let l_minus = model.running_cost(&self.sw, t, &self.y.x, p);
-            l_plus = model.running_cost(&self.sw_next, t, &self.x_plus, p);
+            let l_minus = model.running_cost(&self.sw, At::new(t, &self.y.x, p));
+            l_plus = model.running_cost(&self.sw_next, At::new(t, &self.x_plus, p));
             if !(l_minus.is_finite() && l_plus.is_finite()) {
                 return Err(SolveError::NonFinite {
                     t,
@@ -271,7 +272,7 @@ where
         }
         let ev = &info.events[k];
         if ev.has_cost {
-            let phi = model.event_cost(k, j, t, &self.x_plus, p);
+            let phi = model.event_cost(Occurrence::new(k, j), At::new(t, &self.x_plus, p));
             if !phi.is_finite() {
                 return Err(SolveError::NonFinite {
                     t,
@@ -280,8 +281,12 @@ where
             }
             self.c_ev.add(phi);
             if sens {
-                let phi_t =
-                    model.event_cost_grad(k, j, t, &self.x_plus, p, &mut self.cx, &mut self.cp);
+                let phi_t = model.event_cost_grad(
+                    Occurrence::new(k, j),
+                    At::new(t, &self.x_plus, p),
+                    &mut self.cx,
+                    &mut self.cp,
+                );
                 self.g_ev.gemv_tr(1.0, &self.dtot, &self.cx, 1.0);
                 self.g_ev += &self.cp;
                 self.g_ev.axpy(phi_t, &self.dt, 1.0);
@@ -305,8 +310,8 @@ where
             self.nevents += 1;
             return;
         }
-        model.observe(t, &self.y.x, p, &mut self.obs_minus);
-        model.observe(t, &self.x_plus, p, &mut self.obs_plus);
+        model.observe(At::new(t, &self.y.x, p), &mut self.obs_minus);
+        model.observe(At::new(t, &self.x_plus, p), &mut self.obs_plus);
         sink.event(&EventView {
             index: self.nevents,
             event: k,
@@ -358,7 +363,7 @@ where
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
         if self.sens {
-            let gt = model.switch_grad(j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+            let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
             self.crossing_time_sensitivity(gt);
             if !self.dt.iter().all(|v| v.is_finite()) {
                 return Err(SolveError::NonFinite {
@@ -383,8 +388,8 @@ where
                 &mut self.work,
             );
             if info.has_running_cost {
-                let l_minus = model.running_cost(&self.sw, t, &self.y.x, p);
-                let l_plus = model.running_cost(&self.sw_next, t, &self.y.x, p);
+                let l_minus = model.running_cost(&self.sw, At::new(t, &self.y.x, p));
+                let l_plus = model.running_cost(&self.sw_next, At::new(t, &self.y.x, p));
                 self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
             }
         }

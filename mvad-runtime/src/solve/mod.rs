@@ -36,7 +36,7 @@ use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
 use crate::event::{Crossing, Scanner, Watch};
 use crate::integrate::{AugState, Forward, Integrator, OdeSystem, Scheme};
-use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::reduce::CompensatedSum;
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, EventRecord, GradientMode, Options, Solution};
@@ -365,7 +365,7 @@ where
         let mut undecided = false;
         for j in 0..nsw {
             let x = if x_is_plus { &self.x_plus } else { &self.y.x };
-            let s = self.model.switch_value(j, t, x, self.p);
+            let s = self.model.switch_value(j, At::new(t, x, self.p));
             if s > 0.0 {
                 self.sw_next.set(j, true);
             } else if s == 0.0 {
@@ -389,9 +389,12 @@ where
             );
             for j in 0..nsw {
                 if self.sw_undecided.get(j) {
-                    let st = self
-                        .model
-                        .switch_grad(j, t, &x, self.p, &mut self.gx, &mut self.gp);
+                    let st = self.model.switch_grad(
+                        j,
+                        At::new(t, &x, self.p),
+                        &mut self.gx,
+                        &mut self.gp,
+                    );
                     if self.gx.dot(&self.work) + st > 0.0 {
                         self.sw_next.set(j, true);
                     }
@@ -411,10 +414,10 @@ where
         x: &OVector<f64, M::N>,
     ) -> f64 {
         if w < nev {
-            model.info().events[w].direction.sign() * model.guard(w, t, x, p)
+            model.info().events[w].direction.sign() * model.guard(w, At::new(t, x, p))
         } else {
             let j = w - nev;
-            let s = model.switch_value(j, t, x, p);
+            let s = model.switch_value(j, At::new(t, x, p));
             if sw.get(j) {
                 -s
             } else {

@@ -8,7 +8,7 @@
 use super::Driver;
 use crate::adjoint::record::Tape;
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc};
+use crate::model::{At, HybridModel, ModelAlloc};
 use crate::qp::Side;
 use crate::sink::EventSink;
 use crate::solution::{Diagnostic, DiagnosticKind, Options, Solution};
@@ -68,7 +68,7 @@ where
         sol.x_final.iter().copied(),
     );
     let states = model
-        .qp_states(t, &x, params)
+        .qp_states(At::new(t, &x, params))
         .map_err(|(q, error)| SolveError::Qp {
             t,
             qp: model.qps()[q].name.clone(),

@@ -9,7 +9,7 @@
 //! event's j counts its earlier firings.
 
 use crate::error::SolveError;
-use crate::model::{HybridModel, ModelAlloc, Trigger};
+use crate::model::{HybridModel, ModelAlloc, Occurrence, Trigger};
 use nalgebra::{DefaultAllocator, OVector};
 
 /// Occurrence indices and next times of a run's events (allocated once).
@@ -96,7 +96,7 @@ impl Schedule {
         if !exists {
             return Ok(f64::INFINITY);
         }
-        let tau = model.event_time(k, j, p);
+        let tau = model.event_time(Occurrence::new(k, j), p);
         if tau.is_finite() {
             Ok(tau)
         } else {
@@ -201,6 +201,6 @@ fn first_and_period<M: HybridModel>(model: &M, p: &OVector<f64, M::P>, k: usize)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let t0 = model.event_time(k, 0, p);
-    (t0, model.event_time(k, 1, p) - t0)
+    let t0 = model.event_time(Occurrence::new(k, 0), p);
+    (t0, model.event_time(Occurrence::new(k, 1), p) - t0)
 }

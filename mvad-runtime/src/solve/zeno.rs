@@ -36,7 +36,7 @@
 //! −ℓ(t*, x*) dt*/dθ + ∫ (ℓ_x dx*/dθ + ℓ_θ) dt.
 
 use super::Driver;
-use crate::model::{HybridModel, ModelAlloc, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::reduce::{aitken_iterated_weights, FinalWork, GL8};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
@@ -238,14 +238,14 @@ where
         if d * rate_minus <= 0.0 {
             return false;
         }
-        let gt = model.guard_grad(k, t, &self.x_plus, p, &mut self.gx, &mut self.gp);
+        let gt = model.guard_grad(k, At::new(t, &self.x_plus, p), &mut self.gx, &mut self.gp);
         if d * (self.gx.dot(&self.f_plus) + gt) > 0.0 {
             return false;
         }
         // Relative to the event time (the time resolution there), not to the horizon T: the
         // verdict must be the same whether T lies just past t_k or 10⁶ times beyond it.
         let delta = 1e-6 * t.abs().max(1.0);
-        let v_plus = d * model.guard(k, t, &self.x_plus, p);
+        let v_plus = d * model.guard(k, At::new(t, &self.x_plus, p));
         self.xs.copy_from(&self.x_plus);
         self.xs.axpy(delta, &self.f_plus, 1.0);
         model.rhs(
@@ -255,7 +255,7 @@ where
         self.xe.copy_from(&self.x_plus);
         self.xe.axpy(0.5 * delta, &self.f_plus, 1.0);
         self.xe.axpy(0.5 * delta, &self.work, 1.0);
-        let v2 = d * model.guard(k, t + delta, &self.xe, p);
+        let v2 = d * model.guard(k, At::new(t + delta, &self.xe, p));
         v2 > 0.0 && v2 > v_plus
     }
 
@@ -307,15 +307,19 @@ where
         }
         // Rest on [t*, T]: ∫ ℓ(t, x*) dt by 8-point Gauss–Legendre, and its derivative.
         if model.info().has_running_cost && t_end > t_star {
-            let l_star = model.running_cost(&self.sw, t_star, x_final, p);
+            let l_star = model.running_cost(&self.sw, At::new(t_star, x_final, p));
             if sens {
                 grad.axpy(-l_star, &dt_star, 1.0);
             }
             let (c0, r0) = (0.5 * (t_star + t_end), 0.5 * (t_end - t_star));
             for &(xi, wi) in &GL8 {
                 let t = c0 + r0 * xi;
-                let l =
-                    model.running_cost_value_grad(&self.sw, t, x_final, p, &mut fw.cx, &mut fw.cp);
+                let l = model.running_cost_value_grad(
+                    &self.sw,
+                    At::new(t, x_final, p),
+                    &mut fw.cx,
+                    &mut fw.cp,
+                );
                 cost += wi * r0 * l;
                 if sens {
                     grad.gemv_tr(wi * r0, s_final, &fw.cx, 1.0);

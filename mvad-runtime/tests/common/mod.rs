@@ -10,7 +10,8 @@ pub mod check;
 pub mod models;
 
 use mvad_runtime::model::{
-    HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Switches,
+    At, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Occurrence,
+    Switches,
 };
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -375,28 +376,31 @@ impl<T: Spec> HybridModel for AdModel<T> {
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
         true
     }
-    fn guard(&self, k: usize, t: f64, x: &V, p: &V) -> f64 {
+    fn guard(&self, k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { t, x, p } = at;
         self.spec.guard(k, t, x.as_slice(), p.as_slice())
     }
-    fn guard_grad(&self, k: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
+    fn guard_grad(&self, k: usize, at: At<'_, Self::N, Self::P>, gx: &mut V, gp: &mut V) -> f64 {
+        let At { t, x, p } = at;
         self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
             .1
     }
-    fn reset(&self, k: usize, _j: usize, t: f64, x: &V, p: &V, xp: &mut V) {
+    fn reset(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>, xp: &mut V) {
+        let Occurrence { event: k, .. } = occ;
+        let At { t, x, p } = at;
         self.spec
             .reset(k, t, x.as_slice(), p.as_slice(), xp.as_mut_slice());
     }
     fn reset_jac(
         &self,
-        k: usize,
-        _j: usize,
-        t: f64,
-        x: &V,
-        p: &V,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         rx: &mut Mx,
         rp: &mut Mx,
         rt: &mut V,
     ) {
+        let Occurrence { event: k, .. } = occ;
+        let At { t, x, p } = at;
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
         let mut r = vec![D::c(0.0); self.n()];
         self.spec.reset(k, td, &xd, &pd, &mut r);
@@ -406,17 +410,21 @@ impl<T: Spec> HybridModel for AdModel<T> {
         partials(&r, 1, rx);
         partials(&r, 1 + self.n(), rp);
     }
-    fn switch_value(&self, j: usize, t: f64, x: &V, p: &V) -> f64 {
+    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { t, x, p } = at;
         self.spec.switch(j, t, x.as_slice(), p.as_slice())
     }
-    fn switch_grad(&self, j: usize, t: f64, x: &V, p: &V, gx: &mut V, gp: &mut V) -> f64 {
+    fn switch_grad(&self, j: usize, at: At<'_, Self::N, Self::P>, gx: &mut V, gp: &mut V) -> f64 {
+        let At { t, x, p } = at;
         self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
             .1
     }
-    fn observe(&self, t: f64, x: &V, p: &V, y: &mut [f64]) {
+    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+        let At { t, x, p } = at;
         self.spec.observe(t, x.as_slice(), p.as_slice(), y);
     }
-    fn observe_jac(&self, t: f64, x: &V, p: &V, yx: &mut [f64], yp: &mut [f64]) {
+    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
+        let At { t, x, p } = at;
         let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
         let no = self.info.observables.len();
         let mut y = vec![D::c(0.0); no];
@@ -427,44 +435,47 @@ impl<T: Spec> HybridModel for AdModel<T> {
             yp[i * np..(i + 1) * np].copy_from_slice(&y[i].g[1 + n..1 + n + np]);
         }
     }
-    fn running_cost(&self, sw: &Switches, t: f64, x: &V, p: &V) -> f64 {
+    fn running_cost(&self, sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { t, x, p } = at;
         self.spec
             .running(sw.low_word(), t, x.as_slice(), p.as_slice())
     }
     fn running_cost_value_grad(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &V,
-        p: &V,
+        at: At<'_, Self::N, Self::P>,
         lx: &mut V,
         lp: &mut V,
     ) -> f64 {
+        let At { t, x, p } = at;
         self.scalar_grad(t, x, p, lx, lp, |t, x, p| {
             self.spec.running(sw.low_word(), t, x, p)
         })
         .0
     }
-    fn event_cost(&self, k: usize, _j: usize, t: f64, x: &V, p: &V) -> f64 {
+    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64 {
+        let Occurrence { event: k, .. } = occ;
+        let At { t, x, p } = at;
         self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
     }
     fn event_cost_grad(
         &self,
-        k: usize,
-        _j: usize,
-        t: f64,
-        x: &V,
-        p: &V,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         cx: &mut V,
         cp: &mut V,
     ) -> f64 {
+        let Occurrence { event: k, .. } = occ;
+        let At { t, x, p } = at;
         self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.event_cost(k, t, x, p))
             .1
     }
-    fn final_cost(&self, t: f64, x: &V, p: &V) -> f64 {
+    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64 {
+        let At { t, x, p } = at;
         self.spec.final_cost(t, x.as_slice(), p.as_slice())
     }
-    fn final_cost_grad(&self, t: f64, x: &V, p: &V, cx: &mut V, cp: &mut V) -> f64 {
+    fn final_cost_grad(&self, at: At<'_, Self::N, Self::P>, cx: &mut V, cp: &mut V) -> f64 {
+        let At { t, x, p } = at;
         self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.final_cost(t, x, p))
             .1
     }

@@ -19,7 +19,7 @@ use clap::Args;
 use mvad::runtime::measure::{measure, Measure};
 use mvad::runtime::solution::{Options, Solution};
 use mvad::runtime::solve::solve;
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{At, HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
 use serde_json::{Map, Value};
 
@@ -229,7 +229,7 @@ where
     let nobs = model.info().nobservables();
     move |t, x| {
         let mut y = vec![0.0; nobs];
-        model.observe(t, &xvec(model, x), params, &mut y);
+        model.observe(At::new(t, &xvec(model, x), params), &mut y);
         y[obs]
     }
 }

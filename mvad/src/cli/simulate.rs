@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use clap::Args;
 use mvad::runtime::solution::{Solution, Trajectory};
 use mvad::runtime::solve::solve;
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{At, HybridModel, ModelAlloc};
 use nalgebra::DefaultAllocator;
 use serde_json::{Map, Value};
 
@@ -147,7 +147,7 @@ where
     };
     let observe = |t: f64, x: &[f64]| {
         let mut y = vec![0.0; nobs];
-        model.observe(t, &xvec(model, x), params, &mut y);
+        model.observe(At::new(t, &xvec(model, x), params), &mut y);
         y
     };
     let sample = |t: f64| {

@@ -13,9 +13,9 @@ use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::ExprArena;
 use mvad_dsl::schedule::SecondOrderKernels;
 use mvad_runtime::model::differences;
-use mvad_runtime::{ModelAdjoint, ModelSecondOrder, Point, Switches};
+use mvad_runtime::{At, ModelAdjoint, ModelSecondOrder, Occurrence, Point, Switches};
 
-use super::{at_sw, pt0, pt_theta, At, InterpretedModel, Scratch, M, X};
+use super::{at_pt, at_sw, pt0, pt_theta, InterpretedModel, Scratch, TapeAt, M, X};
 
 /// The tapes of [`SecondOrderKernels`], with their entry tables.
 #[derive(Clone, Debug)]
@@ -65,7 +65,7 @@ impl SecondTapes {
     fn dir_x(
         &self,
         model: &InterpretedModel,
-        at: &At<'_>,
+        at: &TapeAt<'_>,
         sc: &mut Scratch,
         s: &[f64],
         v: &[f64],
@@ -99,7 +99,7 @@ impl SecondTapes {
     fn dt(
         &self,
         model: &InterpretedModel,
-        at: &At<'_>,
+        at: &TapeAt<'_>,
         regs: &mut [f64],
         s: &[f64],
         out: &mut [f64],
@@ -145,11 +145,11 @@ impl InterpretedModel {
 
 impl ModelAdjoint for InterpretedModel {
     fn rhs_vjp(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, vx: &mut X, vp: &mut X) {
-        let Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         let (n, np) = (self.n, self.p);
         let sizes = lambda.len() == n && vx.len() == n && vp.len() == np;
         let mut sc = self.scratch.borrow_mut();
-        let at = at_sw(t, x, p, sw);
+        let at = at_pt(pt);
         let m = self.mode(mode).filter(|_| sizes);
         let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
             vx.fill(f64::NAN);
@@ -176,26 +176,22 @@ impl ModelAdjoint for InterpretedModel {
             vp.as_mut_slice(),
         );
     }
-
-    #[allow(clippy::too_many_arguments)]
     fn reset_vjp(
         &self,
-        event: usize,
-        j: usize,
-        t: f64,
-        x: &X,
-        p: &X,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
         mu: &X,
         vx: &mut X,
         vp: &mut X,
     ) -> f64 {
+        let Occurrence { event, j } = occ;
         let (n, np) = (self.n, self.p);
         let sizes = mu.len() == n && vx.len() == n && vp.len() == np;
         let row = self.tables.row(event, j);
         let mut sc = self.scratch.borrow_mut();
-        let at = At {
+        let at = TapeAt {
             row: &row,
-            ..pt0(t, x, p)
+            ..pt0(at)
         };
         let e = self.events.get(event).filter(|_| sizes);
         let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
@@ -252,12 +248,12 @@ impl ModelSecondOrder for InterpretedModel {
         if self.second_by_differences {
             return differences::rhs_sens_dir_x(self, pt, s, v, out);
         }
-        let Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         let ok = v.len() == self.n && self.sens_shapes(s, out.len(), self.n);
         match self.mode(mode).filter(|_| ok) {
             Some(m) => {
                 let mut sc = self.scratch.borrow_mut();
-                let at = at_sw(t, x, p, sw);
+                let at = at_pt(pt);
                 let (s, v) = (s.as_slice(), v.as_slice());
                 m.second.dir_x(self, &at, &mut sc, s, v, out.as_mut_slice());
             }
@@ -269,12 +265,12 @@ impl ModelSecondOrder for InterpretedModel {
         if self.second_by_differences {
             return differences::rhs_sens_dt(self, pt, s, out);
         }
-        let Point { mode, sw, t, x, p } = pt;
+        let mode = pt.mode;
         let ok = self.sens_shapes(s, out.len(), self.n);
         match self.mode(mode).filter(|_| ok) {
             Some(m) if m.depends_on_t => {
                 let mut sc = self.scratch.borrow_mut();
-                let at = at_sw(t, x, p, sw);
+                let at = at_pt(pt);
                 let o = out.as_mut_slice();
                 m.second.dt(self, &at, &mut sc.regs, s.as_slice(), o);
             }
@@ -282,20 +278,16 @@ impl ModelSecondOrder for InterpretedModel {
             None => out.fill(f64::NAN),
         }
     }
-
-    #[allow(clippy::too_many_arguments)]
     fn running_cost_sens_dir_x(
         &self,
         sw: &Switches,
-        t: f64,
-        x: &X,
-        p: &X,
+        at: At<'_, Self::N, Self::P>,
         s: &M,
         v: &X,
         out: &mut X,
     ) {
         if self.second_by_differences {
-            return differences::running_cost_sens_dir_x(self, sw, t, x, p, s, v, out);
+            return differences::running_cost_sens_dir_x(self, sw, at, s, v, out);
         }
         if v.len() != self.n || !self.sens_shapes(s, out.len(), 1) {
             out.fill(f64::NAN);
@@ -304,7 +296,7 @@ impl ModelSecondOrder for InterpretedModel {
         match &self.running_cost_second {
             Some(so) => {
                 let mut sc = self.scratch.borrow_mut();
-                let at = at_sw(t, x, p, sw);
+                let at = at_sw(at, sw);
                 let (s, v) = (s.as_slice(), v.as_slice());
                 so.dir_x(self, &at, &mut sc, s, v, out.as_mut_slice());
             }
@@ -312,9 +304,15 @@ impl ModelSecondOrder for InterpretedModel {
         }
     }
 
-    fn running_cost_sens_dt(&self, sw: &Switches, t: f64, x: &X, p: &X, s: &M, out: &mut X) -> f64 {
+    fn running_cost_sens_dt(
+        &self,
+        sw: &Switches,
+        at: At<'_, Self::N, Self::P>,
+        s: &M,
+        out: &mut X,
+    ) -> f64 {
         if self.second_by_differences {
-            return differences::running_cost_sens_dt(self, sw, t, x, p, s, out);
+            return differences::running_cost_sens_dt(self, sw, at, s, out);
         }
         if !self.sens_shapes(s, out.len(), 1) {
             out.fill(f64::NAN);
@@ -323,7 +321,7 @@ impl ModelSecondOrder for InterpretedModel {
         match &self.running_cost_second {
             Some(so) => {
                 let mut sc = self.scratch.borrow_mut();
-                let at = at_sw(t, x, p, sw);
+                let at = at_sw(at, sw);
                 so.dt(self, &at, &mut sc.regs, s.as_slice(), out.as_mut_slice())
             }
             None => {

@@ -9,7 +9,7 @@ use mvad_dsl::eval::Tape;
 use mvad_dsl::schedule::{ModelKernels, TimeKind};
 use mvad_runtime::Trigger;
 
-use super::{pt_theta, At, InterpretedModel, Scratch, X};
+use super::{pt_theta, InterpretedModel, Scratch, TapeAt, X};
 use crate::table::{bind_columns, Table, TableError, TableNeeds};
 
 /// τ (or the start of `every`), ∂τ/∂θ, and for `every` the period and its gradient.
@@ -113,7 +113,7 @@ impl InterpretedModel {
             return f64::NAN;
         };
         let row = self.tables.row(event, j);
-        let at = At {
+        let at = TapeAt {
             row: &row,
             ..pt_theta(p)
         };
@@ -131,7 +131,7 @@ impl InterpretedModel {
             return;
         };
         let row = self.tables.row(event, j);
-        let at = At {
+        let at = TapeAt {
             row: &row,
             ..pt_theta(p)
         };
