@@ -179,6 +179,19 @@ fn wrt_or_all(info: &ModelInfo, wrt: Option<Vec<String>>) -> Vec<String> {
     wrt.unwrap_or_else(|| info.params.clone())
 }
 
+/// The request of a batch of observables (derivatives in `wrt`, every parameter by
+/// default) and its sample times.
+fn observe_request(
+    info: &ModelInfo,
+    times: &PyReadonlyArray1<'_, f64>,
+    wrt: Option<Vec<String>>,
+    params: Option<BTreeMap<String, f64>>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(Request, Vec<f64>)> {
+    let req = request(params, Some(wrt_or_all(info, wrt)), options)?;
+    Ok((req, times.as_array().iter().copied().collect()))
+}
+
 #[pymethods]
 impl Model {
     /// The model's name.
@@ -417,8 +430,7 @@ impl Model {
         params: Option<BTreeMap<String, f64>>,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
-        let ts: Vec<f64> = times.as_array().iter().copied().collect();
+        let (req, ts) = observe_request(&self.info, &times, wrt, params, options)?;
         let flat = rows(&thetas);
         let (results, _) = self.batch(py, &req, &flat, |_, m, p, s| {
             vjp::observe(m, p, &s.opts, &ts)
@@ -444,8 +456,7 @@ impl Model {
         params: Option<BTreeMap<String, f64>>,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
-        let ts: Vec<f64> = times.as_array().iter().copied().collect();
+        let (req, ts) = observe_request(&self.info, &times, wrt, params, options)?;
         let m = self.info.nobservables();
         let b = thetas.shape()[0];
         if cotangents.shape() != [b, ts.len(), m] {

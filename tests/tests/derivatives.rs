@@ -188,6 +188,7 @@ where
     random(v.as_mut_slice());
     random(s.as_mut_slice());
     let (x, pv, t) = (vn(m, &pt.x), vp(m, &pt.p), pt.t);
+    let at = At::new(t, &x, &pv);
     // The step along v and in t, and the points x ± h v, t ± ht.
     let h = f64::EPSILON.cbrt() * x.amax().max(1.0) / v.amax().max(f64::MIN_POSITIVE);
     let (mut xu, mut xd) = (x.clone(), x.clone());
@@ -249,7 +250,7 @@ where
         (l, lp.as_slice().to_vec())
     };
     let mut out = zp();
-    m.running_cost_sens_dir_x(sw, At::new(t, &x, &pv), &s, &v, &mut out);
+    m.running_cost_sens_dir_x(sw, at, &s, &v, &mut out);
     compare(
         "D v",
         out.as_slice(),
@@ -257,7 +258,7 @@ where
         &lsens(t, &xd).1,
         2.0 * h,
     );
-    let lt = m.running_cost_sens_dt(sw, At::new(t, &x, &pv), &s, &mut out);
+    let lt = m.running_cost_sens_dt(sw, at, &s, &mut out);
     let ((lu, su), (ld, sd)) = (lsens(tu, &x), lsens(td, &x));
     compare("∂ₜq̇_θ", out.as_slice(), &su, &sd, tu - td);
     compare("∂ₜℓ", &[lt], &[lu], &[ld], tu - td);
@@ -267,21 +268,9 @@ where
     for k in 0..info.events.len() {
         let what = |w: &str| format!("{} event {k} {w}", info.name);
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(
-            Occurrence::new(k, 0),
-            At::new(t, &x, &pv),
-            &mut rx,
-            &mut rp,
-            &mut rt,
-        );
+        m.reset_jac(Occurrence::new(k, 0), at, &mut rx, &mut rp, &mut rt);
         let (mut vx, mut vpp) = (zn(), zp());
-        let vt = m.reset_vjp(
-            Occurrence::new(k, 0),
-            At::new(t, &x, &pv),
-            &lam,
-            &mut vx,
-            &mut vpp,
-        );
+        let vt = m.reset_vjp(Occurrence::new(k, 0), at, &lam, &mut vx, &mut vpp);
         assert_vjp(&what("μᵀR_x"), vx.as_slice(), &rows(&rx), mu);
         assert_vjp(&what("μᵀR_θ"), vpp.as_slice(), &rows(&rp), mu);
         assert_vjp(&what("μᵀR_t"), &[vt], rt.as_slice(), mu);
@@ -331,6 +320,7 @@ where
     let znp = || OMatrix::<f64, M::N, M::P>::zeros_generic(m.nstates(), m.nparams());
     let (x, pv) = (vn(m, &pt.x), vp(m, &pt.p));
     let t = pt.t;
+    let at = At::new(t, &x, &pv);
     // Flow, per mode.
     for mode in 0..info.modes.len() {
         let f = |q: &Pt| {
@@ -400,7 +390,7 @@ where
                 pt,
                 &format!("{what} guard"),
                 |t, x, p| m.guard(k, At::new(t, x, p)),
-                |gx, gp| m.guard_grad(k, At::new(t, &x, &pv), gx, gp),
+                |gx, gp| m.guard_grad(k, at, gx, gp),
             );
         }
 
@@ -414,13 +404,7 @@ where
             xp.as_slice().to_vec()
         };
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(
-            Occurrence::new(k, 0),
-            At::new(t, &x, &pv),
-            &mut rx,
-            &mut rp,
-            &mut rt,
-        );
+        m.reset_jac(Occurrence::new(k, 0), at, &mut rx, &mut rp, &mut rt);
         fd_check_xpt(
             &format!("{what} reset"),
             pt,
@@ -433,7 +417,7 @@ where
             pt,
             &format!("{what} cost"),
             |t, x, p| m.event_cost(Occurrence::new(k, 0), At::new(t, x, p)),
-            |cx, cp| m.event_cost_grad(Occurrence::new(k, 0), At::new(t, &x, &pv), cx, cp),
+            |cx, cp| m.event_cost_grad(Occurrence::new(k, 0), at, cx, cp),
         );
     }
 
@@ -444,7 +428,7 @@ where
             pt,
             &format!("{} switch {j}", info.name),
             |t, x, p| m.switch_value(j, At::new(t, x, p)),
-            |gx, gp| m.switch_grad(j, At::new(t, &x, &pv), gx, gp),
+            |gx, gp| m.switch_grad(j, at, gx, gp),
         );
     }
 
@@ -456,14 +440,14 @@ where
         y
     };
     let (mut yx, mut yp) = (vec![9.0; nobs * n], vec![9.0; nobs * p]);
-    m.observe_jac(At::new(t, &x, &pv), &mut yx, &mut yp);
+    m.observe_jac(at, &mut yx, &mut yp);
     fd_check(&format!("{} observe", info.name), pt, Wrt::X, &yx, &y);
     fd_check(&format!("{} observe", info.name), pt, Wrt::P, &yp, &y);
 
     // Costs.
     let l = |q: &Pt| vec![m.running_cost(sw, At::new(q.t, &vn(m, &q.x), &vp(m, &q.p)))];
     let (mut lx, mut lp) = (zn(), zp());
-    let lv = m.running_cost_value_grad(sw, At::new(t, &x, &pv), &mut lx, &mut lp);
+    let lv = m.running_cost_value_grad(sw, at, &mut lx, &mut lp);
     assert_eq!(lv, l(pt)[0], "running_cost_value_grad returns ℓ");
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::X, lx.as_slice(), &l);
     fd_check(&format!("{} ℓ", info.name), pt, Wrt::P, lp.as_slice(), &l);
@@ -472,7 +456,7 @@ where
         pt,
         &format!("{} Φ", info.name),
         |t, x, p| m.final_cost(At::new(t, x, p)),
-        |cx, cp| m.final_cost_grad(At::new(t, &x, &pv), cx, cp),
+        |cx, cp| m.final_cost_grad(at, cx, cp),
     );
 
     // x₀(θ) and T(θ).

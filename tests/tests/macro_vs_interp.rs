@@ -58,6 +58,7 @@ where
     m.horizon_grad(&pv, &mut dt);
     put("dT".into(), dt.as_slice());
 
+    let at = At::new(t, &xv, &pv);
     for mode in 0..info.modes.len() {
         let pt = mvad::Point::new(mode, sw, t, &xv, &pv);
         let (mut f, mut fx, mut fp, mut ft) = (zn(), znn(), znp(), zn());
@@ -79,69 +80,53 @@ where
         put(format!("sens_ds{mode}"), ds.as_slice());
     }
     for k in 0..info.events.len() {
-        put(format!("g{k}"), &[m.guard(k, At::new(t, &xv, &pv))]);
+        let occ = Occurrence::new(k, 0);
+        put(format!("g{k}"), &[m.guard(k, at)]);
         let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.guard_grad(k, At::new(t, &xv, &pv), &mut gx, &mut gp);
+        let gt = m.guard_grad(k, at, &mut gx, &mut gp);
         put(format!("gx{k}"), gx.as_slice());
         put(format!("gp{k}"), gp.as_slice());
         put(format!("gt{k}"), &[gt]);
         let mut xp = zn();
-        m.reset(Occurrence::new(k, 0), At::new(t, &xv, &pv), &mut xp);
+        m.reset(occ, at, &mut xp);
         put(format!("R{k}"), xp.as_slice());
         let (mut rx, mut rp, mut rt) = (znn(), znp(), zn());
-        m.reset_jac(
-            Occurrence::new(k, 0),
-            At::new(t, &xv, &pv),
-            &mut rx,
-            &mut rp,
-            &mut rt,
-        );
+        m.reset_jac(occ, at, &mut rx, &mut rp, &mut rt);
         put(format!("Rx{k}"), rx.as_slice());
         put(format!("Rp{k}"), rp.as_slice());
         put(format!("Rt{k}"), rt.as_slice());
-        put(
-            format!("phi{k}"),
-            &[m.event_cost(Occurrence::new(k, 0), At::new(t, &xv, &pv))],
-        );
+        put(format!("phi{k}"), &[m.event_cost(occ, at)]);
         let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(
-            Occurrence::new(k, 0),
-            At::new(t, &xv, &pv),
-            &mut cx,
-            &mut cp,
-        );
+        let ct = m.event_cost_grad(occ, at, &mut cx, &mut cp);
         put(format!("phix{k}"), cx.as_slice());
         put(format!("phip{k}"), cp.as_slice());
         put(format!("phit{k}"), &[ct]);
     }
     for j in 0..info.switches {
-        put(
-            format!("sigma{j}"),
-            &[m.switch_value(j, At::new(t, &xv, &pv))],
-        );
+        put(format!("sigma{j}"), &[m.switch_value(j, at)]);
         let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.switch_grad(j, At::new(t, &xv, &pv), &mut gx, &mut gp);
+        let gt = m.switch_grad(j, at, &mut gx, &mut gp);
         put(format!("sigmax{j}"), gx.as_slice());
         put(format!("sigmap{j}"), gp.as_slice());
         put(format!("sigmat{j}"), &[gt]);
     }
     let nobs = info.observables.len();
     let mut y = vec![0.0; nobs];
-    m.observe(At::new(t, &xv, &pv), &mut y);
+    m.observe(at, &mut y);
     put("y".into(), &y);
     let (mut yx, mut yp) = (vec![7.0; nobs * x.len()], vec![7.0; nobs * p.len()]);
-    m.observe_jac(At::new(t, &xv, &pv), &mut yx, &mut yp);
+    m.observe_jac(at, &mut yx, &mut yp);
     put("yx".into(), &yx);
     put("yp".into(), &yp);
-    put("l".into(), &[m.running_cost(sw, At::new(t, &xv, &pv))]);
+    put("l".into(), &[m.running_cost(sw, at)]);
     let (mut lx, mut lp) = (zn(), zp());
-    let l2 = m.running_cost_value_grad(sw, At::new(t, &xv, &pv), &mut lx, &mut lp);
+    let l2 = m.running_cost_value_grad(sw, at, &mut lx, &mut lp);
     put("lx".into(), lx.as_slice());
     put("lp".into(), lp.as_slice());
     put("l2".into(), &[l2]);
-    put("Phi".into(), &[m.final_cost(At::new(t, &xv, &pv))]);
+    put("Phi".into(), &[m.final_cost(at)]);
     let (mut cx, mut cp) = (zn(), zp());
-    let ct = m.final_cost_grad(At::new(t, &xv, &pv), &mut cx, &mut cp);
+    let ct = m.final_cost_grad(at, &mut cx, &mut cp);
     put("Phix".into(), cx.as_slice());
     put("Phip".into(), cp.as_slice());
     put("Phit".into(), &[ct]);
@@ -173,6 +158,7 @@ where
     sv.as_mut_slice().copy_from_slice(s);
     let mut out: Vec<(String, Vec<f64>)> = Vec::new();
     let mut put = |k: String, v: &[f64]| out.push((k, v.to_vec()));
+    let at = At::new(t, &xv, &pv);
     for mode in 0..m.info().modes.len() {
         let pt = mvad::Point::new(mode, sw, t, &xv, &pv);
         let (mut vx, mut vp) = (vec_n(x), zp());
@@ -186,14 +172,9 @@ where
         put(format!("dS_dt{mode}"), o.as_slice());
     }
     for k in 0..m.info().events.len() {
+        let occ = Occurrence::new(k, 0);
         let (mut vx, mut vp) = (vec_n(x), zp());
-        let vt = m.reset_vjp(
-            Occurrence::new(k, 0),
-            At::new(t, &xv, &pv),
-            &lam,
-            &mut vx,
-            &mut vp,
-        );
+        let vt = m.reset_vjp(occ, at, &lam, &mut vx, &mut vp);
         put(format!("reset_vjp_x{k}"), vx.as_slice());
         put(format!("reset_vjp_p{k}"), vp.as_slice());
         put(format!("reset_vjp_t{k}"), &[vt]);
@@ -201,9 +182,9 @@ where
     let mut vp = zp();
     m.initial_state_vjp(&pv, &lam, &mut vp);
     put("x0_vjp".into(), vp.as_slice());
-    m.running_cost_sens_dir_x(sw, At::new(t, &xv, &pv), &sv, &v, &mut vp);
+    m.running_cost_sens_dir_x(sw, at, &sv, &v, &mut vp);
     put("Dv".into(), vp.as_slice());
-    let lt = m.running_cost_sens_dt(sw, At::new(t, &xv, &pv), &sv, &mut vp);
+    let lt = m.running_cost_sens_dt(sw, at, &sv, &mut vp);
     put("dqp_dt".into(), vp.as_slice());
     put("dl_dt".into(), &[lt]);
     out

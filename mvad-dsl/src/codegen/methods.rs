@@ -97,12 +97,7 @@ impl Gen<'_> {
         let mnn = quote!(#pr::OMatrix<f64, Self::N, Self::N>);
         let mnp = quote!(#pr::OMatrix<f64, Self::N, Self::P>);
         let sw_t = quote!(#pr::Switches);
-        let EvalArgs {
-            at,
-            let_at,
-            occ,
-            let_occ,
-        } = EvalArgs::new(&pr);
+        let [at, let_at, occ, let_occ] = eval_args(&pr);
         let vecd = |buf: TokenStream| {
             move |s: usize| {
                 let i = usize_lit(s);
@@ -397,17 +392,23 @@ impl Gen<'_> {
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             fn flow_is_constant(&self, mode: usize) -> bool { #constant }
             fn guard_is_affine(&self, event: usize) -> bool { #affine }
+            #[inline]
             fn guard(&self, event: usize, #at) -> f64 { #let_at #guard }
+            #[inline]
             fn guard_grad(&self, event: usize, #at, gx: &mut #xv, gp: &mut #pv) -> f64 { #let_at #guard_grad }
             fn reset(&self, #occ, #at, xplus: &mut #xv) { #let_occ #let_at #row #reset }
             fn reset_jac(&self, #occ, #at, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #let_occ #let_at #row #reset_jac }
             fn event_time(&self, #occ, p: &#pv) -> f64 { #let_occ #row #etime }
             fn event_time_grad(&self, #occ, p: &#pv, dtau: &mut #pv) { #let_occ #row #etime_grad }
+            #[inline]
             fn switch_value(&self, j: usize, #at) -> f64 { #let_at #swv }
+            #[inline]
             fn switch_grad(&self, j: usize, #at, gx: &mut #xv, gp: &mut #pv) -> f64 { #let_at #swg }
             fn observe(&self, #at, y: &mut [f64]) { #let_at #obs }
             fn observe_jac(&self, #at, yx: &mut [f64], yp: &mut [f64]) { #let_at #obs_jac }
+            #[inline]
             fn running_cost(&self, sw: &#sw_t, #at) -> f64 { #let_at #rc }
+            #[inline]
             fn running_cost_value_grad(&self, sw: &#sw_t, #at, lx: &mut #xv, lp: &mut #pv) -> f64 { #let_at #rcg }
             fn event_cost(&self, #occ, #at) -> f64 { #let_occ #let_at #row #ecost }
             fn event_cost_grad(&self, #occ, #at, cx: &mut #xv, cp: &mut #pv) -> f64 { #let_occ #let_at #row #ecost_grad }
@@ -506,27 +507,14 @@ pub(super) fn row_binding(k: &ModelKernels) -> TokenStream {
 }
 
 /// The evaluation-point parameters of the emitted event-side methods and the bindings that
-/// unpack them into the names the kernels read: `at` (an `At`) into `t`, `x`, `p`; `occ`
-/// (an `Occurrence`) into `event`, `j`.
-pub(super) struct EvalArgs {
-    /// `at: At<'_, N, P>`.
-    pub at: TokenStream,
-    /// `let At { t, x, p } = at;`.
-    pub let_at: TokenStream,
-    /// `occ: Occurrence`.
-    pub occ: TokenStream,
-    /// `let Occurrence { event, j } = occ;`.
-    pub let_occ: TokenStream,
-}
-
-impl EvalArgs {
-    /// The four token streams, with the runtime's items under the path `pr`.
-    pub fn new(pr: &TokenStream) -> Self {
-        EvalArgs {
-            at: quote!(at: #pr::At<'_, Self::N, Self::P>),
-            let_at: quote!(let #pr::At { t, x, p } = at;),
-            occ: quote!(occ: #pr::Occurrence),
-            let_occ: quote!(let #pr::Occurrence { event, j } = occ;),
-        }
-    }
+/// unpack them into the names the kernels read, with the runtime's items under the path `pr`:
+/// `at: At<'_, N, P>`, `let At { t, x, p } = at;`, `occ: Occurrence` and
+/// `let Occurrence { event, j } = occ;`.
+pub(super) fn eval_args(pr: &TokenStream) -> [TokenStream; 4] {
+    [
+        quote!(at: #pr::At<'_, Self::N, Self::P>),
+        quote!(let #pr::At { t, x, p } = at;),
+        quote!(occ: #pr::Occurrence),
+        quote!(let #pr::Occurrence { event, j } = occ;),
+    ]
 }

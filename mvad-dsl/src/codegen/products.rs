@@ -9,7 +9,7 @@ use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 
 use super::emit::Body;
-use super::methods::EvalArgs;
+use super::methods::eval_args;
 use super::{lit, usize_lit, Gen};
 use crate::schedule::{Kernel, ModelKernels, SecondOrderKernels};
 
@@ -171,12 +171,7 @@ impl Gen<'_> {
         let pv = quote!(#pr::OVector<f64, Self::P>);
         let lam = quote!(lambda);
         let mu = quote!(mu);
-        let EvalArgs {
-            at,
-            let_at,
-            occ,
-            let_occ,
-        } = EvalArgs::new(&pr);
+        let [at, let_at, occ, let_occ] = eval_args(&pr);
 
         // λᵀf_x, λᵀf_θ read qps under the frozen bits, as the flow does.
         self.frozen.set(true);
@@ -361,7 +356,7 @@ impl Gen<'_> {
         let pv = quote!(#pr::OVector<f64, Self::P>);
         let mnp = quote!(#pr::OMatrix<f64, Self::N, Self::P>);
         let sw_t = quote!(#pr::Switches);
-        let EvalArgs { at, let_at, .. } = EvalArgs::new(&pr);
+        let [at, let_at, ..] = eval_args(&pr);
         let nan = quote!(out.fill(f64::NAN););
 
         // Flows and ℓ read (static) qps under the frozen bits.

@@ -22,7 +22,7 @@
 use super::record::{FinalState, Item, Tape};
 use super::transpose::{transpose_jump, JumpWork};
 use crate::error::SolveError;
-use crate::integrate::{AdjState, Integrator, StageVector};
+use crate::integrate::{AdjState, Backward, Integrator, StageVector};
 use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
@@ -152,7 +152,7 @@ where
         sw.add(model, p, &samples[left - 1], &mut y);
         left -= 1;
     }
-    let mut integ = Integrator::backward(model, p, tape, opts, cw);
+    let mut integ = Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts);
     let mut work = JumpWork::new(model);
     let mut h_seed = 0.0;
     for item in tape.items().iter().rev() {

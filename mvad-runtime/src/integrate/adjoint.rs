@@ -266,6 +266,8 @@ where
 {
     /// The backward system of `model` at `p` over the record `tape`, with cost cotangent
     /// `cw`; allocates its buffers once (the Rodas5P ones only when `opts.method` may use it).
+    /// Its integrator is `Integrator::with_system(Backward::new(..), opts)`; call
+    /// [`Integrator::restart_segment`] before each segment.
     pub fn new(
         model: &'a M,
         p: &'a OVector<f64, M::P>,
@@ -504,18 +506,6 @@ impl<'a, M: HybridModel> Integrator<Backward<'a, M>>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// An integrator of the backward system over `tape` (see [`Backward::new`]); allocates
-    /// every buffer once. Call [`Integrator::restart_segment`] before each segment.
-    pub fn backward(
-        model: &'a M,
-        p: &'a OVector<f64, M::P>,
-        tape: &'a Tape,
-        opts: &Options,
-        cw: f64,
-    ) -> Self {
-        Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts)
-    }
-
     /// Forget all history and restart at (s, y) on segment `seg` (its mode, switch bits and
     /// recorded steps), in the segment's local time s = t − t_start (see
     /// [`crate::adjoint::record`]); then `step(s_stop)` with s_stop < s integrates backwards.

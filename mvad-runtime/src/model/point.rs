@@ -99,6 +99,7 @@ impl Switches {
 /// products) take one `Point` instead of five arguments, so every source of flow
 /// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
 /// words, passed by value.
+#[derive(Clone, Copy)]
 pub struct Point<'a, N: Dim, P: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<P>,
@@ -138,19 +139,9 @@ where
     }
 }
 
-impl<N: Dim, P: Dim> Clone for Point<'_, N, P>
-where
-    DefaultAllocator: Allocator<N> + Allocator<P>,
-{
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<N: Dim, P: Dim> Copy for Point<'_, N, P> where DefaultAllocator: Allocator<N> + Allocator<P> {}
-
 /// A point (t, x, θ) of a pointwise function: guards, resets, switching functions,
 /// observables and the costs (see the module doc). It is `Copy`: three words.
+#[derive(Clone, Copy)]
 pub struct At<'a, N: Dim, P: Dim>
 where
     DefaultAllocator: Allocator<N> + Allocator<P>,
@@ -173,17 +164,6 @@ where
         At { t, x, p }
     }
 }
-
-impl<N: Dim, P: Dim> Clone for At<'_, N, P>
-where
-    DefaultAllocator: Allocator<N> + Allocator<P>,
-{
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<N: Dim, P: Dim> Copy for At<'_, N, P> where DefaultAllocator: Allocator<N> + Allocator<P> {}
 
 /// Occurrence j of event k: the event that fires and how many times before it has (a guard
 /// event) or which of its scheduled times this is (a time event; for `at each`, the table

@@ -25,6 +25,18 @@ pub enum BallCost {
     Mixed,
 }
 
+impl BallCost {
+    /// The five costs that E1's closed form gives ([`flights`], indexed by the
+    /// discriminant).
+    pub const CLOSED_FORM: [BallCost; 5] = [
+        BallCost::IntH,
+        BallCost::IntV,
+        BallCost::IntH2,
+        BallCost::FinalV,
+        BallCost::SumVplus2,
+    ];
+}
+
 /// Which surface the ball bounces off.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Wall {

@@ -155,20 +155,13 @@ pub fn flights_dual(p: &[f64], t_end: f64) -> ([D; 5], Vec<f64>) {
 
 /// E1 with each cost at three parameter points.
 fn e1_costs() -> Vec<Case> {
-    let costs = [
-        BallCost::IntH,
-        BallCost::IntV,
-        BallCost::IntH2,
-        BallCost::FinalV,
-        BallCost::SumVplus2,
-    ];
     let points = [
         [0.8, 9.81, 2.0, 0.0],
         [0.7, 9.0, 1.5, 0.8],
         [0.9, 9.81, 1.0, -2.0],
     ];
     let mut out = vec![];
-    for cost in costs {
+    for cost in BallCost::CLOSED_FORM {
         for p in points {
             let (cf, impacts) = flights_dual(&p, 2.0);
             let c = cf[cost as usize];

@@ -96,3 +96,18 @@ pub fn assert_close(what: &str, got: f64, want: f64, rel: f64, abs: f64) {
     r.close(what, got, want, rel, abs);
     r.assert_ok();
 }
+
+/// Asserts C of `sol` [`close`] to `cost` (relative `cost_rel`) and the first `grad.len()`
+/// entries of dC/dθ to `grad` (`grad_rel`, `grad_abs`), named `what` in the messages.
+pub fn assert_cost_grad(
+    what: &str,
+    sol: &Solution,
+    cost: f64,
+    grad: &[f64],
+    cost_rel: f64,
+    grad_rel: f64,
+    grad_abs: f64,
+) {
+    assert_close(&format!("{what}: cost"), sol.cost, cost, cost_rel, 0.0);
+    assert_grad(what, &sol.gradient[..grad.len()], grad, grad_rel, grad_abs);
+}
