@@ -410,13 +410,7 @@ fn pairing<T: Spec + Clone>(
     wc: f64,
     w: &[f64],
 ) -> f64 {
-    let m = AdModel::new(spec.clone());
-    let cot = Cotangents {
-        cost: wc,
-        times,
-        observables: w,
-    };
-    let v = vjp(&m, &DVector::from_column_slice(p), o, &cot).expect("vjp");
+    let v = pullback(spec, p, o, times, wc, w);
     wc * v.cost + v.observables.iter().zip(w).map(|(y, w)| y * w).sum::<f64>()
 }
 
