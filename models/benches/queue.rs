@@ -85,10 +85,9 @@ fn profile(which: &str) {
         "compiled" => compiled(&s),
         "lindley" => lindley(&s),
         _ => {
-            let mut loaded = mvad::interp::InterpretedModel::from_source(include_str!(
-                "../queue.hyb"
-            ))
-            .expect("model");
+            let mut loaded =
+                mvad::interp::InterpretedModel::from_source(include_str!("../queue.hyb"))
+                    .expect("model");
             loaded
                 .bind_tables(&[&s.arrivals.table().expect("table")])
                 .expect("binds");
