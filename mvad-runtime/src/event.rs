@@ -240,6 +240,7 @@ impl Scanner {
     /// events are armed iff v ≤ 0 (a guard that starts exactly on zero fires at once if the
     /// flow carries it into the firing side), except the event that just `fired`, which is
     /// disarmed until v < 0; switches are always armed.
+    #[inline]
     pub fn restart_one(&mut self, w: usize, active: bool, v: f64, fired: bool) {
         self.active[w] = active;
         self.start_val[w] = v;

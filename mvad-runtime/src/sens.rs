@@ -89,11 +89,24 @@ pub fn crossing_cosine<N: Dim>(gx: &OVector<f64, N>, f_minus: &OVector<f64, N>, 
 where
     DefaultAllocator: nalgebra::allocator::Allocator<N>,
 {
-    let rate = gx.dot(f_minus) + gt;
+    cosine_of(gx.dot(f_minus) + gt, gx.norm() * f_minus.norm() + gt.abs())
+}
+
+/// The [`crossing_cosine`] of a crossing with total rate `rate` = g_x f⁻ + g_t and scale
+/// |g_x| |f⁻| + |g_t|: |rate| / scale, and 0 for a vanishing rate.
+#[inline]
+pub fn cosine_of(rate: f64, scale: f64) -> f64 {
     if rate == 0.0 {
         return 0.0;
     }
-    rate.abs() / (gx.norm() * f_minus.norm() + gt.abs())
+    rate.abs() / scale
+}
+
+/// Whether a crossing of [`crossing_cosine`] `cosine` grazes at tolerance τ (see
+/// [`is_grazing`]).
+#[inline]
+pub fn is_grazing_cosine(cosine: f64, tau: f64) -> bool {
+    cosine == 0.0 || cosine < tau
 }
 
 /// Whether a crossing is grazing: its [`crossing_cosine`] is below τ, i.e.
@@ -108,8 +121,7 @@ pub fn is_grazing<N: Dim>(
 where
     DefaultAllocator: nalgebra::allocator::Allocator<N>,
 {
-    let cosine = crossing_cosine(gx, f_minus, gt);
-    cosine == 0.0 || cosine < tau
+    is_grazing_cosine(crossing_cosine(gx, f_minus, gt), tau)
 }
 
 /// Saltation update at an event with reset R:
