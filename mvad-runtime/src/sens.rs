@@ -143,6 +143,10 @@ pub fn jump<N: Dim, P: Dim>(
     // s_plus = R_x S⁻ + R_θ
     s_plus.copy_from(rp);
     s_plus.gemm(1.0, rx, s_minus, 1.0);
+    if dt.iter().all(|&d| d == 0.0) {
+        // t' = 0 (a time event whose times do not depend on θ): no time term.
+        return;
+    }
     // work = R_x f⁻ + R_t − f⁺
     work.copy_from(rt);
     work.gemv(1.0, rx, f_minus, 1.0);
@@ -177,7 +181,9 @@ pub fn post_event_total<N: Dim, P: Dim>(
     DefaultAllocator: ModelAlloc<N, P>,
 {
     out.copy_from(s_plus);
-    out.ger(1.0, f_plus, dt, 1.0);
+    if dt.iter().any(|&d| d != 0.0) {
+        out.ger(1.0, f_plus, dt, 1.0);
+    }
 }
 
 #[cfg(test)]

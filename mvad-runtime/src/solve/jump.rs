@@ -86,9 +86,9 @@ where
             );
         }
         // The new state.
-        self.y.x.copy_from(&self.x_plus);
+        self.y.x.as_mut_slice().copy_from_slice(self.x_plus.as_slice());
         if self.sens {
-            self.y.s.copy_from(&self.s_plus);
+            self.y.s.as_mut_slice().copy_from_slice(self.s_plus.as_slice());
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.fired[k] = true;
