@@ -86,9 +86,15 @@ where
             );
         }
         // The new state.
-        self.y.x.as_mut_slice().copy_from_slice(self.x_plus.as_slice());
+        self.y
+            .x
+            .as_mut_slice()
+            .copy_from_slice(self.x_plus.as_slice());
         if self.sens {
-            self.y.s.as_mut_slice().copy_from_slice(self.s_plus.as_slice());
+            self.y
+                .s
+                .as_mut_slice()
+                .copy_from_slice(self.s_plus.as_slice());
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.fired[k] = true;
