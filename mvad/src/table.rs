@@ -71,7 +71,7 @@ pub enum TableSource {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Table {
     names: Vec<String>,
-    columns: Vec<Arc<Vec<f64>>>,
+    columns: Vec<Column>,
     source: Source,
 }
 
@@ -293,7 +293,7 @@ impl Table {
     }
 
     /// The shared buffer of column `name` (what [`bind_columns`] hands a model).
-    fn shared_column(&self, name: &str) -> Option<&Arc<Vec<f64>>> {
+    fn shared_column(&self, name: &str) -> Option<&Column> {
         let i = self.names.iter().position(|n| n == name)?;
         Some(&self.columns[i])
     }
@@ -374,6 +374,9 @@ fn row_start(src: &Source, row: usize) -> Option<usize> {
     None
 }
 
+/// A column's values, shared by the table and the models bound to it.
+pub type Column = Arc<Vec<f64>>;
+
 /// What a model needs from its tables.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TableNeeds<'a> {
@@ -391,7 +394,7 @@ pub struct TableNeeds<'a> {
 pub fn bind_columns(
     needs: &TableNeeds<'_>,
     tables: &[&Table],
-) -> Result<(Vec<Arc<Vec<f64>>>, Vec<usize>), TableError> {
+) -> Result<(Vec<Column>, Vec<usize>), TableError> {
     let mut columns = Vec::with_capacity(needs.columns.len());
     for &(t, name) in &needs.columns {
         let (Some(table), Some(decl)) = (tables.get(t), needs.tables.get(t)) else {
