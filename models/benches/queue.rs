@@ -5,6 +5,10 @@
 //! Targets (issue 10): the compiled model at most 5× the Lindley loop (aim 3×) and under
 //! 17 ms. After criterion, the ratio is printed from a separate timing loop (median of 5).
 //! `QUEUE_N` overrides the number of customers.
+//!
+//! For instruction counts (stable on a shared machine) run the bench binary under
+//! `valgrind --tool=callgrind` with `QUEUE_PROFILE=compiled|loaded|lindley`: it then runs that
+//! case once at `QUEUE_N` customers, without criterion, and prints C and dC/dμ.
 
 use criterion::{criterion_group, Criterion};
 use models::queue::{self, Arrivals};
@@ -74,7 +78,32 @@ fn bench(c: &mut Criterion) {
 
 criterion_group!(benches, bench);
 
+/// One run of the case `which` (`compiled`, `loaded` or `lindley`), for callgrind.
+fn profile(which: &str) {
+    let s = setup();
+    let (c, g) = match which {
+        "compiled" => compiled(&s),
+        "lindley" => lindley(&s),
+        _ => {
+            let mut loaded =
+                mvad::interp::InterpretedModel::from_source(include_str!("../queue.hyb"))
+                    .expect("model");
+            loaded
+                .bind_tables(&[&s.arrivals.table().expect("table")])
+                .expect("binds");
+            let p = nalgebra::DVector::from_vec(vec![1.25]);
+            let sol = solve_with(&loaded, black_box(&p), &s.opts, &mut ()).expect("runs");
+            (sol.cost, sol.gradient[0])
+        }
+    };
+    println!("{which}, {} customers: C {c}, dC/dμ {g}", customers());
+}
+
 fn main() {
+    if let Ok(which) = std::env::var("QUEUE_PROFILE") {
+        profile(&which);
+        return;
+    }
     benches();
     Criterion::default().configure_from_args().final_summary();
     let s = setup();

@@ -240,6 +240,7 @@ impl Scanner {
     /// events are armed iff v ≤ 0 (a guard that starts exactly on zero fires at once if the
     /// flow carries it into the firing side), except the event that just `fired`, which is
     /// disarmed until v < 0; switches are always armed.
+    #[inline]
     pub fn restart_one(&mut self, w: usize, active: bool, v: f64, fired: bool) {
         self.active[w] = active;
         self.start_val[w] = v;
@@ -272,7 +273,7 @@ impl Scanner {
         t0: f64,
         t1: f64,
         linear: bool,
-        mut sample: S,
+        sample: S,
         mut eval: E,
         sim_tol: f64,
     ) -> Result<(), (usize, f64)>
@@ -285,84 +286,26 @@ impl Scanner {
         if nw == 0 || !self.active.iter().any(|&a| a) {
             return Ok(());
         }
-        let times = sample_times(t0, t1);
-        for (v, &s) in self.vals.iter_mut().zip(&self.start_val) {
-            v[0] = s;
-        }
-        // An affine function of t is known from its ends: its interior samples are
-        // interpolated, not evaluated.
-        let first = if linear { NSAMP - 1 } else { 1 };
-        for (i, &t) in times.iter().enumerate().skip(first) {
-            sample(t, i == NSAMP - 1, &self.active, &mut self.tmp);
-            for (v, &s) in self.vals.iter_mut().zip(&self.tmp) {
-                v[i] = s;
-            }
-        }
-        if linear {
-            for v in &mut self.vals {
-                let (a, b) = (v[0], v[NSAMP - 1]);
-                for (i, vi) in v.iter_mut().enumerate().take(NSAMP - 1).skip(1) {
-                    *vi = a + (b - a) * (i as f64 / (NSAMP - 1) as f64);
-                }
-            }
-        }
-        // Brackets per function.
-        let mut first_right = f64::INFINITY;
-        for w in 0..nw {
-            self.brackets[w] = None;
-            if !self.active[w] {
-                continue;
-            }
-            let v = self.vals[w];
-            if let Some(i) = v.iter().position(|x| x.is_nan()) {
-                return Err((w, times[i]));
-            }
-            let strict = self.strict(w);
-            let mut armed = self.armed[w];
-            // A line that fired at t₀ and starts below zero re-armed there (its minimum on
-            // the step; a curve's is searched below).
-            if linear && self.fresh[w] && v[0] < 0.0 {
-                armed = true;
-            }
-            let mut armed_from = if armed { Some(0) } else { None };
-            let mut bracket = None;
-            for i in 1..NSAMP {
-                let vi = v[i];
-                if !armed {
-                    if vi < 0.0 {
-                        armed = true;
-                        armed_from = Some(i);
-                    }
-                } else if triggered(vi, strict) {
-                    bracket = Some((times[i - 1], v[i - 1], times[i], vi));
-                    break;
-                }
-            }
-            if bracket.is_none() && !linear {
-                if let Some(i0) = armed_from {
-                    bracket = dip(&v, &times, i0, self.rising[w], strict, |t| eval(w, t));
-                } else if self.fresh[w] {
-                    // The event fired at t₀ and no sample went below zero: the whole
-                    // excursion to the negative side and back (a short hop of a ball after
-                    // its bounce) may lie between t₀ and the first sample. Look for the
-                    // minimum there; if it is negative the event re-armed at that time and
-                    // the first sample, which has triggered, closes the bracket.
-                    let (tm, neg) = maximize(|t| -eval(w, t), times[0], times[1]);
-                    if neg > 0.0 && triggered(v[1], strict) {
-                        bracket = Some((tm, -neg, times[1], v[1]));
-                    }
-                }
-            }
-            self.fresh[w] = false;
-            if let Some(b) = bracket {
-                first_right = first_right.min(b.2);
-            }
-            self.brackets[w] = bracket;
-        }
+        let first_right = if linear {
+            self.bracket_line(t0, t1, sample)?
+        } else {
+            self.bracket_curve(&sample_times(t0, t1), sample, &mut eval)?
+        };
         if first_right.is_infinite() {
             // Commit the step.
             for w in 0..nw {
                 if !self.active[w] {
+                    continue;
+                }
+                if linear {
+                    // The line from v₀ to v₁: negative somewhere iff at an end; its last
+                    // interior sample as `bracket_curve` would have interpolated it.
+                    let (a, b) = (self.start_val[w], self.tmp[w]);
+                    if !self.armed[w] && (a < 0.0 || b < 0.0) {
+                        self.armed[w] = true;
+                    }
+                    self.start_val[w] = b;
+                    self.rising[w] = b > line_sample(a, b, NSAMP - 2);
                     continue;
                 }
                 let v = &self.vals[w];
@@ -397,6 +340,134 @@ impl Scanner {
         self.found.retain(|c| c.t <= limit);
         Ok(())
     }
+
+    /// The brackets of a step on which every active watched value is affine in t (see
+    /// [`Scanner::scan`]): only v at t₁ is evaluated. A line that is armed at t₀ (or fired there
+    /// and starts below zero) crosses on the step iff v(t₁) has triggered, and its bracket is
+    /// the one the equispaced samples would give, [s_{i−1}, s_i] around the first interpolated
+    /// sample that has triggered. Returns the earliest right end of a bracket (∞ if none);
+    /// v(t₁) stays in `tmp` for the commit.
+    fn bracket_line<S>(&mut self, t0: f64, t1: f64, mut sample: S) -> Result<f64, (usize, f64)>
+    where
+        S: FnMut(f64, bool, &[bool], &mut [f64]),
+    {
+        sample(t1, true, &self.active, &mut self.tmp);
+        let mut first_right = f64::INFINITY;
+        for w in 0..self.len() {
+            self.brackets[w] = None;
+            if !self.active[w] {
+                continue;
+            }
+            let (a, b) = (self.start_val[w], self.tmp[w]);
+            if a.is_nan() || b.is_nan() {
+                // Where the interpolated samples would first have been NaN.
+                let i = if a.is_nan() { 0 } else { 1 };
+                return Err((w, sample_times(t0, t1)[i]));
+            }
+            let strict = self.strict(w);
+            // A line that fired at t₀ and starts below zero re-armed there (its minimum).
+            let armed = self.armed[w] || (self.fresh[w] && a < 0.0);
+            self.fresh[w] = false;
+            if !(armed && triggered(b, strict)) {
+                continue;
+            }
+            let times = sample_times(t0, t1);
+            let mut prev = a;
+            for (i, &ti) in times.iter().enumerate().skip(1) {
+                let vi = if i == NSAMP - 1 {
+                    b
+                } else {
+                    line_sample(a, b, i)
+                };
+                if triggered(vi, strict) {
+                    self.brackets[w] = Some((times[i - 1], prev, ti, vi));
+                    first_right = first_right.min(ti);
+                    break;
+                }
+                prev = vi;
+            }
+        }
+        Ok(first_right)
+    }
+
+    /// The brackets of a step of a curve: v sampled at t₀ (the start value), the interior
+    /// samples of the dense output and t₁; a sign change between two samples, or a dip found
+    /// by [`dip`], or a whole excursion before the first sample after a firing. Returns the
+    /// earliest right end of a bracket (∞ if none).
+    fn bracket_curve<S, E>(
+        &mut self,
+        times: &[f64; NSAMP],
+        mut sample: S,
+        eval: &mut E,
+    ) -> Result<f64, (usize, f64)>
+    where
+        S: FnMut(f64, bool, &[bool], &mut [f64]),
+        E: FnMut(usize, f64) -> f64,
+    {
+        for (v, &s) in self.vals.iter_mut().zip(&self.start_val) {
+            v[0] = s;
+        }
+        for (i, &t) in times.iter().enumerate().skip(1) {
+            sample(t, i == NSAMP - 1, &self.active, &mut self.tmp);
+            for (v, &s) in self.vals.iter_mut().zip(&self.tmp) {
+                v[i] = s;
+            }
+        }
+        let mut first_right = f64::INFINITY;
+        for w in 0..self.len() {
+            self.brackets[w] = None;
+            if !self.active[w] {
+                continue;
+            }
+            let v = self.vals[w];
+            if let Some(i) = v.iter().position(|x| x.is_nan()) {
+                return Err((w, times[i]));
+            }
+            let strict = self.strict(w);
+            let mut armed = self.armed[w];
+            let mut armed_from = if armed { Some(0) } else { None };
+            let mut bracket = None;
+            for i in 1..NSAMP {
+                let vi = v[i];
+                if !armed {
+                    if vi < 0.0 {
+                        armed = true;
+                        armed_from = Some(i);
+                    }
+                } else if triggered(vi, strict) {
+                    bracket = Some((times[i - 1], v[i - 1], times[i], vi));
+                    break;
+                }
+            }
+            if bracket.is_none() {
+                if let Some(i0) = armed_from {
+                    bracket = dip(&v, times, i0, self.rising[w], strict, |t| eval(w, t));
+                } else if self.fresh[w] {
+                    // The event fired at t₀ and no sample went below zero: the whole
+                    // excursion to the negative side and back (a short hop of a ball after
+                    // its bounce) may lie between t₀ and the first sample. Look for the
+                    // minimum there; if it is negative the event re-armed at that time and
+                    // the first sample, which has triggered, closes the bracket.
+                    let (tm, neg) = maximize(|t| -eval(w, t), times[0], times[1]);
+                    if neg > 0.0 && triggered(v[1], strict) {
+                        bracket = Some((tm, -neg, times[1], v[1]));
+                    }
+                }
+            }
+            self.fresh[w] = false;
+            if let Some(b) = bracket {
+                first_right = first_right.min(b.2);
+            }
+            self.brackets[w] = bracket;
+        }
+        Ok(first_right)
+    }
+}
+
+/// Sample i of the line from `a` (at t₀) to `b` (at t₁) at the equispaced sample times.
+#[inline]
+fn line_sample(a: f64, b: f64, i: usize) -> f64 {
+    a + (b - a) * (i as f64 / (NSAMP - 1) as f64)
 }
 
 /// The sample times of a step: t₀, the interior points, t₁ (exactly).

@@ -89,11 +89,24 @@ pub fn crossing_cosine<N: Dim>(gx: &OVector<f64, N>, f_minus: &OVector<f64, N>, 
 where
     DefaultAllocator: nalgebra::allocator::Allocator<N>,
 {
-    let rate = gx.dot(f_minus) + gt;
+    cosine_of(gx.dot(f_minus) + gt, gx.norm() * f_minus.norm() + gt.abs())
+}
+
+/// The [`crossing_cosine`] of a crossing with total rate `rate` = g_x f⁻ + g_t and scale
+/// |g_x| |f⁻| + |g_t|: |rate| / scale, and 0 for a vanishing rate.
+#[inline]
+pub fn cosine_of(rate: f64, scale: f64) -> f64 {
     if rate == 0.0 {
         return 0.0;
     }
-    rate.abs() / (gx.norm() * f_minus.norm() + gt.abs())
+    rate.abs() / scale
+}
+
+/// Whether a crossing of [`crossing_cosine`] `cosine` grazes at tolerance τ (see
+/// [`is_grazing`]).
+#[inline]
+pub fn is_grazing_cosine(cosine: f64, tau: f64) -> bool {
+    cosine == 0.0 || cosine < tau
 }
 
 /// Whether a crossing is grazing: its [`crossing_cosine`] is below τ, i.e.
@@ -108,8 +121,7 @@ pub fn is_grazing<N: Dim>(
 where
     DefaultAllocator: nalgebra::allocator::Allocator<N>,
 {
-    let cosine = crossing_cosine(gx, f_minus, gt);
-    cosine == 0.0 || cosine < tau
+    is_grazing_cosine(crossing_cosine(gx, f_minus, gt), tau)
 }
 
 /// Saltation update at an event with reset R:
@@ -131,6 +143,10 @@ pub fn jump<N: Dim, P: Dim>(
     // s_plus = R_x S⁻ + R_θ
     s_plus.copy_from(rp);
     s_plus.gemm(1.0, rx, s_minus, 1.0);
+    if dt.iter().all(|&d| d == 0.0) {
+        // t' = 0 (a time event whose times do not depend on θ): no time term.
+        return;
+    }
     // work = R_x f⁻ + R_t − f⁺
     work.copy_from(rt);
     work.gemv(1.0, rx, f_minus, 1.0);
@@ -165,7 +181,9 @@ pub fn post_event_total<N: Dim, P: Dim>(
     DefaultAllocator: ModelAlloc<N, P>,
 {
     out.copy_from(s_plus);
-    out.ger(1.0, f_plus, dt, 1.0);
+    if dt.iter().any(|&d| d != 0.0) {
+        out.ger(1.0, f_plus, dt, 1.0);
+    }
 }
 
 #[cfg(test)]

@@ -14,19 +14,46 @@
 
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use mvad_dsl::diag::{render, Diagnostic};
 use mvad_dsl::Span;
 
-/// Where a table came from, for error messages (the file name and its text).
+/// Where a table came from, for error messages: the file name and where its text can be had
+/// again. The text itself is not kept (a table of 10⁷ rows is read as a stream, into its
+/// columns only); an error that quotes it reads it back.
 #[derive(Clone, Debug, Default, PartialEq)]
 struct Source {
     file: String,
-    /// The text (empty for tables built in memory).
-    text: String,
-    /// Byte offset of each data row's line, and of the header (`header`).
-    row_starts: Vec<usize>,
+    origin: Origin,
+    /// Byte offset of the header line.
     header: usize,
+}
+
+/// Where the text of a table is, for the errors that quote it.
+#[derive(Clone, Debug, Default, PartialEq)]
+enum Origin {
+    /// Columns built in memory: no text.
+    #[default]
+    Memory,
+    /// Text handed to [`Table::parse_csv`].
+    Text(Arc<str>),
+    /// A file, read again when an error quotes it.
+    File(PathBuf),
+}
+
+impl Source {
+    /// The text of the table (the file as it is now, invalid UTF-8 replaced; empty for a
+    /// table built in memory or a file that can no longer be read).
+    fn text(&self) -> String {
+        match &self.origin {
+            Origin::Memory => String::new(),
+            Origin::Text(t) => t.to_string(),
+            Origin::File(p) => std::fs::read(p)
+                .map(|b| String::from_utf8_lossy(&b).into_owned())
+                .unwrap_or_default(),
+        }
+    }
 }
 
 /// Where a table's data come from when a caller replaces the file its declaration names
@@ -39,11 +66,12 @@ pub enum TableSource {
     Data(Table),
 }
 
-/// A data table: named columns of equal length.
+/// A data table: named columns of equal length. The columns are shared, not copied, by the
+/// models bound to them ([`bind_columns`]) and by clones.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Table {
     names: Vec<String>,
-    columns: Vec<Vec<f64>>,
+    columns: Vec<Column>,
     source: Source,
 }
 
@@ -70,11 +98,32 @@ impl fmt::Display for TableError {
 
 impl std::error::Error for TableError {}
 
+/// Where in a table's text an error is.
+enum At {
+    /// A byte span.
+    Span(Span),
+    /// Field `i` of the line that starts at byte `start`.
+    Field(usize, usize),
+    /// The header line.
+    Header,
+}
+
 impl TableError {
-    fn located(src: &Source, span: Span, message: String) -> TableError {
+    /// The error at `at` in the table's text (read back from its origin).
+    fn located(src: &Source, at: At, message: String) -> TableError {
+        let text = src.text();
+        let span = match at {
+            At::Span(span) => span,
+            At::Field(start, i) => field_span(&text, start, i),
+            At::Header => {
+                let h = src.header.min(text.len());
+                let end = text[h..].find(['\n', '\r']).map_or(text.len(), |i| h + i);
+                Span::new(h, end)
+            }
+        };
         let diag = Diagnostic::new(span, message.clone());
-        let rendered = render(&src.file, &src.text, std::slice::from_ref(&diag));
-        let (line, col) = mvad_dsl::SourceFile::new(&src.file, &src.text).line_col(span.start);
+        let rendered = render(&src.file, &text, std::slice::from_ref(&diag));
+        let (line, col) = mvad_dsl::SourceFile::new(&src.file, &text).line_col(span.start);
         TableError {
             file: src.file.clone(),
             line,
@@ -106,7 +155,7 @@ impl Table {
                 format!("column `{n}` has {} rows, the first column {rows}", c.len()),
             ));
         }
-        let (names, columns) = columns.into_iter().unzip();
+        let (names, columns) = columns.into_iter().map(|(n, c)| (n, Arc::new(c))).unzip();
         Ok(Table {
             names,
             columns,
@@ -117,78 +166,77 @@ impl Table {
         })
     }
 
-    /// Reads a CSV file.
+    /// Reads a CSV file as a stream: only the columns are kept, so memory is 8 bytes per
+    /// value (the file's text is read again only to quote it in an error).
     pub fn read_csv(path: &Path) -> Result<Table, TableError> {
         let file = path.display().to_string();
-        let bytes = std::fs::read(path)
+        let reader = std::fs::File::open(path)
             .map_err(|e| TableError::unlocated(&file, format!("cannot read the table: {e}")))?;
-        let text = match String::from_utf8(bytes) {
-            Ok(t) => t,
-            Err(e) => {
-                let at = e.utf8_error().valid_up_to();
-                let text = String::from_utf8_lossy(e.as_bytes()).into_owned();
-                let src = Source {
-                    file,
-                    text,
-                    ..Source::default()
-                };
-                return Err(TableError::located(
-                    &src,
-                    Span::new(at, at + 1),
-                    "the table is not valid UTF-8 text".into(),
-                ));
-            }
+        let src = Source {
+            file,
+            origin: Origin::File(path.to_path_buf()),
+            header: 0,
         };
-        Table::parse_csv(&file, text)
+        Table::parse(src, reader)
     }
 
     /// Parses CSV text; `file` names it in error messages.
     pub fn parse_csv(file: &str, text: String) -> Result<Table, TableError> {
-        let mut src = Source {
+        let text: Arc<str> = Arc::from(text);
+        let src = Source {
             file: file.to_string(),
-            text,
-            ..Source::default()
+            origin: Origin::Text(Arc::clone(&text)),
+            header: 0,
         };
+        Table::parse(src, text.as_bytes())
+    }
+
+    /// Reads the records of `input` (the `csv` crate's reader, one record buffer reused): the
+    /// header, then rows of finite numbers, every error located at its field.
+    fn parse(mut src: Source, input: impl std::io::Read) -> Result<Table, TableError> {
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)
             .comment(Some(b'#'))
             // Fields are trimmed here, not by the reader (its trimming allocates per record).
             .flexible(true)
-            .from_reader(src.text.as_bytes());
-        let mut record = csv::StringRecord::new();
+            .from_reader(input);
+        let mut record = csv::ByteRecord::new();
         let mut names: Vec<String> = Vec::new();
         let mut columns: Vec<Vec<f64>> = Vec::new();
         loop {
-            let more = match reader.read_record(&mut record) {
+            let more = match reader.read_byte_record(&mut record) {
                 Ok(m) => m,
                 Err(e) => {
                     let at = e.position().map_or(0, |p| p.byte() as usize);
                     let msg = format!("unreadable CSV: {e}");
-                    return Err(TableError::located(&src, Span::new(at, at + 1), msg));
+                    return Err(TableError::located(
+                        &src,
+                        At::Span(Span::new(at, at + 1)),
+                        msg,
+                    ));
                 }
             };
             if !more {
                 break;
             }
             let start = record.position().map_or(0, |p| p.byte() as usize);
-            if record.len() == 1 && record[0].trim().is_empty() {
+            if record.len() == 1 && record[0].trim_ascii().is_empty() {
                 continue; // a blank line
             }
             if names.is_empty() {
                 src.header = start;
-                for (i, field) in record.iter().map(str::trim).enumerate() {
+                for i in 0..record.len() {
+                    let field = utf8_field(&src, &record, start, i)?;
                     if !is_identifier(field) {
-                        let span = field_span(&src.text, start, i);
                         let msg = format!(
                             "column name `{field}` is not an identifier (letters, digits and `_`, \
                              not starting with a digit)"
                         );
-                        return Err(TableError::located(&src, span, msg));
+                        return Err(TableError::located(&src, At::Field(start, i), msg));
                     }
                     if names.iter().any(|n| n == field) {
-                        let span = field_span(&src.text, start, i);
                         let msg = format!("column `{field}` appears twice in the header");
-                        return Err(TableError::located(&src, span, msg));
+                        return Err(TableError::located(&src, At::Field(start, i), msg));
                     }
                     names.push(field.to_string());
                 }
@@ -196,31 +244,32 @@ impl Table {
                 continue;
             }
             if record.len() != names.len() {
-                let span = field_span(&src.text, start, record.len().min(names.len()));
+                let at = At::Field(start, record.len().min(names.len()));
                 let msg = format!(
                     "this row has {} fields, the header {}",
                     record.len(),
                     names.len()
                 );
-                return Err(TableError::located(&src, span, msg));
+                return Err(TableError::located(&src, at, msg));
             }
-            for (i, field) in record.iter().map(str::trim).enumerate() {
+            for (i, column) in columns.iter_mut().enumerate() {
+                let field = utf8_field(&src, &record, start, i)?;
                 match field.parse::<f64>() {
-                    Ok(v) if v.is_finite() => columns[i].push(v),
+                    Ok(v) if v.is_finite() => column.push(v),
                     _ => {
-                        let span = field_span(&src.text, start, i);
                         let msg =
                             format!("`{field}` in column `{}` is not a finite number", names[i]);
-                        return Err(TableError::located(&src, span, msg));
+                        return Err(TableError::located(&src, At::Field(start, i), msg));
                     }
                 }
             }
-            src.row_starts.push(start);
         }
         if names.is_empty() {
             let msg = "the table has no header row of column names".to_string();
-            return Err(TableError::located(&src, Span::new(0, 0), msg));
+            return Err(TableError::located(&src, At::Span(Span::new(0, 0)), msg));
         }
+        // Shared as they are (moved, not copied).
+        let columns = columns.into_iter().map(Arc::new).collect();
         Ok(Table {
             names,
             columns,
@@ -230,7 +279,7 @@ impl Table {
 
     /// Number of rows.
     pub fn rows(&self) -> usize {
-        self.columns.first().map_or(0, Vec::len)
+        self.columns.first().map_or(0, |c| c.len())
     }
 
     /// The column names, in file order.
@@ -240,6 +289,11 @@ impl Table {
 
     /// The values of column `name`.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.shared_column(name).map(|c| &c[..])
+    }
+
+    /// The shared buffer of column `name` (what [`bind_columns`] hands a model).
+    fn shared_column(&self, name: &str) -> Option<&Column> {
         let i = self.names.iter().position(|n| n == name)?;
         Some(&self.columns[i])
     }
@@ -250,10 +304,7 @@ impl Table {
             "table `{table}` has no column `{name}`; its columns are {}",
             self.names.join(", ")
         );
-        let end = self.source.text[self.source.header..]
-            .find(['\n', '\r'])
-            .map_or(self.source.text.len(), |i| self.source.header + i);
-        TableError::located(&self.source, Span::new(self.source.header, end), msg)
+        TableError::located(&self.source, At::Header, msg)
     }
 
     /// The error "column `name` decreases" at row `row`.
@@ -266,14 +317,65 @@ impl Table {
             c[row],
             c[row - 1]
         );
-        match self.source.row_starts.get(row) {
-            Some(&start) => {
-                TableError::located(&self.source, field_span(&self.source.text, start, i), msg)
-            }
+        match row_start(&self.source, row) {
+            Some(start) => TableError::located(&self.source, At::Field(start, i), msg),
             None => TableError::unlocated(&self.source.file, msg),
         }
     }
 }
+
+/// Field i of `record` (the line starting at byte `start`) as trimmed UTF-8 text, or the
+/// located error at its first invalid byte.
+fn utf8_field<'r>(
+    src: &Source,
+    record: &'r csv::ByteRecord,
+    start: usize,
+    i: usize,
+) -> Result<&'r str, TableError> {
+    match std::str::from_utf8(&record[i]) {
+        Ok(field) => Ok(field.trim()),
+        Err(e) => {
+            // The text before the first invalid byte is the file's, so the field starts where
+            // it does in the file.
+            let text = src.text();
+            let field = field_span(&text, start, i);
+            let lead = record[i].len() - record[i].trim_ascii_start().len();
+            let at = field.start + e.valid_up_to() - lead.min(field.start + e.valid_up_to());
+            let msg = "the table is not valid UTF-8 text".to_string();
+            Err(TableError::located(
+                src,
+                At::Span(Span::new(at, at + 1)),
+                msg,
+            ))
+        }
+    }
+}
+
+/// The byte offset of the line of data row `row` (0-based, after the header), found by
+/// reading the table's text again with the same rules (comments and blank lines skipped).
+fn row_start(src: &Source, row: usize) -> Option<usize> {
+    let text = src.text();
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .from_reader(text.as_bytes());
+    let mut record = csv::ByteRecord::new();
+    let mut seen = 0usize; // non-blank records, the header first
+    while reader.read_byte_record(&mut record).ok()? {
+        if record.len() == 1 && record[0].trim_ascii().is_empty() {
+            continue;
+        }
+        if seen == row + 1 {
+            return record.position().map(|p| p.byte() as usize);
+        }
+        seen += 1;
+    }
+    None
+}
+
+/// A column's values, shared by the table and the models bound to it.
+pub type Column = Arc<Vec<f64>>;
 
 /// What a model needs from its tables.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -292,7 +394,7 @@ pub struct TableNeeds<'a> {
 pub fn bind_columns(
     needs: &TableNeeds<'_>,
     tables: &[&Table],
-) -> Result<(Vec<Vec<f64>>, Vec<usize>), TableError> {
+) -> Result<(Vec<Column>, Vec<usize>), TableError> {
     let mut columns = Vec::with_capacity(needs.columns.len());
     for &(t, name) in &needs.columns {
         let (Some(table), Some(decl)) = (tables.get(t), needs.tables.get(t)) else {
@@ -301,8 +403,8 @@ pub fn bind_columns(
                 format!("no table given for column `{name}`"),
             ));
         };
-        match table.column(name) {
-            Some(c) => columns.push(c.to_vec()),
+        match table.shared_column(name) {
+            Some(c) => columns.push(Arc::clone(c)),
             None => return Err(table.missing_column(decl, name)),
         }
     }
@@ -384,6 +486,35 @@ mod tests {
         );
     }
 
+    /// A file is read as a stream; its errors still quote the line, read back from the file,
+    /// including the row of a decreasing time found only when the model binds it.
+    #[test]
+    fn a_file_streams_and_its_errors_quote_the_line() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("q.csv");
+        let read = |text: &[u8]| {
+            std::fs::write(&path, text).expect("write");
+            Table::read_csv(&path)
+        };
+        let t = read(b"# c\nt,s\n\n1, 2\n3,4\n").expect("reads");
+        assert_eq!(t.column("s"), Some(&[2.0, 4.0][..]));
+        let e = read(b"t,s\n1,2\n3, 4x\n").unwrap_err();
+        assert_eq!((e.line, e.col), (3, 4), "{e}");
+        assert!(e.to_string().contains("3, 4x\n  |    ^^"), "{e}");
+        let e = read(b"t,s\n1,2\n3,caf\xe9\n").unwrap_err();
+        assert_eq!((e.line, e.col), (3, 6), "{e}");
+        assert!(e.message.contains("not valid UTF-8"), "{e}");
+        let t = read(b"t,s\n1,2\n# c\n\n3,4\n2,5\n").expect("reads");
+        let needs = TableNeeds {
+            tables: vec!["arrivals"],
+            columns: vec![(0, "t")],
+            times: vec![(0, "arrive")],
+        };
+        let e = bind_columns(&needs, &[&t]).unwrap_err();
+        assert_eq!((e.line, e.col), (6, 1), "{e}");
+        assert!(e.to_string().contains("2,5"), "{e}");
+    }
+
     #[test]
     fn binding_checks_columns_and_monotone_times() {
         let t = parse("t,s\n1,2\n3,4\n2,5\n").expect("parses");
@@ -393,7 +524,10 @@ mod tests {
             times: vec![],
         };
         let (cols, rows) = bind_columns(&needs, &[&t]).expect("binds");
-        assert_eq!(cols, vec![vec![2.0, 4.0, 5.0], vec![1.0, 3.0, 2.0]]);
+        assert_eq!(cols[0][..], [2.0, 4.0, 5.0]);
+        assert_eq!(cols[1][..], [1.0, 3.0, 2.0]);
+        // Bound, not copied: the model shares the table's buffers.
+        assert!(Arc::ptr_eq(&cols[0], t.shared_column("s").expect("s")));
         assert_eq!(rows, vec![3]);
         let needs = TableNeeds {
             times: vec![(1, "arrive")],

@@ -115,7 +115,7 @@ pub fn generate(k: &ModelKernels) -> TokenStream {
         pub struct #name {
             info: #pr::ModelInfo,
             /// The columns the model reads, bound from its tables (empty without tables).
-            columns: ::std::vec::Vec<::std::vec::Vec<f64>>,
+            columns: ::std::vec::Vec<::std::sync::Arc<::std::vec::Vec<f64>>>,
             #qp_fields
         }
 

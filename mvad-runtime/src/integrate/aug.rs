@@ -52,12 +52,14 @@ where
         }
     }
 
-    /// Copies every part of `other` into `self` (no allocation).
+    /// Copies every part of `other` into `self` (no allocation; slice copies, which for
+    /// dynamic sizes are a memcpy rather than nalgebra's checked element loop).
+    #[inline]
     pub fn copy_from(&mut self, other: &Self) {
-        self.x.copy_from(&other.x);
-        self.s.copy_from(&other.s);
+        self.x.as_mut_slice().copy_from_slice(other.x.as_slice());
+        self.s.as_mut_slice().copy_from_slice(other.s.as_slice());
         self.q = other.q;
-        self.qp.copy_from(&other.qp);
+        self.qp.as_mut_slice().copy_from_slice(other.qp.as_slice());
     }
 
     /// `self += a · other`, every part.
@@ -161,11 +163,11 @@ where
 
     #[inline]
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.x.copy_from(&base.x);
+        self.x.as_mut_slice().copy_from_slice(base.x.as_slice());
         self.q = base.q;
         if all {
-            self.s.copy_from(&base.s);
-            self.qp.copy_from(&base.qp);
+            self.s.as_mut_slice().copy_from_slice(base.s.as_slice());
+            self.qp.as_mut_slice().copy_from_slice(base.qp.as_slice());
         }
         self.accumulate(h, coefs, ks, all);
     }

@@ -120,6 +120,9 @@ where
     events_cost: f64,
     /// The error of Σ dφ_k/dθ so far.
     events_grad: OVector<f64, P>,
+    /// Nothing has been carried yet: every part is exactly zero, and so is its image under
+    /// any jump (a run whose steps are all exact, which make no error, never leaves it).
+    zero: bool,
     /// Scratch: two n-vectors, n×p and p.
     xs: OVector<f64, N>,
     w: OVector<f64, N>,
@@ -165,11 +168,18 @@ where
             beta: OVector::zeros_generic(p, Const::<1>),
             events_cost: 0.0,
             events_grad: OVector::zeros_generic(p, Const::<1>),
+            zero: true,
             xs: OVector::zeros_generic(n, Const::<1>),
             w: OVector::zeros_generic(n, Const::<1>),
             ss: OMatrix::zeros_generic(n, p),
             dts: OVector::zeros_generic(p, Const::<1>),
         }
+    }
+
+    /// Whether the estimate is exactly zero because nothing has been carried yet (the steps so
+    /// far were exact): its jump at an event is then zero too, and needs no inputs.
+    pub fn is_zero(&self) -> bool {
+        self.zero
     }
 
     /// Carries the estimate over the accepted step from (t₀, Y₀) of signed length h with local
@@ -200,6 +210,7 @@ where
         sens: bool,
         autonomous: bool,
     ) {
+        self.zero = false;
         let r = &mut self.r;
         r.x += &le.x;
         r.q += le.q;
@@ -338,6 +349,10 @@ where
     /// The linearised jump at an event (see the module doc); the time shifts are turned into
     /// the errors they are at t⁻ first (the linearised jump maps them exactly).
     pub fn jump(&mut self, s: &Saltation<'_, N>, sens: bool) {
+        if self.zero {
+            // The jump is linear in the estimate: zero stays zero.
+            return;
+        }
         self.materialise(s.f_minus, s.l_minus, sens);
         // w = R_x f⁻ + R_t − f⁺.
         match s.rx {
@@ -424,6 +439,7 @@ mod tests {
         let (e, g, v) = (0.8, 9.81, -3.0);
         let mut ge = GlobalError::new(Const::<2>, Const::<1>);
         ge.alpha = 1e-3;
+        ge.zero = false;
         let f_minus = Vector2::new(v, -g);
         let f_plus = Vector2::new(-e * v, -g);
         let rx = Matrix2::new(1.0, 0.0, 0.0, -e);

@@ -435,9 +435,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.carry_global_error();
         self.ensure_k0()?;
         if self.scheme == Scheme::Exact {
-            // Exact: the first attempt lands on t_stop.
-            self.h = f64::INFINITY;
-        } else if self.h == 0.0 {
+            return self.exact_step(t_stop);
+        }
+        if self.h == 0.0 {
             self.h = self.initial_step(t_stop - self.t);
         }
         // Where the last non-finite attempt of this step came from (see `nonfinite_source`).
@@ -489,11 +489,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             let k = self.scheme.error_order();
             if err <= 1.0 {
                 let fac = self.ctrl.accepted(err, k);
-                let exact = self.scheme == Scheme::Exact;
                 self.accept(dir * h, landing, t_stop);
-                // An exact step makes no error, and its flow (a function of θ alone) moves
-                // none: there is nothing to carry.
-                self.carry_pending = (!exact).then_some(dir * h);
+                self.carry_pending = Some(dir * h);
                 self.h = h * fac;
                 self.update_stiffness();
                 return Ok(());
@@ -501,6 +498,36 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             self.stats.rejected_steps += 1;
             self.h = h * self.ctrl.rejected(err, k);
         }
+    }
+
+    /// The one step of a [`Scheme::Exact`] segment: Y(t_stop) = Y + (t_stop − t)·F, landing on
+    /// t_stop, with no error estimate, no step-size control and nothing to carry for the global
+    /// error estimate (the step makes no error, and its flow, a function of θ alone, moves
+    /// none). Fails as an adaptive step would: a step below the resolution of t, the step
+    /// budget, or a state that overflows.
+    fn exact_step(&mut self, t_stop: f64) -> Result<(), StepError> {
+        let h = t_stop - self.t;
+        if h.abs() <= 10.0 * f64::EPSILON * self.t.abs() || h.abs() < 1e-300 {
+            return Err(StepError::StepSizeUnderflow {
+                t: self.t,
+                h: h.abs(),
+            });
+        }
+        if self.stats.steps + self.stats.rejected_steps >= self.max_steps {
+            return Err(StepError::MaxSteps {
+                t: self.t,
+                steps: self.max_steps,
+            });
+        }
+        self.exact_attempt(h);
+        if !self.ynew.is_finite() {
+            self.stats.rejected_steps += 1;
+            let what = self.nonfinite_source();
+            return Err(StepError::NonFinite { t: self.t, what });
+        }
+        self.accept(h, true, t_stop);
+        self.carry_pending = None;
+        Ok(())
     }
 
     /// Takes one step of exactly `h` (either sign) with the active scheme and no error control

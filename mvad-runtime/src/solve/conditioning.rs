@@ -28,7 +28,8 @@ where
         rate: f64,
         l_plus: f64,
     ) {
-        if self.integ.global_error_mut().is_none() {
+        // A zero estimate (only exact steps so far) jumps to zero: nothing to compute.
+        if self.integ.global_error_mut().is_none_or(|ge| ge.is_zero()) {
             return;
         }
         let (model, p) = (self.model, self.p);
@@ -57,7 +58,7 @@ where
     /// Carries the estimate through the crossing of switching function j at t (identity
     /// reset): x in `y.x`, f⁻ and f⁺ computed, the old bits in `sw` and the new in `sw_next`.
     pub(super) fn error_through_switch(&mut self, j: usize, t: f64) {
-        if self.integ.global_error_mut().is_none() {
+        if self.integ.global_error_mut().is_none_or(|ge| ge.is_zero()) {
             return;
         }
         let (model, p) = (self.model, self.p);

@@ -86,9 +86,15 @@ where
             );
         }
         // The new state.
-        self.y.x.copy_from(&self.x_plus);
+        self.y
+            .x
+            .as_mut_slice()
+            .copy_from_slice(self.x_plus.as_slice());
         if self.sens {
-            self.y.s.copy_from(&self.s_plus);
+            self.y
+                .s
+                .as_mut_slice()
+                .copy_from_slice(self.s_plus.as_slice());
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.fired[k] = true;
@@ -129,17 +135,25 @@ where
                 what: format!("guard of event `{name}`"),
             });
         }
-        let cosine = sens::crossing_cosine(&self.gx, &self.f_minus, gt);
-        let grazing = sens::is_grazing(&self.gx, &self.f_minus, gt, self.opts.grazing_tol);
+        // A time event's g = t − τ has ∇g = 0: its rate is ∂g/∂t = 1 and so is its cosine.
+        let (rate, scale) = if timed {
+            (gt, gt.abs())
+        } else {
+            (
+                self.gx.dot(&self.f_minus) + gt,
+                self.gx.norm() * self.f_minus.norm() + gt.abs(),
+            )
+        };
+        let cosine = sens::cosine_of(rate, scale);
+        let grazing = sens::is_grazing_cosine(cosine, self.opts.grazing_tol);
         if !timed && !grazing {
             self.snap_onto_guard(k, t, gt);
         }
-        let rate = self.gx.dot(&self.f_minus) + gt;
         let approach = Approach {
             rate,
             gt,
             cosine,
-            scale: self.gx.norm() * self.f_minus.norm() + gt.abs(),
+            scale,
             grazing,
         };
         if !self.sens {

@@ -188,6 +188,49 @@ fn time_resolution(t: f64) -> f64 {
     16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE
 }
 
+/// What the scanner watches in one mode: every switching function and the state events armed
+/// there (time events are not watched: the loop steps onto their times), and whether all of
+/// them are affine guards (a mode with a switching function is not).
+struct ModeWatch {
+    /// Watched function w is active in the mode.
+    active: Vec<bool>,
+    /// Some function is active.
+    any: bool,
+    /// Every active function is an affine guard.
+    affine: bool,
+}
+
+impl ModeWatch {
+    /// The watch of every mode of `model`.
+    fn of_modes<M: HybridModel>(model: &M) -> Vec<ModeWatch>
+    where
+        DefaultAllocator: ModelAlloc<M::N, M::P>,
+    {
+        let info = model.info();
+        let nev = info.events.len();
+        (0..info.modes.len())
+            .map(|mode| {
+                let active: Vec<bool> = (0..nev + info.switches)
+                    .map(|w| {
+                        w >= nev
+                            || (info.events[w].armed_in(mode) && !info.events[w].is_time_event())
+                    })
+                    .collect();
+                let affine = active
+                    .iter()
+                    .enumerate()
+                    .all(|(w, &a)| !a || (w < nev && model.guard_is_affine(w)));
+                let any = active.iter().any(|&a| a);
+                ModeWatch {
+                    active,
+                    any,
+                    affine,
+                }
+            })
+            .collect()
+    }
+}
+
 /// All state and buffers of one run (allocated once in `new`).
 struct Driver<'a, M: HybridModel>
 where
@@ -210,6 +253,8 @@ where
     /// Scratch: switching functions at exactly zero when the bits are first decided.
     sw_undecided: Switches,
     scanner: Scanner,
+    /// What each mode watches, decided once per run (see [`ModeWatch`]).
+    watch: Vec<ModeWatch>,
     /// Every watched function active since the last restart is an affine guard (see
     /// [`HybridModel::guard_is_affine`]): on an exact step the scanner needs only its ends.
     affine_watch: bool,
@@ -296,6 +341,7 @@ where
             sw_next: Switches::new(info.switches),
             sw_undecided: Switches::new(info.switches),
             scanner: Scanner::new(nev, info.switches),
+            watch: ModeWatch::of_modes(model),
             affine_watch: false,
             xs: vn(),
             xe: vn(),
@@ -428,14 +474,10 @@ where
 
     /// Restarts the integrator and the scanner at (t, self.y) in the current mode and bits.
     fn restart(&mut self, t: f64) -> Result<(), SolveError> {
-        let info = self.model.info();
-        let nev = info.events.len();
-        self.affine_watch = true;
-        for w in 0..self.scanner.len() {
-            // Time events are not watched: the loop steps onto their times.
-            let active =
-                w >= nev || (info.events[w].armed_in(self.mode) && !info.events[w].is_time_event());
-            self.affine_watch &= !active || (w < nev && self.model.guard_is_affine(w));
+        let nev = self.scanner.nevents;
+        let watch = &self.watch[self.mode];
+        self.affine_watch = watch.affine;
+        for (w, &active) in watch.active.iter().enumerate() {
             let v = if active {
                 Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
             } else {
@@ -499,7 +541,7 @@ where
             }
             self.integ.step(self.t_end.min(t_next))?;
             // The step's full dense output is needed only to sample guards or to record.
-            if self.rec.is_some() || self.scanner.active.iter().any(|&a| a) {
+            if self.rec.is_some() || self.watch[self.mode].any {
                 self.integ.ensure_dense();
             }
             let (t0, t1) = (self.integ.t_prev(), self.integ.t());

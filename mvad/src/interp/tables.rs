@@ -27,7 +27,7 @@ pub(super) struct Tables {
     /// Per event: the table an `at each` event runs over.
     each: Vec<Option<usize>>,
     /// The bound values of each column (empty until [`InterpretedModel::bind_tables`]).
-    values: Vec<Vec<f64>>,
+    values: Vec<std::sync::Arc<Vec<f64>>>,
     /// The current row's values of every column (scratch of the event methods).
     row: RefCell<Vec<f64>>,
     /// The (event, row) `row` holds (the methods of one event read the same row in turn).
