@@ -22,7 +22,7 @@
 use super::record::{FinalState, Item, Tape};
 use super::transpose::{transpose_jump, JumpWork};
 use crate::error::SolveError;
-use crate::integrate::{AdjState, Integrator, StageVector};
+use crate::integrate::Integrator;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
@@ -64,28 +64,30 @@ where
         model: &M,
         p: &OVector<f64, M::P>,
         s: &Sample<'_>,
-        y: &mut AdjState<M::N, M::P>,
+        lam: &mut OVector<f64, M::N>,
+        g: &mut OVector<f64, M::P>,
     ) {
         if s.w.iter().all(|&w| w == 0.0) {
             return;
         }
-        let (n, np) = (y.lam.len(), y.g.len());
+        let (n, np) = (lam.len(), g.len());
         model.observe_jac(s.t, &self.x, p, &mut self.yx, &mut self.yp);
         for (i, &wi) in s.w.iter().enumerate() {
             if wi == 0.0 {
                 continue;
             }
-            for (l, v) in y.lam.iter_mut().zip(&self.yx[i * n..(i + 1) * n]) {
+            for (l, v) in lam.iter_mut().zip(&self.yx[i * n..(i + 1) * n]) {
                 *l += wi * v;
             }
-            for (g, v) in y.g.iter_mut().zip(&self.yp[i * np..(i + 1) * np]) {
+            for (g, v) in g.iter_mut().zip(&self.yp[i * np..(i + 1) * np]) {
                 *g += wi * v;
             }
         }
     }
 }
 
-/// λ(T) = w Φ_xᵀ and g = w [Φ_θ + (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ] into `y`.
+/// λ(T) = w Φ_xᵀ and g = w [Φ_θ + (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ] into `lam`, `g`.
+#[allow(clippy::too_many_arguments)]
 fn terminal<M: HybridModel>(
     model: &M,
     p: &OVector<f64, M::P>,
@@ -93,13 +95,14 @@ fn terminal<M: HybridModel>(
     cw: f64,
     dt_end: &OVector<f64, M::P>,
     x: &mut OVector<f64, M::N>,
-    y: &mut AdjState<M::N, M::P>,
+    lam: &mut OVector<f64, M::N>,
+    g: &mut OVector<f64, M::P>,
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let info = model.info();
-    y.lam.fill(0.0);
-    y.g.fill(0.0);
+    lam.fill(0.0);
+    g.fill(0.0);
     if cw == 0.0 {
         return;
     }
@@ -107,17 +110,17 @@ fn terminal<M: HybridModel>(
     let mut rate = 0.0;
     if info.has_final_cost {
         let mut f = x.clone_owned();
-        let phi_t = model.final_cost_grad(fin.t, x, p, &mut y.lam, &mut y.g);
+        let phi_t = model.final_cost_grad(fin.t, x, p, lam, g);
         model.rhs(Point::new(fin.mode, &fin.sw, fin.t, x, p), &mut f);
-        rate += y.lam.dot(&f) + phi_t;
-        y.lam *= cw;
-        y.g *= cw;
+        rate += lam.dot(&f) + phi_t;
+        *lam *= cw;
+        *g *= cw;
     }
     if info.has_running_cost {
         rate += model.running_cost(&fin.sw, fin.t, x, p);
     }
     if rate != 0.0 {
-        y.g.axpy(cw * rate, dt_end, 1.0);
+        g.axpy(cw * rate, dt_end, 1.0);
     }
 }
 
@@ -138,35 +141,37 @@ where
     let fin = tape.final_state().ok_or(SolveError::NotRecorded)?;
     let (n, np) = (model.nstates(), model.nparams());
     let nobs = model.info().nobservables();
-    let mut y = AdjState::zeros(n, np);
+    let mut lam = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
     let mut sw = SampleWork::<M> {
         yx: vec![0.0; nobs * n.value()],
         yp: vec![0.0; nobs * np.value()],
         x: OVector::zeros_generic(n, Const::<1>),
     };
-    terminal(model, p, fin, cw, dt_end, &mut sw.x, &mut y);
+    // g lives in the backward system, which adds each step's quadrature to it.
+    let mut integ = Integrator::backward(model, p, tape, opts, cw);
+    terminal(model, p, fin, cw, dt_end, &mut sw.x, &mut lam, integ.gradient_mut());
     // Samples are consumed from the back: samples[..left] are still to come.
     let mut left = samples.len();
     while left > 0 && samples[left - 1].t >= fin.t {
         sw.x.as_mut_slice().copy_from_slice(&fin.x);
-        sw.add(model, p, &samples[left - 1], &mut y);
+        sw.add(model, p, &samples[left - 1], &mut lam, integ.gradient_mut());
         left -= 1;
     }
-    let mut integ = Integrator::backward(model, p, tape, opts, cw);
     let mut work = JumpWork::new(model);
     let mut h_seed = 0.0;
     for item in tape.items().iter().rev() {
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
-                transpose_jump(model, p, cw, j, states, &mut y.lam, &mut y.g, &mut work)?;
+                let g = integ.gradient_mut();
+                transpose_jump(model, p, cw, j, states, &mut lam, g, &mut work)?;
                 continue;
             }
             Item::Segment(seg) => seg,
         };
         let mut t = seg.t_end;
         loop {
-            integ.restart_segment(seg, seg.local(t), &y);
+            integ.restart_segment(seg, seg.local(t), &lam);
             integ.set_step_size(h_seed);
             let stop = match left {
                 0 => seg.t_start,
@@ -179,11 +184,11 @@ where
                 integ.step(s_stop)?;
                 h_seed = integ.last_step_size().abs();
             }
-            y.copy_from(integ.y());
+            lam.copy_from(integ.y());
             let mut cursor = seg.steps.end - 1;
             while left > 0 && samples[left - 1].t >= stop {
                 tape.state_at(seg, s_stop, &mut cursor, sw.x.as_mut_slice());
-                sw.add(model, p, &samples[left - 1], &mut y);
+                sw.add(model, p, &samples[left - 1], &mut lam, integ.gradient_mut());
                 left -= 1;
             }
             if stop <= seg.t_start {
@@ -193,16 +198,17 @@ where
         }
     }
     let mut vp = OVector::<f64, M::P>::zeros_generic(np, Const::<1>);
-    model.initial_state_vjp(p, &y.lam, &mut vp);
-    y.g += &vp;
-    if !y.g.iter().all(|v| v.is_finite()) {
+    model.initial_state_vjp(p, &lam, &mut vp);
+    let g = integ.gradient_mut();
+    *g += &vp;
+    if !g.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite {
             t: 0.0,
             what: "adjoint gradient".into(),
         });
     }
     Ok(SweepOut {
-        gradient: y.g.iter().copied().collect(),
+        gradient: integ.gradient_mut().iter().copied().collect(),
         stats: integ.stats().clone(),
     })
 }

@@ -177,6 +177,80 @@ impl ModelAdjoint for InterpretedModel {
         );
     }
 
+    /// −(λᵀf_x + w ℓ_x): the flow's Jacobian tape walked over its f_x entries only, then
+    /// ℓ's gradient tape over its x slots (when w ≠ 0); nothing of size p is touched.
+    fn adjoint_rate(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, w: f64, out: &mut X) {
+        let Point { mode, sw, t, x, p } = pt;
+        let n = self.n;
+        let mut sc = self.scratch.borrow_mut();
+        let at = at_sw(t, x, p, sw);
+        let m = self.mode(mode).filter(|_| lambda.len() == n && out.len() == n);
+        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
+            out.fill(f64::NAN);
+            return;
+        };
+        let xe = &m.second.x_entries;
+        let regs = &sc.regs;
+        let vals = m.jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
+        transposed(
+            lambda.as_slice(),
+            vals.take_while(|&(slot, _)| slot < xe.len())
+                .map(|(slot, a)| (xe[slot].0, xe[slot].1, a)),
+            out.as_mut_slice(),
+        );
+        out.neg_mut();
+        let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
+            return;
+        };
+        if !self.run(&c.grad, &at, &mut sc.regs) {
+            out.fill(f64::NAN);
+            return;
+        }
+        let regs = &sc.regs;
+        for (slot, reg) in c.grad.outputs().filter(|&(slot, _)| slot < n) {
+            out[slot] -= w * regs[reg];
+        }
+    }
+
+    /// g −= a·(λᵀf_θ + w ℓ_θ) over the f_θ entries of the flow's Jacobian tape and the θ
+    /// slots of ℓ's gradient tape: O(non-zeros), never O(p).
+    fn adjoint_quadrature_add(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        lambda: &X,
+        w: f64,
+        a: f64,
+        g: &mut X,
+    ) {
+        let Point { mode, sw, t, x, p } = pt;
+        let (n, np) = (self.n, self.p);
+        let mut sc = self.scratch.borrow_mut();
+        let at = at_sw(t, x, p, sw);
+        let m = self.mode(mode).filter(|_| lambda.len() == n && g.len() == np);
+        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
+            g.fill(f64::NAN);
+            return;
+        };
+        let (nx, pe) = (m.second.x_entries.len(), &m.second.p_entries);
+        let regs = &sc.regs;
+        for (slot, reg) in m.jac.outputs().skip_while(|&(slot, _)| slot < nx) {
+            let (r, k) = pe[slot - nx];
+            g[k] -= a * (lambda[r] * regs[reg]);
+        }
+        let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
+            return;
+        };
+        if !self.run(&c.grad, &at, &mut sc.regs) {
+            g.fill(f64::NAN);
+            return;
+        }
+        let regs = &sc.regs;
+        let aw = a * w;
+        for (slot, reg) in c.grad.outputs().filter(|&(s, _)| s >= n && s < n + np) {
+            g[slot - n] -= aw * regs[reg];
+        }
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn reset_vjp(
         &self,
