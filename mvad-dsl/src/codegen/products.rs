@@ -301,9 +301,9 @@ impl Gen<'_> {
             fn rhs_vjp(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, vx: &mut #xv, vp: &mut #pv) {
                 let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
             fn adjoint_rate(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, out: &mut #xv) {
-                let #pr::Point { mode, sw, t, x, p } = pt; #rate out.neg_mut(); #rc_rate }
+                let #pr::Point { mode, sw, t, x, p } = pt; { #rate } out.neg_mut(); #rc_rate }
             fn adjoint_quadrature_add(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, a: f64, g: &mut #pv) {
-                let #pr::Point { mode, sw, t, x, p } = pt; #quad #rc_quad }
+                let #pr::Point { mode, sw, t, x, p } = pt; { #quad } #rc_quad }
             fn reset_vjp(&self, event: usize, j: usize, t: f64, x: &#xv, p: &#pv, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #row #reset }
             fn initial_state_vjp(&self, p: &#pv, mu: &#xv, vp: &mut #pv) { #x0 }
         }

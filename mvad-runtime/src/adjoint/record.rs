@@ -321,6 +321,23 @@ impl Tape {
         self.eval_step(k, t, out);
     }
 
+    /// The start (local time) of the recorded step on `seg` that holds s from below: the
+    /// largest step boundary strictly below s, or the segment's start. A backward step that
+    /// stops there stays within one recorded step (see `adjoint::sweep`); `cursor` as in
+    /// [`Tape::state_at`].
+    pub fn step_start_below(&self, seg: &SegmentRec, s: f64, cursor: &mut usize) -> f64 {
+        let (first, last) = (seg.steps.start, seg.steps.end - 1);
+        let mut k = (*cursor).clamp(first, last);
+        while k > first && s <= self.steps[k].lo {
+            k -= 1;
+        }
+        while k < last && s > self.steps[k].hi {
+            k += 1;
+        }
+        *cursor = k;
+        self.steps[k].lo
+    }
+
     /// Step k's polynomial at t, by Horner's scheme in θ = (t − t0)/h.
     fn eval_step(&self, k: usize, t: f64, out: &mut [f64]) {
         let s = self.steps[k];

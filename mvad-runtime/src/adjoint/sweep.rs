@@ -14,6 +14,14 @@
 //!    those jumps are undone; one at T takes x(T) after any jump at T.
 //! 4. At t = 0: g += λ(0)ᵀ∂x₀/∂θ ([`crate::model::ModelAdjoint::initial_state_vjp`]).
 //!
+//! The quadrature g is not under error control (only λ is: see `integrate::adjoint`), so
+//! what resolves its integrand G(t) = −(λᵀf_θ + w ℓ_θ)(t, x(t)) where x(t) moves fast (the
+//! stiff relay's lag, τ = 1e-8, whose f_τ has a transient of width 1e-8 after each switch
+//! while λ has none) is the record itself: x(t) is a polynomial per recorded step, the steps
+//! the primal run chose for x, and no backward step spans two of them (it stops at each
+//! recorded step's start). Where λ allows longer steps than x did, the sweep takes as many
+//! steps as the primal run.
+//!
 //! Then g = w dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ: the sum of every term of DESIGN.md's dC/dθ,
 //! transposed. The integrator restarts at every segment start and every sample (λ jumps
 //! there), its first step seeded with the last step's size. It runs in the segment's local
@@ -180,8 +188,13 @@ where
             // A stop within the time resolution of where the sweep stands (a sample a few ulps
             // before a segment's end) is reached: no step is that short.
             let s_stop = seg.local(stop);
+            let mut cursor = seg.steps.end - 1;
             while integ.t() - s_stop > 16.0 * f64::EPSILON * integ.t().abs() {
-                integ.step(s_stop)?;
+                // No backward step spans two recorded steps (see the module doc).
+                let s = integ.t();
+                let below = tape.step_start_below(seg, s, &mut cursor);
+                let resolvable = s - below > 64.0 * f64::EPSILON * s.abs();
+                integ.step(if resolvable { below.max(s_stop) } else { s_stop })?;
                 h_seed = integ.last_step_size().abs();
             }
             lam.copy_from(integ.y());
