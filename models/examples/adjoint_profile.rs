@@ -42,8 +42,10 @@ fn main() -> ExitCode {
     }
     let model = match InterpretedModel::from_source(&text(p)) {
         Ok(m) => m,
-        Err(e) => {
-            eprintln!("{e}");
+        Err(diags) => {
+            for d in diags {
+                eprintln!("{}", d.message);
+            }
             return ExitCode::from(1);
         }
     };

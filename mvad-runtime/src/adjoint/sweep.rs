@@ -18,9 +18,9 @@
 //! what resolves its integrand G(t) = −(λᵀf_θ + w ℓ_θ)(t, x(t)) where x(t) moves fast (the
 //! stiff relay's lag, τ = 1e-8, whose f_τ has a transient of width 1e-8 after each switch
 //! while λ has none) is the record itself: x(t) is a polynomial per recorded step, the steps
-//! the primal run chose for x, and no backward step spans two of them (it stops at each
-//! recorded step's start). Where λ allows longer steps than x did, the sweep takes as many
-//! steps as the primal run.
+//! the primal run chose for x, and no backward step is longer than [`RECORD_REACH`] times
+//! the shortest recorded step it overlaps ([`Tape::backward_reach`]). Where x moved fast the
+//! sweep's steps are as fine as the primal run's; elsewhere λ's error control decides.
 //!
 //! Then g = w dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ: the sum of every term of DESIGN.md's dC/dθ,
 //! transposed. The integrator restarts at every segment start and every sample (λ jumps
@@ -34,6 +34,10 @@ use crate::integrate::Integrator;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+
+/// A backward step reaches at most this many times the shortest recorded step it overlaps
+/// (see the module doc).
+pub(crate) const RECORD_REACH: f64 = 4.0;
 
 /// The cotangent w_s of the observables at one sample time t_s.
 #[derive(Clone, Copy, Debug)]
@@ -190,11 +194,12 @@ where
             let s_stop = seg.local(stop);
             let mut cursor = seg.steps.end - 1;
             while integ.t() - s_stop > 16.0 * f64::EPSILON * integ.t().abs() {
-                // No backward step spans two recorded steps (see the module doc).
+                // No backward step is longer than RECORD_REACH recorded steps (module doc).
                 let s = integ.t();
-                let below = tape.step_start_below(seg, s, &mut cursor);
-                let resolvable = s - below > 64.0 * f64::EPSILON * s.abs();
-                integ.step(if resolvable { below.max(s_stop) } else { s_stop })?;
+                let h = integ.next_step_size();
+                let reach = tape.backward_reach(seg, s, RECORD_REACH, h, &mut cursor);
+                let resolvable = s - reach > 64.0 * f64::EPSILON * s.abs();
+                integ.step(if resolvable { reach.max(s_stop) } else { s_stop })?;
                 h_seed = integ.last_step_size().abs();
             }
             lam.copy_from(integ.y());
