@@ -6,8 +6,9 @@
 //! cargo run --release -p models --example adjoint_profile -- impact 1000 adjoint [runs]
 //! ```
 //!
-//! Arguments: the family (`impact` or `chain`), p, the mode (`forward` or `adjoint`) and the
-//! number of runs (default 1). Prints the gradient's first entry, the steps of the run (for
+//! Arguments: the family (`impact` or `chain`), p, the mode (`forward` or `adjoint`), the
+//! number of runs (default 1) and optionally `no-global-error` (`Options::global_error` off,
+//! to see what the global error estimate costs). Prints the gradient's first entry, the steps of the run (for
 //! the adjoint: the primal run's and the sweep's, apart) and the record's bytes.
 
 use models::generated::{chain, impact};
@@ -18,7 +19,7 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: adjoint_profile impact|chain P forward|adjoint [RUNS]";
+    let usage = "usage: adjoint_profile impact|chain P forward|adjoint [RUNS [no-global-error]]";
     let (Some(family), Some(p), Some(mode)) = (args.first(), args.get(1), args.get(2)) else {
         eprintln!("{usage}");
         return ExitCode::from(2);
@@ -52,6 +53,7 @@ fn main() -> ExitCode {
     let theta = model.default_params();
     let opts = Options {
         gradient_mode: mode,
+        global_error: args.get(4).map(String::as_str) != Some("no-global-error"),
         ..Options::default()
     };
     let mut last = None;

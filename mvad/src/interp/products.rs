@@ -177,27 +177,21 @@ impl ModelAdjoint for InterpretedModel {
         );
     }
 
-    /// −(λᵀf_x + w ℓ_x): the flow's Jacobian tape walked over its f_x entries only, then
-    /// ℓ's gradient tape over its x slots (when w ≠ 0); nothing of size p is touched.
+    /// −(λᵀf_x + w ℓ_x): the flow's f_x tape (its non-zero entries only), then ℓ's gradient
+    /// tape over its x slots (when w ≠ 0); nothing of size p is touched.
     fn adjoint_rate(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, w: f64, out: &mut X) {
         let Point { mode, sw, t, x, p } = pt;
         let n = self.n;
         let mut sc = self.scratch.borrow_mut();
         let at = at_sw(t, x, p, sw);
         let m = self.mode(mode).filter(|_| lambda.len() == n && out.len() == n);
-        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
+        let Some(m) = m.filter(|m| self.run(&m.jac_x, &at, &mut sc.regs)) else {
             out.fill(f64::NAN);
             return;
         };
-        let xe = &m.second.x_entries;
         let regs = &sc.regs;
-        let vals = m.jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
-        transposed(
-            lambda.as_slice(),
-            vals.take_while(|&(slot, _)| slot < xe.len())
-                .map(|(slot, a)| (xe[slot].0, xe[slot].1, a)),
-            out.as_mut_slice(),
-        );
+        let vals = m.jac_x.outputs().map(|(s, reg)| (s / n, s % n, regs[reg]));
+        transposed(lambda.as_slice(), vals, out.as_mut_slice());
         out.neg_mut();
         let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
             return;
@@ -212,7 +206,7 @@ impl ModelAdjoint for InterpretedModel {
         }
     }
 
-    /// g −= a·(λᵀf_θ + w ℓ_θ) over the f_θ entries of the flow's Jacobian tape and the θ
+    /// g −= a·(λᵀf_θ + w ℓ_θ) over the non-zero entries of the flow's f_θ tape and the θ
     /// slots of ℓ's gradient tape: O(non-zeros), never O(p).
     fn adjoint_quadrature_add(
         &self,
@@ -227,14 +221,13 @@ impl ModelAdjoint for InterpretedModel {
         let mut sc = self.scratch.borrow_mut();
         let at = at_sw(t, x, p, sw);
         let m = self.mode(mode).filter(|_| lambda.len() == n && g.len() == np);
-        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
+        let Some(m) = m.filter(|m| self.run(&m.jac_p, &at, &mut sc.regs)) else {
             g.fill(f64::NAN);
             return;
         };
-        let (nx, pe) = (m.second.x_entries.len(), &m.second.p_entries);
         let regs = &sc.regs;
-        for (slot, reg) in m.jac.outputs().skip_while(|&(slot, _)| slot < nx) {
-            let (r, k) = pe[slot - nx];
+        for (slot, reg) in m.jac_p.outputs() {
+            let (r, k) = (slot / np, slot % np);
             g[k] -= a * (lambda[r] * regs[reg]);
         }
         let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
