@@ -161,7 +161,16 @@ where
     };
     // g lives in the backward system, which adds each step's quadrature to it.
     let mut integ = Integrator::backward(model, p, tape, opts, cw);
-    terminal(model, p, fin, cw, dt_end, &mut sw.x, &mut lam, integ.gradient_mut());
+    terminal(
+        model,
+        p,
+        fin,
+        cw,
+        dt_end,
+        &mut sw.x,
+        &mut lam,
+        integ.gradient_mut(),
+    );
     // Samples are consumed from the back: samples[..left] are still to come.
     let mut left = samples.len();
     while left > 0 && samples[left - 1].t >= fin.t {
@@ -199,7 +208,11 @@ where
                 let h = integ.next_step_size();
                 let reach = tape.backward_reach(seg, s, RECORD_REACH, h, &mut cursor);
                 let resolvable = s - reach > 64.0 * f64::EPSILON * s.abs();
-                integ.step(if resolvable { reach.max(s_stop) } else { s_stop })?;
+                integ.step(if resolvable {
+                    reach.max(s_stop)
+                } else {
+                    s_stop
+                })?;
                 h_seed = integ.last_step_size().abs();
             }
             lam.copy_from(integ.y());

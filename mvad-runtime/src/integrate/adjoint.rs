@@ -71,13 +71,23 @@ where
     #[inline]
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
         self.as_mut_slice().copy_from_slice(base.as_slice());
-        accumulate_slices(self.as_mut_slice(), h, coefs, ks.iter().map(|k| k.as_slice()));
+        accumulate_slices(
+            self.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.as_slice()),
+        );
     }
 
     #[inline]
     fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
         self.fill(0.0);
-        accumulate_slices(self.as_mut_slice(), h, coefs, ks.iter().map(|k| k.as_slice()));
+        accumulate_slices(
+            self.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.as_slice()),
+        );
     }
 
     #[inline]
@@ -371,7 +381,8 @@ where
         let rhs = &mut self.rhs;
         rhs.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
-        rhs.model.adjoint_quadrature_add(pt, y, rhs.w, a, &mut self.g);
+        rhs.model
+            .adjoint_quadrature_add(pt, y, rhs.w, a, &mut self.g);
     }
 }
 

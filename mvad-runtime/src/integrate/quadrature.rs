@@ -84,13 +84,13 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 self.sys.quadrature_add(t0, &self.y_prev, h * ws);
             } else {
                 let (a, c) = rosenbrock::stage_row(s);
-                self.tmp
-                    .combine(&self.y_prev, 1.0, a, &self.k[1..=s], true);
+                self.tmp.combine(&self.y_prev, 1.0, a, &self.k[1..=s], true);
                 self.sys.quadrature_add(t0 + c * h, &self.tmp, h * ws);
             }
         }
         self.tmp.lincomb(1.0, &omega, &self.k[1..=NSTAGES], true);
         self.sys.quadrature_jac_add(t0, &self.tmp, h);
-        self.sys.quadrature_dt_add(t0, &self.y_prev, h * h * omega_t);
+        self.sys
+            .quadrature_dt_add(t0, &self.y_prev, h * h * omega_t);
     }
 }

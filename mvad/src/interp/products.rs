@@ -184,7 +184,9 @@ impl ModelAdjoint for InterpretedModel {
         let n = self.n;
         let mut sc = self.scratch.borrow_mut();
         let at = at_sw(t, x, p, sw);
-        let m = self.mode(mode).filter(|_| lambda.len() == n && out.len() == n);
+        let m = self
+            .mode(mode)
+            .filter(|_| lambda.len() == n && out.len() == n);
         let Some(m) = m.filter(|m| self.run(&m.jac_x, &at, &mut sc.regs)) else {
             out.fill(f64::NAN);
             return;
@@ -220,7 +222,9 @@ impl ModelAdjoint for InterpretedModel {
         let (n, np) = (self.n, self.p);
         let mut sc = self.scratch.borrow_mut();
         let at = at_sw(t, x, p, sw);
-        let m = self.mode(mode).filter(|_| lambda.len() == n && g.len() == np);
+        let m = self
+            .mode(mode)
+            .filter(|_| lambda.len() == n && g.len() == np);
         let Some(m) = m.filter(|m| self.run(&m.jac_p, &at, &mut sc.regs)) else {
             g.fill(f64::NAN);
             return;
