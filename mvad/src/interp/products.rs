@@ -137,6 +137,29 @@ fn transposed(w: &[f64], triples: impl Iterator<Item = (usize, usize, f64)>, out
 }
 
 impl InterpretedModel {
+    /// Runs ℓ's gradient tape at `at` when w ≠ 0 and the model has a running cost, and hands
+    /// each of its non-zero outputs whose slot is in `slots` (x: 0..n, θ: n..n+p) to `add`;
+    /// false when the tape cannot run.
+    fn running_cost_slots(
+        &self,
+        at: &At<'_>,
+        regs: &mut [f64],
+        w: f64,
+        slots: std::ops::Range<usize>,
+        mut add: impl FnMut(usize, f64),
+    ) -> bool {
+        let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
+            return true;
+        };
+        if !self.run(&c.grad, at, regs) {
+            return false;
+        }
+        for (slot, reg) in c.grad.outputs().filter(|(s, _)| slots.contains(s)) {
+            add(slot, regs[reg]);
+        }
+        true
+    }
+
     /// Whether `s` is n×p and `out` n×p (or, for ℓ, `out` has p entries).
     fn sens_shapes(&self, s: &M, out_len: usize, rows: usize) -> bool {
         s.nrows() == self.n && s.ncols() == self.p && out_len == rows * self.p
@@ -195,16 +218,9 @@ impl ModelAdjoint for InterpretedModel {
         let vals = m.jac_x.outputs().map(|(s, reg)| (s / n, s % n, regs[reg]));
         transposed(lambda.as_slice(), vals, out.as_mut_slice());
         out.neg_mut();
-        let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
-            return;
-        };
-        if !self.run(&c.grad, &at, &mut sc.regs) {
+        let rc = |s: usize, v: f64| out[s] -= w * v;
+        if !self.running_cost_slots(&at, &mut sc.regs, w, 0..n, rc) {
             out.fill(f64::NAN);
-            return;
-        }
-        let regs = &sc.regs;
-        for (slot, reg) in c.grad.outputs().filter(|&(slot, _)| slot < n) {
-            out[slot] -= w * regs[reg];
         }
     }
 
@@ -234,17 +250,10 @@ impl ModelAdjoint for InterpretedModel {
             let (r, k) = (slot / np, slot % np);
             g[k] -= a * (lambda[r] * regs[reg]);
         }
-        let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
-            return;
-        };
-        if !self.run(&c.grad, &at, &mut sc.regs) {
-            g.fill(f64::NAN);
-            return;
-        }
-        let regs = &sc.regs;
         let aw = a * w;
-        for (slot, reg) in c.grad.outputs().filter(|&(s, _)| s >= n && s < n + np) {
-            g[slot - n] -= aw * regs[reg];
+        let rc = |s: usize, v: f64| g[s - n] -= aw * v;
+        if !self.running_cost_slots(&at, &mut sc.regs, w, n..n + np, rc) {
+            g.fill(f64::NAN);
         }
     }
 
