@@ -29,6 +29,7 @@
 
 use crate::qp::{QpError, QpLayerInfo, QpState, Side};
 
+pub mod dense;
 pub mod differences;
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
 
@@ -627,11 +628,8 @@ where
         fp.tr_mul_to(lambda, vp);
     }
 
-    /// The adjoint's rate of λ at `pt` with cost cotangent w: out = −(λᵀf_x + w ℓ_x) (n,
-    /// overwritten; ℓ is not evaluated when w = 0). The backward sweep's stage derivative
-    /// (`integrate::adjoint`); it touches nothing of size p. The default goes through
-    /// [`ModelAdjoint::rhs_vjp`] and [`HybridModel::running_cost_value_grad`] (and allocates
-    /// p-long scratch); both doors override it with the sparse kernels.
+    /// The backward sweep's rate of λ: out = −(λᵀf_x + w ℓ_x) (overwritten; ℓ not evaluated
+    /// when w = 0), touching nothing of size p. The default is [`dense::adjoint_rate`].
     fn adjoint_rate(
         &self,
         pt: Point<'_, Self::N, Self::P>,
@@ -641,24 +639,12 @@ where
     ) where
         Self: HybridModel,
     {
-        let (n, np) = (self.nstates(), self.nparams());
-        let mut vp = OVector::<f64, Self::P>::zeros_generic(np, nalgebra::Const::<1>);
-        self.rhs_vjp(pt, lambda, out, &mut vp);
-        if w != 0.0 && self.info().has_running_cost {
-            let mut lx = OVector::<f64, Self::N>::zeros_generic(n, nalgebra::Const::<1>);
-            self.running_cost_value_grad(pt.sw, pt.t, pt.x, pt.p, &mut lx, &mut vp);
-            out.axpy(w, &lx, 1.0);
-        }
-        out.neg_mut();
+        dense::adjoint_rate(self, pt, lambda, w, out);
     }
 
-    /// The adjoint's gradient quadrature rate at `pt`, scaled and added:
-    /// g += a·(−(λᵀf_θ + w ℓ_θ)) (ℓ not evaluated when w = 0). Only the structurally
-    /// non-zero entries of f_θ and ℓ_θ are touched, so a model whose p parameters each enter
-    /// one term pays O(p) once per call, and one whose flow reads one parameter pays O(1):
-    /// the backward sweep adds its quadrature with this product, at the stage points of each
-    /// accepted step, without any p-long temporary (`integrate::adjoint`). The default forms
-    /// λᵀf_θ and ℓ_θ densely (it allocates).
+    /// The sweep's gradient quadrature, scaled and added: g += −a (λᵀf_θ + w ℓ_θ), touching
+    /// only the structural non-zeros of f_θ and ℓ_θ (`integrate::quadrature`). The default
+    /// is [`dense::adjoint_quadrature_add`].
     fn adjoint_quadrature_add(
         &self,
         pt: Point<'_, Self::N, Self::P>,
@@ -669,15 +655,7 @@ where
     ) where
         Self: HybridModel,
     {
-        let (n, np) = (self.nstates(), self.nparams());
-        let mut vx = OVector::<f64, Self::N>::zeros_generic(n, nalgebra::Const::<1>);
-        let mut vp = OVector::<f64, Self::P>::zeros_generic(np, nalgebra::Const::<1>);
-        self.rhs_vjp(pt, lambda, &mut vx, &mut vp);
-        g.axpy(-a, &vp, 1.0);
-        if w != 0.0 && self.info().has_running_cost {
-            self.running_cost_value_grad(pt.sw, pt.t, pt.x, pt.p, &mut vx, &mut vp);
-            g.axpy(-a * w, &vp, 1.0);
-        }
+        dense::adjoint_quadrature_add(self, pt, lambda, w, a, g);
     }
 
     /// μᵀR_x into `vx` (n) and μᵀR_θ into `vp` (p) for event k's reset x⁺ = R_k(t, x, θ) at
