@@ -16,49 +16,59 @@
 //!
 //! Per model and p: `forward`, forward sensitivities (O(n·p) per step), and `adjoint`,
 //! `GradientMode::Adjoint` (a primal run at 1/100 of the tolerances, then the sweep, with the
-//! interpreter's sparse vector–Jacobian products: O(p) per stage for λᵀf_θ).
+//! interpreter's sparse vector–Jacobian products: λ alone in the stepper, the gradient
+//! quadrature added once per step at O(nnz f_θ) per stage value).
 //!
 //! After criterion, a table per model (medians of 9 runs in ms, for p = 1, 10, 20, 50, 100,
 //! 1000; steps; the forward record's memory; forward/adjoint agreement), the crossover p and
 //! the flatness ratio time(p = 1000)/time(p = 10) (target ≤ 3) are printed (not with
 //! `ADJOINT_BENCH_NO_TABLE` set, e.g. under a profiler with a criterion filter).
 //!
-//! ## Figures (2 cores shared with other builds: load average 1.6 at the start, 5.5 at the end)
+//! ## Figures (issue 8's flatness work; measured by the helper `adjflat`, 2 cores shared with
+//! other builds: load average 7.2–7.5 during the run, 4.0 during the "before" run)
 //!
 //! `cargo bench -p models --bench adjoint`, release, AMD EPYC (2 vCPUs); the table's medians
-//! in ms (criterion's medians agree within the noise of the load, e.g. impact adjoint p = 1000:
-//! 0.88 ms [0.79, 0.96], p = 10: 0.14 ms [0.13, 0.16]):
+//! in ms (criterion's medians, taken first, are 2–3× the table's under this load and noisier:
+//! impact adjoint p = 1000 1.16 ms [1.05, 1.28], p = 10 0.20 ms [0.19, 0.22], a ratio of 5.7;
+//! the instruction counts below are the figure to trust):
 //!
 //! | p | impact fwd | impact adj | chain fwd | chain adj |
 //! |---|---|---|---|---|
-//! | 1 | 0.039 | 0.080 | 1.05 | 2.31 |
-//! | 10 | 0.059 | 0.088 | 1.95 | 3.83 |
-//! | 20 | 0.078 | 0.096 | 2.92 | 9.07 |
-//! | 50 | 0.130 | 0.101 | 9.09 | 14.1 |
-//! | 100 | 0.219 | 0.122 | 13.3 | 25.3 |
-//! | 1000 | 1.83 | 0.506 | 123 | 138 |
+//! | 1 | 0.046 | 0.084 | 1.26 | 7.16 |
+//! | 10 | 0.070 | 0.093 | 6.17 | 8.43 |
+//! | 20 | 0.093 | 0.097 | 7.25 | 13.6 |
+//! | 50 | 0.153 | 0.104 | 12.4 | 20.8 |
+//! | 100 | 0.263 | 0.124 | 27.3 | 35.4 |
+//! | 1000 | 6.20 | 0.413 | 269 | 339 |
 //!
-//! - impact: adjoint time(1000)/time(10) = 5.8 (target ≤ 3: **not met**), forward 31; the
-//!   adjoint is faster from p = 50 (`GradientMode::AUTO_ADJOINT_MIN_PARAMS`), 3.6× faster at
-//!   p = 1000. Where the adjoint's p = 1000 time goes (perf): up to ~45 % the sweep's O(p) work
-//!   per stage (the quadrature g is p long in every stage vector, combination, error norm and
-//!   finiteness check, though f_θ has one non-zero), ~30 % the model's own O(p) work at the
-//!   four impacts (the reset's p-term law evaluated forwards and its Jacobian transposed:
-//!   ~0.24 ms at p = 1000 by perf's shares, more than twice the whole p = 10 run), the rest
-//!   the O(1) primal and λ. So on this model 3× is out of reach even for an adjoint with no
-//!   O(p) work of its own ((0.088 + 0.24)/0.088 ≈ 3.7); what the adjoint can still remove is
-//!   its per-stage O(p), by accumulating the quadrature sparsely outside the integrator's
-//!   vectors (a product that adds into g instead of overwriting a p vector).
-//! - chain: f has p terms, so every evaluation is O(p) in both modes; the adjoint takes 1592
-//!   steps (primal at 1/100 of the tolerances, then the sweep) to forward's 249, and is not
-//!   faster up to p = 1000 (1.1× slower there). Adjoint 1000/10 = 36, forward 63.
-//! - Memory (`stats.record_bytes`, the forward record): impact 7.5–8.0 kB (77–89 steps, 3–4
-//!   impacts), chain 451 kB (n = 8, ~1600 steps), the same for every p: the record holds x,
+//! Before (the quadrature g carried in the stepper's vectors; same bench, load 4.0): impact
+//! adjoint 0.090 / 0.093 / 0.099 / 0.114 / 0.140 / 0.654 ms, time(1000)/time(10) = 7.0.
+//!
+//! - impact: adjoint time(1000)/time(10) = 4.5 wall-clock (target ≤ 3: **not met** on the
+//!   clock at this load), forward 89; the adjoint is faster from p = 50 (20 is a tie), 15×
+//!   faster at p = 1000. Instruction counts are the steady figure (callgrind,
+//!   `examples/adjoint_profile.rs`, 11 runs minus 1, per solve): main 1.228 M (p = 10) and
+//!   11.37 M (p = 1000), 9.3×; now 1.216 M and 4.948 M, **4.07×**; with
+//!   `Options::global_error` off 1.129 M and 3.328 M, **2.95×**. Where p = 1000 goes now
+//!   (callgrind, inclusive): the gradient quadrature 1.4 % (it was ~45 %: g was p long in
+//!   every stage vector, combination, error norm and finiteness check); the model's own O(p)
+//!   reset at the impacts 29 % (its value in the primal run 8.7 %, its transpose `reset_vjp`
+//!   20.7 %); the primal run's global error estimate 32 % (the reset's full Jacobian through
+//!   each event 22.6 %, ℓ's gradient with its p-long ℓ_θ at each step 9.6 %); per-run
+//!   buffers of size p (`Driver::new`, `Zeno::new`, `JumpWork::new`) 11 %.
+//! - chain: f has p terms, so every evaluation is O(p) in both modes. The adjoint takes
+//!   1222 primal steps (at `PRIMAL_TOL_FACTOR` = 1/100 of the tolerances) and ~510 sweep
+//!   steps to forward mode's 249–489, and is not faster up to p = 1000 (1.3× slower there).
+//!   The sweep is not what holds it back: the primal tolerance is, and 1/10 fails the
+//!   thermostat's accuracy test at rtol 1e-12 (see `PRIMAL_TOL_FACTOR`).
+//! - Memory (`stats.record_bytes`, the forward record): impact 7.6–8.1 kB (77–89 steps, 3–4
+//!   impacts), chain 451 kB (n = 8, ~1200 steps), the same for every p: the record holds x,
 //!   never anything of size p.
-//! - Agreement forward/adjoint at the default rtol 1e-8: impact ≤ 1.6e-10, chain ≤ 3.8e-8 of
+//! - Agreement forward/adjoint at the default rtol 1e-8: impact ≤ 2.2e-10, chain ≤ 3.7e-8 of
 //!   the gradient's scale.
 
 use criterion::{criterion_group, Criterion};
+use models::generated::{chain, impact};
 use mvad::interp::InterpretedModel;
 use mvad::solution::{GradientMode, Options, Solution};
 use mvad::solve::solve;
@@ -66,95 +76,10 @@ use nalgebra::DVector;
 use std::hint::black_box;
 use std::time::Instant;
 
-/// Masses in the chain (n = 2 × MASSES states: q₁, v₁, q₂, v₂, …).
-const MASSES: usize = 4;
-
-/// `(t₁ + t₂ + …)`, as a balanced tree (the language bounds nesting at 256 levels).
-fn balanced_sum(terms: &[String]) -> String {
-    match terms {
-        [] => "0".into(),
-        [t] => t.clone(),
-        _ => {
-            let (a, b) = terms.split_at(terms.len() / 2);
-            format!("({} + {})", balanced_sum(a), balanced_sum(b))
-        }
-    }
-}
-
-/// The `.hyb` text of the impact model with p parameters (g and p − 1 restitution weights).
-fn impact(p: usize) -> String {
-    let m = p - 1;
-    let mut s = String::from("model Impact {\n    param g = 9.81;\n");
-    for j in 1..=m {
-        s += &format!("    param a{j} = {:?};\n", 0.8 / m as f64);
-    }
-    s += "    state h = 2; state v = 0;\n    flow { der(h) = v; der(v) = -g - 0.05 * v; }\n";
-    let terms: Vec<String> = (1..=m)
-        .map(|j| format!("a{j} / (1 + (v / {})^2)", 10 * j))
-        .collect();
-    let law = if m == 0 {
-        "0.8".into()
-    } else {
-        balanced_sum(&terms)
-    };
-    s += &format!("    event impact when h <= 0 {{ v = -{law} * v; }}\n");
-    s += "    cost = integral(h) + sum(impact, 0.01 * v^2);\n    horizon 3;\n}\n";
-    s
-}
-
 /// The parameter counts benchmarked by criterion.
 const PS: [usize; 4] = [1, 10, 100, 1000];
 /// The parameter counts of the summary table (finer, to locate the crossover).
 const TABLE_PS: [usize; 6] = [1, 10, 20, 50, 100, 1000];
-
-/// c_j of parameter j (1-based): fixed in (0, 1].
-fn c(j: usize) -> f64 {
-    ((j * 7) % 10 + 1) as f64 / 10.0
-}
-
-/// The mass (0-based) parameter j (1-based) stiffens.
-fn mass_of(j: usize) -> usize {
-    (j - 1) % MASSES
-}
-
-/// The `.hyb` text of the chain with p parameters.
-fn chain(p: usize) -> String {
-    let mut s = String::from("model Chain {\n    const k = 4.0; const d = 0.05;\n");
-    for j in 1..=p {
-        s += &format!("    param a{j} = {:?};\n", 0.5 / p as f64);
-    }
-    for i in 1..=MASSES {
-        let v0 = if i == 1 { 2.0 } else { 0.0 };
-        s += &format!("    state q{i} = 0; state v{i} = {v0:?};\n");
-    }
-    s += "    flow {\n";
-    for i in 1..=MASSES {
-        let left = if i > 1 {
-            format!("q{}", i - 1)
-        } else {
-            "0".into()
-        };
-        let right = if i < MASSES {
-            format!("q{}", i + 1)
-        } else {
-            "0".into()
-        };
-        let terms: Vec<String> = (1..=p)
-            .filter(|&j| mass_of(j) == i - 1)
-            .map(|j| format!("{:?} * a{j}", c(j)))
-            .collect();
-        let gain = balanced_sum(&terms);
-        let drive = if i == 1 { "1.5 * sin(2 * t) " } else { "" };
-        s += &format!("        der(q{i}) = v{i};\n");
-        s += &format!(
-            "        der(v{i}) = {drive}- k * (2 * q{i} - {left} - {right}) - d * v{i} - q{i} * ({gain});\n"
-        );
-    }
-    s += "    }\n    event hit when q1 >= 0.3 { v1 = -v1; }\n";
-    s += &format!("    cost = integral(q1^2 + q{MASSES}^2) + sum(hit, v1^2);\n");
-    s += "    horizon 10;\n}\n";
-    s
-}
 
 /// A generated model with p parameters, loaded, and θ.
 struct Case {

@@ -13,6 +13,7 @@
 //! | [`ceiling`] | near-grazing impact | t' ∝ 1/√(apex − c) |
 //! | [`queue`] | the seed paper's E4, a FIFO queue | `at each` table events, 10³–10⁷ customers |
 //! | [`qp_kink`] | the seed paper's E3 | a static qp, its kink at θ = 0, no states |
+//! | [`generated`] | impact and chain with p parameters | adjoint cost against p (`benches/adjoint.rs`) |
 //! | [`qp_cart`] | a saturating qp controller, a wall | a qp in the flow, its active-set changes as kinks |
 //!
 //! [`paper`] holds the numbers the seed paper printed (Tables 1 and 2), which the
@@ -21,6 +22,7 @@
 pub mod bouncing_ball;
 pub mod ceiling;
 pub mod e2_sweep;
+pub mod generated;
 pub mod paper;
 pub mod qp_cart;
 pub mod qp_kink;

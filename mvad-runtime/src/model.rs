@@ -29,6 +29,7 @@
 
 use crate::qp::{QpError, QpLayerInfo, QpState, Side};
 
+pub mod dense;
 pub mod differences;
 mod point;
 use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OMatrix, OVector};
@@ -436,6 +437,36 @@ where
         self.rhs_jac_p(pt, &mut fp);
         fx.tr_mul_to(lambda, vx);
         fp.tr_mul_to(lambda, vp);
+    }
+
+    /// The backward sweep's rate of λ: out = −(λᵀf_x + w ℓ_x) (overwritten; ℓ not evaluated
+    /// when w = 0), touching nothing of size p. The default is [`dense::adjoint_rate`].
+    fn adjoint_rate(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        lambda: &OVector<f64, Self::N>,
+        w: f64,
+        out: &mut OVector<f64, Self::N>,
+    ) where
+        Self: HybridModel,
+    {
+        dense::adjoint_rate(self, pt, lambda, w, out);
+    }
+
+    /// The sweep's gradient quadrature, scaled and added: g += −a (λᵀf_θ + w ℓ_θ), touching
+    /// only the structural non-zeros of f_θ and ℓ_θ (`integrate::quadrature`). The default
+    /// is [`dense::adjoint_quadrature_add`].
+    fn adjoint_quadrature_add(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        lambda: &OVector<f64, Self::N>,
+        w: f64,
+        a: f64,
+        g: &mut OVector<f64, Self::P>,
+    ) where
+        Self: HybridModel,
+    {
+        dense::adjoint_quadrature_add(self, pt, lambda, w, a, g);
     }
 
     /// μᵀR_x into `vx` (n) and μᵀR_θ into `vp` (p) for event k's reset x⁺ = R_k(t, x, θ) at

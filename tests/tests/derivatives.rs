@@ -214,6 +214,32 @@ where
         let l = lam.as_slice();
         assert_vjp(&what("λᵀf_x"), vx.as_slice(), &rows(&fx), l);
         assert_vjp(&what("λᵀf_θ"), vpp.as_slice(), &rows(&fp), l);
+        // The adjoint's products: −(λᵀf_x + w ℓ_x) and g += −a (λᵀf_θ + w ℓ_θ), against the
+        // dense Jacobians with ℓ's gradient as one more row weighted by w.
+        let w = 0.7;
+        let (mut lx, mut lp) = (zn(), zp());
+        m.running_cost_value_grad(sw, At::new(t, &x, &pv), &mut lx, &mut lp);
+        let lw: Vec<f64> = l.iter().copied().chain([w]).collect();
+        let mut rate = zn();
+        m.adjoint_rate(pt_at(t, &x), &lam, w, &mut rate);
+        let neg: Vec<f64> = rate.iter().map(|r| -r).collect();
+        let jx: Vec<f64> = rows(&fx).into_iter().chain(lx.iter().copied()).collect();
+        assert_vjp(&what("adjoint_rate"), &neg, &jx, &lw);
+        let mut g = zp();
+        m.adjoint_quadrature_add(pt_at(t, &x), &lam, w, -1.0, &mut g);
+        let jp: Vec<f64> = rows(&fp).into_iter().chain(lp.iter().copied()).collect();
+        assert_vjp(&what("adjoint_quadrature_add"), g.as_slice(), &jp, &lw);
+        // It adds (scaled) to what g holds: g + 2.5·(−G) = −1.5·G, G = λᵀf_θ + w ℓ_θ.
+        let once = g.clone();
+        m.adjoint_quadrature_add(pt_at(t, &x), &lam, w, 2.5, &mut g);
+        for (k, (a, b)) in g.iter().zip(&once).enumerate() {
+            let want = -1.5 * b;
+            assert!(
+                (a - want).abs() <= 1e-14 * (1.0 + b.abs()),
+                "{}[{k}]: {a:e} vs {want:e}",
+                what("adjoint_quadrature_add adds")
+            );
+        }
         // ∂ₓ(f_x S + f_θ)·v and ∂ₜ(f_x S + f_θ) against differences of rhs_sens.
         let ds = |t: f64, x: &OVector<f64, M::N>| {
             let (mut f, mut ds) = (zn(), znp());

@@ -121,6 +121,29 @@ fn transposed(
     out
 }
 
+/// `buf[k] −= a·(w[r]·a_e)` (or `+=` for a negated coefficient) for every entry e = (r, k),
+/// in entry order: a scaled transposed product added into `buf`, no fill, nothing per column
+/// without an entry.
+fn scaled_transposed_add(
+    entries: &[(usize, usize)],
+    coefs: &[Coef],
+    w: &TokenStream,
+    a: TokenStream,
+    buf: TokenStream,
+) -> TokenStream {
+    let mut out = TokenStream::new();
+    for (&(r, k), c) in entries.iter().zip(coefs) {
+        let (rl, kl) = (usize_lit(r), usize_lit(k));
+        let (neg, term) = c.times(quote!(#w[#rl]));
+        out.extend(if neg {
+            quote!(#buf[#kl] += #a * (#term);)
+        } else {
+            quote!(#buf[#kl] -= #a * (#term);)
+        });
+    }
+    out
+}
+
 /// `buf[i]`.
 fn at1(buf: TokenStream) -> impl Fn(usize) -> TokenStream {
     move |i| {
@@ -173,43 +196,57 @@ impl Gen<'_> {
         let mu = quote!(mu);
         let [at, let_at, occ, let_occ] = eval_args(&pr);
 
-        // λᵀf_x, λᵀf_θ read qps under the frozen bits, as the flow does.
+        // λᵀf_x, λᵀf_θ read qps under the frozen bits, as the flow does; so does ℓ.
         self.frozen.set(true);
-        let rhs_arms = (0..k.modes.len())
-            .map(|m| {
-                let mk = &k.modes[m];
-                let body = self.body(&mk.jac);
-                let nx = mk.second.x_entries.len();
-                let mut lets = body.lets.clone();
-                let a: Vec<Coef> = (0..mk.jac.outputs.len())
-                    .map(|j| self.coef(&mk.jac, &body, j, None, &mut lets))
-                    .collect();
-                let vx = transposed(
-                    &mk.second.x_entries,
-                    &a[..nx],
-                    &lam,
-                    n,
-                    quote!(vx),
-                    at1(quote!(vx)),
-                );
-                let vp = transposed(
-                    &mk.second.p_entries,
-                    &a[nx..],
-                    &lam,
-                    p,
-                    quote!(vp),
-                    at1(quote!(vp)),
-                );
-                (m, quote!(#lets #vx #vp))
-            })
-            .collect();
+        let (mut rhs_arms, mut rate_arms, mut quad_arms) = (vec![], vec![], vec![]);
+        for (m, mk) in k.modes.iter().enumerate() {
+            let body = self.body(&mk.jac);
+            let nx = mk.second.x_entries.len();
+            let mut lets = body.lets.clone();
+            let a: Vec<Coef> = (0..mk.jac.outputs.len())
+                .map(|j| self.coef(&mk.jac, &body, j, None, &mut lets))
+                .collect();
+            let xe = &mk.second.x_entries;
+            let vx = transposed(xe, &a[..nx], &lam, n, quote!(vx), at1(quote!(vx)));
+            let pe = &mk.second.p_entries;
+            let vp = transposed(pe, &a[nx..], &lam, p, quote!(vp), at1(quote!(vp)));
+            rhs_arms.push((m, quote!(#lets #vx #vp)));
+            let rate = transposed(xe, &a[..nx], &lam, n, quote!(out), at1(quote!(out)));
+            rate_arms.push((m, quote!(#lets #rate)));
+            let quad = scaled_transposed_add(pe, &a[nx..], &lam, quote!(a), quote!(g));
+            quad_arms.push((m, quote!(#lets #quad)));
+        }
+        let (rc_rate, rc_quad) = match &k.running_cost {
+            Some(c) => {
+                let body = self.body(&c.grad);
+                let (mut xs, mut ps) = (TokenStream::new(), TokenStream::new());
+                for (s, v) in &body.outputs {
+                    if *s < n {
+                        let i = usize_lit(*s);
+                        xs.extend(quote!(out[#i] -= w * (#v);));
+                    } else if *s < n + p {
+                        let i = usize_lit(s - n);
+                        ps.extend(quote!(g[#i] -= aw * (#v);));
+                    }
+                }
+                let lets = &body.lets;
+                (
+                    quote!(if w != 0.0 { #lets #xs }),
+                    quote!(if w != 0.0 { let aw = a * w; #lets #ps }),
+                )
+            }
+            None => (TokenStream::new(), TokenStream::new()),
+        };
         self.frozen.set(false);
+        let nm = k.modes.len();
         let rhs = self.dispatch(
             quote!(mode),
             rhs_arms,
             quote!(vx.fill(f64::NAN); vp.fill(f64::NAN);),
-            k.modes.len(),
+            nm,
         );
+        let rate = self.dispatch(quote!(mode), rate_arms, quote!(out.fill(f64::NAN);), nm);
+        let quad = self.dispatch(quote!(mode), quad_arms, quote!(g.fill(f64::NAN);), nm);
 
         let reset_arms = (0..k.events.len())
             .map(|e| {
@@ -265,6 +302,10 @@ impl Gen<'_> {
         quote! {
             fn rhs_vjp(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, vx: &mut #xv, vp: &mut #pv) {
                 let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
+            fn adjoint_rate(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, out: &mut #xv) {
+                let #pr::Point { mode, sw, t, x, p } = pt; { #rate } out.neg_mut(); #rc_rate }
+            fn adjoint_quadrature_add(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, a: f64, g: &mut #pv) {
+                let #pr::Point { mode, sw, t, x, p } = pt; { #quad } #rc_quad }
             fn reset_vjp(&self, #occ, #at, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #let_occ #let_at #row #reset }
             fn initial_state_vjp(&self, p: &#pv, mu: &#xv, vp: &mut #pv) { #x0 }
         }

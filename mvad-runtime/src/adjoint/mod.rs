@@ -184,7 +184,12 @@ fn sorted_samples<'a>(cot: &Cotangents<'a>, nobs: usize) -> Vec<Sample<'a>> {
 /// leaves 2.2e-9. At 1/100 of them the adjoint is as accurate as forward mode (Tsit5, rtol
 /// 1e-8 / 1e-10 / 1e-12: 2.0e-10 / 3.5e-12 / 1.2e-12 against forward's 2.2e-9 / 1.1e-11 /
 /// 3.3e-13; Rodas5P 2.6e-9 / 7.1e-12 / 2.6e-12 against 2.7e-9 / 1.4e-11 / 1.9e-12), for
-/// about 2.5× the primal steps of a 5th-order method, each O(n).
+/// about 2.5× the primal steps of a 5th-order method, each O(n). At 1/10 (with the
+/// quadrature outside the stepper, `integrate::adjoint`) the thermostat under `auto` leaves
+/// 3.5e-9 / 4.2e-10 / 5.8e-12 at rtol 1e-8 / 1e-10 / 1e-12 (forward: 2.2e-9 / 1.1e-11 /
+/// 6.4e-13), more than 5× forward mode's error or 5× rtol at 1e-12: this factor, not the
+/// sweep, is what keeps the adjoint slower than forward mode on a model whose flow has the p
+/// terms (`benches/adjoint.rs`, chain: 1222 primal steps against forward mode's 249–398).
 pub const PRIMAL_TOL_FACTOR: f64 = 0.01;
 
 /// The primal run with the tape; a [`Handover`] when it did not reach T normally (an

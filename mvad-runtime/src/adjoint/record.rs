@@ -321,6 +321,39 @@ impl Tape {
         self.eval_step(k, t, out);
     }
 
+    /// How far below s (local time, on `seg`) a backward step may reach when it must not
+    /// be longer than `m` times the shortest recorded step it overlaps: the furthest e with
+    /// s − e ≤ m·min{length of the recorded steps meeting (e, s)}, looking no further than
+    /// s − `h` (the step about to be tried; 0 for no limit), or −∞ when the segment's start
+    /// is within reach. `cursor` as in [`Tape::state_at`]. See `adjoint::sweep`.
+    pub fn backward_reach(
+        &self,
+        seg: &SegmentRec,
+        s: f64,
+        m: f64,
+        h: f64,
+        cursor: &mut usize,
+    ) -> f64 {
+        let (first, last) = (seg.steps.start, seg.steps.end - 1);
+        let mut k = (*cursor).clamp(first, last);
+        while k > first && s <= self.steps[k].lo {
+            k -= 1;
+        }
+        while k < last && s > self.steps[k].hi {
+            k += 1;
+        }
+        *cursor = k;
+        let mut shortest = f64::INFINITY;
+        for step in self.steps[first..=k].iter().rev() {
+            shortest = shortest.min(step.hi - step.lo);
+            let reach = m * shortest;
+            if s - step.lo >= reach || (h > 0.0 && s - step.lo >= h) {
+                return s - reach;
+            }
+        }
+        f64::NEG_INFINITY
+    }
+
     /// Step k's polynomial at t, by Horner's scheme in θ = (t − t0)/h.
     fn eval_step(&self, k: usize, t: f64, out: &mut [f64]) {
         let s = self.steps[k];

@@ -14,6 +14,14 @@
 //!    those jumps are undone; one at T takes x(T) after any jump at T.
 //! 4. At t = 0: g += λ(0)ᵀ∂x₀/∂θ ([`crate::model::ModelAdjoint::initial_state_vjp`]).
 //!
+//! The quadrature g is not under error control (only λ is: see `integrate::adjoint`), so
+//! what resolves its integrand G(t) = −(λᵀf_θ + w ℓ_θ)(t, x(t)) where x(t) moves fast (the
+//! stiff relay's lag, τ = 1e-8, whose f_τ has a transient of width 1e-8 after each switch
+//! while λ has none) is the record itself: x(t) is a polynomial per recorded step, the steps
+//! the primal run chose for x, and no backward step is longer than [`RECORD_REACH`] times
+//! the shortest recorded step it overlaps ([`Tape::backward_reach`]). Where x moved fast the
+//! sweep's steps are as fine as the primal run's; elsewhere λ's error control decides.
+//!
 //! Then g = w dC/dθ + Σ_s w_sᵀ dy(t_s)/dθ: the sum of every term of DESIGN.md's dC/dθ,
 //! transposed. The integrator restarts at every segment start and every sample (λ jumps
 //! there), its first step seeded with the last step's size. It runs in the segment's local
@@ -22,10 +30,14 @@
 use super::record::{FinalState, Item, Tape};
 use super::transpose::{transpose_jump, JumpWork};
 use crate::error::SolveError;
-use crate::integrate::{AdjState, Backward, Integrator, StageVector};
+use crate::integrate::Integrator;
 use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+
+/// A backward step reaches at most this many times the shortest recorded step it overlaps
+/// (see the module doc).
+pub(crate) const RECORD_REACH: f64 = 4.0;
 
 /// The cotangent w_s of the observables at one sample time t_s.
 #[derive(Clone, Copy, Debug)]
@@ -64,28 +76,30 @@ where
         model: &M,
         p: &OVector<f64, M::P>,
         s: &Sample<'_>,
-        y: &mut AdjState<M::N, M::P>,
+        lam: &mut OVector<f64, M::N>,
+        g: &mut OVector<f64, M::P>,
     ) {
         if s.w.iter().all(|&w| w == 0.0) {
             return;
         }
-        let (n, np) = (y.lam.len(), y.g.len());
+        let (n, np) = (lam.len(), g.len());
         model.observe_jac(At::new(s.t, &self.x, p), &mut self.yx, &mut self.yp);
         for (i, &wi) in s.w.iter().enumerate() {
             if wi == 0.0 {
                 continue;
             }
-            for (l, v) in y.lam.iter_mut().zip(&self.yx[i * n..(i + 1) * n]) {
+            for (l, v) in lam.iter_mut().zip(&self.yx[i * n..(i + 1) * n]) {
                 *l += wi * v;
             }
-            for (g, v) in y.g.iter_mut().zip(&self.yp[i * np..(i + 1) * np]) {
+            for (g, v) in g.iter_mut().zip(&self.yp[i * np..(i + 1) * np]) {
                 *g += wi * v;
             }
         }
     }
 }
 
-/// λ(T) = w Φ_xᵀ and g = w [Φ_θ + (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ] into `y`.
+/// λ(T) = w Φ_xᵀ and g = w [Φ_θ + (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ] into `lam`, `g`.
+#[allow(clippy::too_many_arguments)]
 fn terminal<M: HybridModel>(
     model: &M,
     p: &OVector<f64, M::P>,
@@ -93,13 +107,14 @@ fn terminal<M: HybridModel>(
     cw: f64,
     dt_end: &OVector<f64, M::P>,
     x: &mut OVector<f64, M::N>,
-    y: &mut AdjState<M::N, M::P>,
+    lam: &mut OVector<f64, M::N>,
+    g: &mut OVector<f64, M::P>,
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let info = model.info();
-    y.lam.fill(0.0);
-    y.g.fill(0.0);
+    lam.fill(0.0);
+    g.fill(0.0);
     if cw == 0.0 {
         return;
     }
@@ -107,17 +122,17 @@ fn terminal<M: HybridModel>(
     let mut rate = 0.0;
     if info.has_final_cost {
         let mut f = x.clone_owned();
-        let phi_t = model.final_cost_grad(At::new(fin.t, x, p), &mut y.lam, &mut y.g);
+        let phi_t = model.final_cost_grad(At::new(fin.t, x, p), lam, g);
         model.rhs(Point::new(fin.mode, &fin.sw, fin.t, x, p), &mut f);
-        rate += y.lam.dot(&f) + phi_t;
-        y.lam *= cw;
-        y.g *= cw;
+        rate += lam.dot(&f) + phi_t;
+        *lam *= cw;
+        *g *= cw;
     }
     if info.has_running_cost {
         rate += model.running_cost(&fin.sw, At::new(fin.t, x, p));
     }
     if rate != 0.0 {
-        y.g.axpy(cw * rate, dt_end, 1.0);
+        g.axpy(cw * rate, dt_end, 1.0);
     }
 }
 
@@ -138,35 +153,46 @@ where
     let fin = tape.final_state().ok_or(SolveError::NotRecorded)?;
     let (n, np) = (model.nstates(), model.nparams());
     let nobs = model.info().nobservables();
-    let mut y = AdjState::zeros(n, np);
+    let mut lam = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
     let mut sw = SampleWork::<M> {
         yx: vec![0.0; nobs * n.value()],
         yp: vec![0.0; nobs * np.value()],
         x: OVector::zeros_generic(n, Const::<1>),
     };
-    terminal(model, p, fin, cw, dt_end, &mut sw.x, &mut y);
+    // g lives in the backward system, which adds each step's quadrature to it.
+    let mut integ = Integrator::backward(model, p, tape, opts, cw);
+    terminal(
+        model,
+        p,
+        fin,
+        cw,
+        dt_end,
+        &mut sw.x,
+        &mut lam,
+        integ.gradient_mut(),
+    );
     // Samples are consumed from the back: samples[..left] are still to come.
     let mut left = samples.len();
     while left > 0 && samples[left - 1].t >= fin.t {
         sw.x.as_mut_slice().copy_from_slice(&fin.x);
-        sw.add(model, p, &samples[left - 1], &mut y);
+        sw.add(model, p, &samples[left - 1], &mut lam, integ.gradient_mut());
         left -= 1;
     }
-    let mut integ = Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts);
     let mut work = JumpWork::new(model);
     let mut h_seed = 0.0;
     for item in tape.items().iter().rev() {
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
-                transpose_jump(model, p, cw, j, states, &mut y.lam, &mut y.g, &mut work)?;
+                let g = integ.gradient_mut();
+                transpose_jump(model, p, cw, j, states, &mut lam, g, &mut work)?;
                 continue;
             }
             Item::Segment(seg) => seg,
         };
         let mut t = seg.t_end;
         loop {
-            integ.restart_segment(seg, seg.local(t), &y);
+            integ.restart_segment(seg, seg.local(t), &lam);
             integ.set_step_size(h_seed);
             let stop = match left {
                 0 => seg.t_start,
@@ -175,15 +201,25 @@ where
             // A stop within the time resolution of where the sweep stands (a sample a few ulps
             // before a segment's end) is reached: no step is that short.
             let s_stop = seg.local(stop);
+            let mut cursor = seg.steps.end - 1;
             while integ.t() - s_stop > 16.0 * f64::EPSILON * integ.t().abs() {
-                integ.step(s_stop)?;
+                // No backward step is longer than RECORD_REACH recorded steps (module doc).
+                let s = integ.t();
+                let h = integ.next_step_size();
+                let reach = tape.backward_reach(seg, s, RECORD_REACH, h, &mut cursor);
+                let resolvable = s - reach > 64.0 * f64::EPSILON * s.abs();
+                integ.step(if resolvable {
+                    reach.max(s_stop)
+                } else {
+                    s_stop
+                })?;
                 h_seed = integ.last_step_size().abs();
             }
-            y.copy_from(integ.y());
+            lam.copy_from(integ.y());
             let mut cursor = seg.steps.end - 1;
             while left > 0 && samples[left - 1].t >= stop {
                 tape.state_at(seg, s_stop, &mut cursor, sw.x.as_mut_slice());
-                sw.add(model, p, &samples[left - 1], &mut y);
+                sw.add(model, p, &samples[left - 1], &mut lam, integ.gradient_mut());
                 left -= 1;
             }
             if stop <= seg.t_start {
@@ -193,16 +229,17 @@ where
         }
     }
     let mut vp = OVector::<f64, M::P>::zeros_generic(np, Const::<1>);
-    model.initial_state_vjp(p, &y.lam, &mut vp);
-    y.g += &vp;
-    if !y.g.iter().all(|v| v.is_finite()) {
+    model.initial_state_vjp(p, &lam, &mut vp);
+    let g = integ.gradient_mut();
+    *g += &vp;
+    if !g.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite {
             t: 0.0,
             what: "adjoint gradient".into(),
         });
     }
     Ok(SweepOut {
-        gradient: y.g.iter().copied().collect(),
+        gradient: integ.gradient_mut().iter().copied().collect(),
         stats: integ.stats().clone(),
     })
 }

@@ -3,153 +3,117 @@
 //!
 //! On a segment [a, b] with frozen mode m and switch bits, and the primal trajectory x(t)
 //! replayed from the forward record ([`Tape`]; the integrator runs in the segment's local
-//! time s = t − a, see there), Y = (λ, g) with λ ∈ Rⁿ, g ∈ Rᵖ and
+//! time s = t − a, see there), the integrated vector is λ ∈ Rⁿ alone,
 //!
 //! ```text
-//!   F(t, Y) = ( −f_xᵀ λ − w ℓ_xᵀ,   −(f_θᵀ λ + w ℓ_θᵀ) )      at (t, x(t), θ)
+//!   λ̇ = −f_xᵀ λ − w ℓ_xᵀ                    at (t, x(t), θ)   (the stepper's F)
+//!   ġ = G(t, λ) = −(f_θᵀ λ + w ℓ_θᵀ)                           (a quadrature, g ∈ Rᵖ)
 //! ```
 //!
 //! (w the cotangent of the cost), integrated from b down to a with negative steps. Then
 //! d/dt(λᵀS) = λ̇ᵀS + λᵀ(f_x S + f_θ) = −w ℓ_x S + λᵀ f_θ, so
 //! λ(b)ᵀS(b) + w ∫_a^b (ℓ_x S + ℓ_θ) dt = λ(a)ᵀS(a) + [g(a) − g(b)]:
-//! the segment's share of dC/dθ moves into g without ever forming S. λᵀf_x and λᵀf_θ come
-//! from [`crate::model::ModelAdjoint::rhs_vjp`] (sparse when the model overrides it), ℓ_x and
-//! ℓ_θ from `running_cost_value_grad`, so a stage costs O(n + p) beyond the model's own work.
+//! the segment's share of dC/dθ moves into g without ever forming S.
+//!
+//! ## The quadrature outside the stepper
+//! G never feeds back into λ̇, so g is not part of the integrated vector: the stepper's
+//! stages, error norm, dense output and finiteness checks are all n long, and g (p long) is
+//! kept here and added to once per accepted step, when it is known where the step ends
+//! (`Integrator::close_step`), by the scheme's own weights on the step's stage values
+//! (`integrate/quadrature.rs`): for the augmented system (λ, g) the Runge–Kutta update of g
+//! is exactly g₁ = g₀ + h Σᵢ bᵢ G(tᵢ, Λᵢ) with Λᵢ the λ-part of stage i's argument, so
+//! the result is the augmented integration's to rounding (the same order, and the same steps
+//! when g is not under error control). Each term is the model's sparse product
+//! [`crate::model::ModelAdjoint::adjoint_quadrature_add`], g += a·G, which touches only the
+//! structural non-zeros of f_θ and ℓ_θ; the stages use
+//! [`crate::model::ModelAdjoint::adjoint_rate`], which touches nothing of size p. So a
+//! backward step costs O(n + nnz(f_θ)) beyond the model's own work, never O(p) (as SUNDIALS
+//! does with `errconQB = false`, g does not enter the step-size control).
 //!
 //! ## For Rodas5P
-//! J = ∂F/∂Y = [[−f_xᵀ, 0], [−f_θᵀ, 0]] is block lower triangular with a zero block for g, so
-//! with W = I + hγ f_xᵀ (the `WMatrix` of J_λλ = −f_xᵀ, factorised once per attempt) a stage is
-//! solved exactly: K_λ = W⁻¹ hγ R_λ, K_g = hγ (R_g − f_θᵀ K_λ), the last a vector–Jacobian
-//! product at the step start. F depends on t through x(t) even for an autonomous flow, so F_t
-//! is the total derivative along the trajectory, the direction (1, f₀) of (t, x) at fixed λ:
-//! F_t = (−d(λᵀf_x) − w dℓ_x, −d(λᵀf_θ) − w dℓ_θ) from the model's products
+//! J_λλ = −f_xᵀ, and with W = I + hγ f_xᵀ (the `WMatrix` of J_λλ, factorised once per
+//! attempt) a stage is K_λ = W⁻¹ hγ R_λ. For the augmented system J = [[−f_xᵀ, 0],
+//! [−f_θᵀ, 0]], and the g block of a Rosenbrock step is linear in the stage values G_i, in
+//! J_gλ K_λ,i and in G_t, so its update is formed from them after the step (see
+//! `quadrature.rs`). F depends on t through x(t) even for an autonomous flow, so F_t is the
+//! total derivative along the trajectory, the direction (1, f₀) of (t, x) at fixed λ:
+//! F_t = −d(λᵀf_x) − w dℓ_x and G_t = −d(λᵀf_θ) − w dℓ_θ from the model's products
 //! [`crate::model::ModelAdjoint::rhs_vjp_dir`] and
 //! [`crate::model::ModelAdjoint::running_cost_grad_dir`] (nothing here takes a difference
 //! quotient; their trait defaults do, on the scale of the direction, so that a stiff
-//! transient is differenced on its own time scale). The adjoint of a stiff flow is stiff
-//! backwards in time (the eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x
-//! stepped forwards), so `auto` switches to Rodas5P on it as on the forward run.
+//! transient is differenced on its own time scale). G_t is p long: a Rodas5P step costs O(p)
+//! once, at its start. The adjoint of a stiff flow is stiff backwards in time (the
+//! eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x stepped forwards), so `auto`
+//! switches to Rodas5P on it as on the forward run.
 
-use super::aug::{axpy_slice, hermite_slice, mix5_slice, WeightedRms};
+use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem, StageVector};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
-use nalgebra::{Const, DefaultAllocator, Dim, OVector};
+use nalgebra::{allocator::Allocator, Const, DefaultAllocator, Dim, OVector};
 
-/// The adjoint state (λ, g) of the backward sweep: λ = ∂C/∂x(t) and g, dC/dθ accumulated
-/// from T down to t.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AdjState<N: Dim, P: Dim>
+/// A plain vector as the integrated vector of a system with no secondary parts (the
+/// adjoint's λ): every operation works on the one slice, `all` changes nothing.
+impl<N: Dim> StageVector for OVector<f64, N>
 where
-    DefaultAllocator: ModelAlloc<N, P>,
-{
-    /// λ (n).
-    pub lam: OVector<f64, N>,
-    /// g (p).
-    pub g: OVector<f64, P>,
-}
-
-impl<N: Dim, P: Dim> AdjState<N, P>
-where
-    DefaultAllocator: ModelAlloc<N, P>,
-{
-    /// λ = 0 and g = 0.
-    pub fn zeros(n: N, p: P) -> Self {
-        AdjState {
-            lam: OVector::zeros_generic(n, Const::<1>),
-            g: OVector::zeros_generic(p, Const::<1>),
-        }
-    }
-
-    /// self += h Σ_j c_j k_j over λ, and g too when `all` (zero coefficients skipped).
-    #[inline(always)]
-    fn accumulate(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c == 0.0 {
-                continue;
-            }
-            axpy_slice(self.lam.as_mut_slice(), h * c, k.lam.as_slice());
-            if all {
-                axpy_slice(self.g.as_mut_slice(), h * c, k.g.as_slice());
-            }
-        }
-    }
-}
-
-impl<N: Dim, P: Dim> StageVector for AdjState<N, P>
-where
-    DefaultAllocator: ModelAlloc<N, P>,
+    DefaultAllocator: Allocator<N>,
 {
     type Primary = OVector<f64, N>;
 
     #[inline]
     fn copy_from(&mut self, other: &Self) {
-        self.lam.copy_from(&other.lam);
-        self.g.copy_from(&other.g);
+        self.as_mut_slice().copy_from_slice(other.as_slice());
     }
 
     #[inline]
-    fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.lam.copy_from(&base.lam);
-        if all {
-            self.g.copy_from(&base.g);
-        }
-        self.accumulate(h, coefs, ks, all);
+    fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
+        self.as_mut_slice().copy_from_slice(base.as_slice());
+        accumulate_slices(
+            self.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.as_slice()),
+        );
     }
 
     #[inline]
-    fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.lam.fill(0.0);
-        if all {
-            self.g.fill(0.0);
-        }
-        self.accumulate(h, coefs, ks, all);
+    fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
+        self.fill(0.0);
+        accumulate_slices(
+            self.as_mut_slice(),
+            h,
+            coefs,
+            ks.iter().map(|k| k.as_slice()),
+        );
     }
 
     #[inline]
-    fn axpy(&mut self, a: f64, other: &Self, all: bool) {
-        axpy_slice(self.lam.as_mut_slice(), a, other.lam.as_slice());
-        if all {
-            axpy_slice(self.g.as_mut_slice(), a, other.g.as_slice());
-        }
+    fn axpy(&mut self, a: f64, other: &Self, _all: bool) {
+        axpy_slice(self.as_mut_slice(), a, other.as_slice());
     }
 
     #[inline]
-    fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], all: bool) {
-        Self::mix5_primary(&mut self.lam, w, v);
-        if all {
-            mix5_slice(self.g.as_mut_slice(), w, v.map(|u| u.g.as_slice()));
-        }
+    fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], _all: bool) {
+        mix5_slice(self.as_mut_slice(), w, v.map(|u| u.as_slice()));
     }
 
     #[inline]
-    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, all: bool) {
-        Self::hermite_primary(&mut self.lam, y0, y1, f0, f1, h, th);
-        if all {
-            let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.g.as_slice());
-            hermite_slice(self.g.as_mut_slice(), a, b, g0, g1, h, th);
-        }
+    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, _all: bool) {
+        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.as_slice());
+        hermite_slice(self.as_mut_slice(), a, b, g0, g1, h, th);
     }
 
     #[inline]
     fn is_finite(&self) -> bool {
-        self.lam.iter().chain(self.g.iter()).all(|v| v.is_finite())
+        self.iter().all(|v| v.is_finite())
     }
 
     #[inline]
     fn primary(&self) -> &[f64] {
-        self.lam.as_slice()
-    }
-}
-
-/// `o = −o + a·v` elementwise (one pass).
-#[inline]
-fn negate_plus(o: &mut [f64], a: f64, v: &[f64]) {
-    for (oi, vi) in o.iter_mut().zip(v) {
-        *oi = a * vi - *oi;
+        self.as_slice()
     }
 }
 
@@ -160,9 +124,10 @@ where
 {
     rhs: AdjRhs<'a, M>,
     hist: History<'a, M::N>,
-    /// g is under error control (with λ).
-    sens_err: bool,
     imp: AdjImplicit<M::N, M::P>,
+    /// g: the gradient quadrature, with whatever the sweep adds to it (jumps, samples, the
+    /// terminal and initial terms).
+    g: OVector<f64, M::P>,
 }
 
 /// Everything F needs besides x(t).
@@ -176,11 +141,10 @@ where
     sw: Switches,
     /// Absolute time of the segment's start: the integrator runs in local time s = t − t_start.
     t_start: f64,
-    /// The cotangent w of the cost.
-    cw: f64,
+    /// The cotangent w of the cost (0 when the model has no running cost: ℓ is never
+    /// evaluated then).
+    w: f64,
     has_rc: bool,
-    lx: OVector<f64, M::N>,
-    lp: OVector<f64, M::P>,
     evals: usize,
 }
 
@@ -206,10 +170,12 @@ where
     x0: OVector<f64, N>,
     f0: OVector<f64, N>,
     /// F_t at the step start.
-    dt: AdjState<N, P>,
-    /// λᵀf_x scratch of the stage solve, and f_θᵀK_λ.
-    vx: OVector<f64, N>,
-    vp: OVector<f64, P>,
+    dt: OVector<f64, N>,
+    /// G_t at the step start `dt_at` (local time), and ℓ's directional-derivative scratch.
+    dt_g: OVector<f64, P>,
+    dt_at: Option<f64>,
+    lx: OVector<f64, N>,
+    lp: OVector<f64, P>,
     prepared: bool,
 }
 
@@ -217,30 +183,10 @@ impl<M: HybridModel> AdjRhs<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// out = F at local time s and state x: (−f_xᵀλ − w ℓ_xᵀ, −f_θᵀλ − w ℓ_θᵀ), the model
-    /// evaluated at t = t_start + s.
+    /// The model's point at local time s and state x.
     #[inline]
-    fn eval_at(
-        &mut self,
-        s: f64,
-        x: &OVector<f64, M::N>,
-        y: &AdjState<M::N, M::P>,
-        out: &mut AdjState<M::N, M::P>,
-    ) {
-        self.evals += 1;
-        let t = self.t_start + s;
-        let pt = Point::new(self.mode, &self.sw, t, x, self.p);
-        self.model.rhs_vjp(pt, &y.lam, &mut out.lam, &mut out.g);
-        if self.has_rc && self.cw != 0.0 {
-            let (lx, lp) = (&mut self.lx, &mut self.lp);
-            self.model
-                .running_cost_value_grad(&self.sw, At::new(t, x, self.p), lx, lp);
-            negate_plus(out.lam.as_mut_slice(), -self.cw, lx.as_slice());
-            negate_plus(out.g.as_mut_slice(), -self.cw, lp.as_slice());
-        } else {
-            out.lam.neg_mut();
-            out.g.neg_mut();
-        }
+    fn point<'b>(&'b self, s: f64, x: &'b OVector<f64, M::N>) -> Point<'b, M::N, M::P> {
+        Point::new(self.mode, &self.sw, self.t_start + s, x, self.p)
     }
 }
 
@@ -265,9 +211,8 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     /// The backward system of `model` at `p` over the record `tape`, with cost cotangent
-    /// `cw`; allocates its buffers once (the Rodas5P ones only when `opts.method` may use it).
-    /// Its integrator is `Integrator::with_system(Backward::new(..), opts)`; call
-    /// [`Integrator::restart_segment`] before each segment.
+    /// `cw` and g = 0; allocates its buffers once (the Rodas5P ones only when `opts.method`
+    /// may use it).
     pub fn new(
         model: &'a M,
         p: &'a OVector<f64, M::P>,
@@ -278,6 +223,13 @@ where
         let (n, np) = (model.nstates(), model.nparams());
         let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
         let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        // G_t's buffers, like the WMatrix: empty for `Dyn` sizes unless Rodas5P may run.
+        let stiff_np = if used || M::P::try_to_usize().is_some() {
+            np
+        } else {
+            M::P::from_usize(0)
+        };
+        let has_rc = model.info().has_running_cost;
         Backward {
             rhs: AdjRhs {
                 model,
@@ -285,10 +237,8 @@ where
                 mode: model.info().initial_mode,
                 sw: Switches::new(model.info().switches),
                 t_start: 0.0,
-                cw,
-                has_rc: model.info().has_running_cost,
-                lx: vn(),
-                lp: OVector::zeros_generic(np, Const::<1>),
+                w: if has_rc { cw } else { 0.0 },
+                has_rc,
                 evals: 0,
             },
             hist: History {
@@ -297,16 +247,18 @@ where
                 cursor: 0,
                 x: vn(),
             },
-            sens_err: opts.sens_error_control,
             imp: AdjImplicit {
                 w: WMatrix::new(n, used),
                 x0: vn(),
                 f0: vn(),
-                dt: AdjState::zeros(n, np),
-                vx: vn(),
-                vp: OVector::zeros_generic(np, Const::<1>),
+                dt: vn(),
+                dt_g: OVector::zeros_generic(stiff_np, Const::<1>),
+                dt_at: None,
+                lx: vn(),
+                lp: OVector::zeros_generic(stiff_np, Const::<1>),
                 prepared: false,
             },
+            g: OVector::zeros_generic(np, Const::<1>),
         }
     }
 
@@ -316,16 +268,39 @@ where
             None => self.rhs.mode.to_string(),
         }
     }
+
+    /// x₀ = x(t0), f₀ = f(t₀, x₀), F_t = −d(λᵀf_x) − w dℓ_x and G_t = −d(λᵀf_θ) − w dℓ_θ
+    /// along (1, f₀) at fixed λ = y0 (local time t0).
+    fn time_derivatives(&mut self, t0: f64, y0: &OVector<f64, M::N>) {
+        let Backward { rhs, hist, imp, .. } = self;
+        hist.at(t0);
+        imp.x0.copy_from(&hist.x);
+        let pt = rhs.point(t0, &imp.x0);
+        rhs.model.rhs(pt, &mut imp.f0);
+        rhs.model
+            .rhs_vjp_dir(pt, y0, &imp.f0, &mut imp.dt, &mut imp.dt_g);
+        if rhs.w != 0.0 {
+            let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
+            let (lx, lp) = (&mut imp.lx, &mut imp.lp);
+            rhs.model
+                .running_cost_grad_dir(sw, At::new(t, &imp.x0, p), &imp.f0, lx, lp);
+            imp.dt.axpy(rhs.w, &imp.lx, 1.0);
+            imp.dt_g.axpy(rhs.w, &imp.lp, 1.0);
+        }
+        imp.dt.neg_mut();
+        imp.dt_g.neg_mut();
+        imp.dt_at = Some(t0);
+    }
 }
 
 impl<M: HybridModel> OdeSystem for Backward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    type Vector = AdjState<M::N, M::P>;
+    type Vector = OVector<f64, M::N>;
 
     fn zeros(&self) -> Self::Vector {
-        AdjState::zeros(self.rhs.model.nstates(), self.rhs.model.nparams())
+        OVector::zeros_generic(self.rhs.model.nstates(), Const::<1>)
     }
 
     #[inline]
@@ -333,22 +308,24 @@ where
         true
     }
 
-    /// F depends on λ alone: g is a quadrature, never read back.
     #[inline]
     fn reads_secondary(&self) -> bool {
-        false
+        true
     }
 
     #[inline]
     fn controls_all(&self) -> bool {
-        self.sens_err
+        true
     }
 
-    /// out = F(t, y) with x(t) from the record.
+    /// out = −f_xᵀλ − w ℓ_xᵀ with x(t) from the record.
     #[inline]
     fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector) {
         self.hist.at(t);
-        self.rhs.eval_at(t, &self.hist.x, y, out);
+        let rhs = &mut self.rhs;
+        rhs.evals += 1;
+        let pt = rhs.point(t, &self.hist.x);
+        rhs.model.adjoint_rate(pt, y, rhs.w, out);
     }
 
     /// A mode whose flow is a function of θ alone and no running cost: f_x = 0, so λ is
@@ -363,11 +340,8 @@ where
         self.rhs.evals
     }
 
-    /// [`WeightedRms`] over λ and, under sensitivity error control, g, both with weight 1.
-    /// Forward mode weights S_j by |θ_j|; g is not weighted: it is a quadrature, so its
-    /// errors only add up, and the weight would turn atol into an absolute tolerance of
-    /// atol/|θ_j| on ∂C/∂θ_j. With |θ_j| = 1e-8 (the stiff relay's τ) that let a step skip the
-    /// fast transient of λᵀf_τ (λ has none: f_x is constant there) and left 1 % in dC/dτ.
+    /// [`WeightedRms`] over λ with weight 1 (g is a quadrature outside the vector; see the
+    /// module doc).
     #[inline]
     fn error_norm(
         &self,
@@ -378,21 +352,12 @@ where
         rtol: f64,
     ) -> f64 {
         let mut rms = WeightedRms::new(atol, rtol);
-        rms.add(e.lam.as_slice(), y0.lam.as_slice(), y1.lam.as_slice(), 1.0);
-        if self.sens_err {
-            rms.add(e.g.as_slice(), y0.g.as_slice(), y1.g.as_slice(), 1.0);
-        }
+        rms.add(e.as_slice(), y0.as_slice(), y1.as_slice(), 1.0);
         rms.norm()
     }
 
     fn nonfinite_part(&self, y: &Self::Vector) -> Option<&'static str> {
-        if !y.lam.iter().all(|v| v.is_finite()) {
-            Some("adjoint state λ")
-        } else if !y.g.iter().all(|v| v.is_finite()) {
-            Some("adjoint gradient quadrature")
-        } else {
-            None
-        }
+        (!y.iter().all(|v| v.is_finite())).then_some("adjoint state λ")
     }
 
     /// `adjoint of the flow of mode `m``.
@@ -400,15 +365,24 @@ where
         format!("adjoint of the flow of mode `{}`", self.mode_name())
     }
 
-    fn stage_source(&self, k: &Self::Vector) -> String {
-        if !k.lam.iter().all(|v| v.is_finite()) {
-            self.flow_name()
-        } else {
-            format!(
-                "adjoint gradient quadrature of the flow of mode `{}`",
-                self.mode_name()
-            )
-        }
+    fn stage_source(&self, _k: &Self::Vector) -> String {
+        self.flow_name()
+    }
+
+    #[inline]
+    fn has_quadrature(&self) -> bool {
+        true
+    }
+
+    /// g += a·G(t, λ) = −a (λᵀf_θ + w ℓ_θ) at x(t): the model's sparse product.
+    #[inline]
+    fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64) {
+        self.hist.at(t);
+        let rhs = &mut self.rhs;
+        rhs.evals += 1;
+        let pt = rhs.point(t, &self.hist.x);
+        rhs.model
+            .adjoint_quadrature_add(pt, y, rhs.w, a, &mut self.g);
     }
 }
 
@@ -416,31 +390,15 @@ impl<M: HybridModel> ImplicitSystem for Backward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// J_λλ = −f_xᵀ (and its spectral radius) and F_t at the step start.
+    /// J_λλ = −f_xᵀ (and its spectral radius), F_t and G_t at the step start.
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
-        let Backward { rhs, hist, imp, .. } = self;
-        hist.at(t0);
-        imp.x0.copy_from(&hist.x);
-        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t0, &imp.x0, rhs.p);
+        self.time_derivatives(t0, y0);
+        let Backward { rhs, imp, .. } = self;
+        let pt = rhs.point(t0, &imp.x0);
         rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
         imp.w.jac.transpose_mut();
         imp.w.jac.neg_mut();
         imp.w.power_iteration();
-        // F_t along the trajectory (direction (1, f₀)) at fixed λ: the model's products.
-        rhs.model.rhs(pt, &mut imp.f0);
-        rhs.model
-            .rhs_vjp_dir(pt, &y0.lam, &imp.f0, &mut imp.dt.lam, &mut imp.dt.g);
-        if rhs.has_rc && rhs.cw != 0.0 {
-            let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
-            let (lx, lp) = (&mut rhs.lx, &mut rhs.lp);
-            rhs.model
-                .running_cost_grad_dir(sw, At::new(t, &imp.x0, p), &imp.f0, lx, lp);
-            negate_plus(imp.dt.lam.as_mut_slice(), -rhs.cw, rhs.lx.as_slice());
-            negate_plus(imp.dt.g.as_mut_slice(), -rhs.cw, rhs.lp.as_slice());
-        } else {
-            imp.dt.lam.neg_mut();
-            imp.dt.g.neg_mut();
-        }
         imp.prepared = true;
     }
 
@@ -460,28 +418,38 @@ where
         self.imp.w.factorised_for()
     }
 
-    /// K_λ = W⁻¹ hγ R_λ, K_g = hγ (R_g − f_θᵀ K_λ) (see the module doc).
+    /// K_λ = W⁻¹ hγ R_λ (see the module doc).
     fn solve_stage(
         &mut self,
-        t0: f64,
+        _t0: f64,
         _y0: &Self::Vector,
         hg: f64,
         r: &Self::Vector,
         k: &mut Self::Vector,
     ) -> bool {
-        let Backward { rhs, imp, .. } = self;
-        if imp.w.factorised_for().is_none() {
+        if self.imp.w.factorised_for().is_none() {
             return false;
         }
-        k.lam.copy_from(&r.lam);
-        k.lam *= hg;
-        let ok = imp.w.solve_mut(&mut k.lam);
-        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t0, &imp.x0, rhs.p);
-        rhs.model.rhs_vjp(pt, &k.lam, &mut imp.vx, &mut imp.vp);
-        k.g.copy_from(&r.g);
-        k.g -= &imp.vp;
-        k.g *= hg;
-        ok
+        k.copy_from(r);
+        *k *= hg;
+        self.imp.w.solve_mut(k)
+    }
+
+    /// g += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
+    fn quadrature_jac_add(&mut self, t0: f64, v: &Self::Vector, a: f64) {
+        self.hist.at(t0);
+        let rhs = &mut self.rhs;
+        let pt = rhs.point(t0, &self.hist.x);
+        rhs.model.adjoint_quadrature_add(pt, v, 0.0, a, &mut self.g);
+    }
+
+    /// g += a·G_t at the step start (from `prepare`, recomputed if it was for another one).
+    fn quadrature_dt_add(&mut self, t0: f64, y0: &Self::Vector, a: f64) {
+        if self.imp.dt_at != Some(t0) {
+            self.time_derivatives(t0, y0);
+            self.imp.prepared = false;
+        }
+        self.g.axpy(a, &self.imp.dt_g, 1.0);
     }
 
     fn invalidate(&mut self) {
@@ -492,7 +460,7 @@ where
     fn spectral_radius_at(&mut self, t: f64, _y: &Self::Vector) -> f64 {
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t);
-        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t, &hist.x, rhs.p);
+        let pt = rhs.point(t, &hist.x);
         rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
         imp.w.power_iteration()
     }
@@ -506,16 +474,37 @@ impl<'a, M: HybridModel> Integrator<Backward<'a, M>>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// Forget all history and restart at (s, y) on segment `seg` (its mode, switch bits and
+    /// An integrator of the backward system over `tape` (see [`Backward::new`]); allocates
+    /// every buffer once. Call [`Integrator::restart_segment`] before each segment.
+    pub fn backward(
+        model: &'a M,
+        p: &'a OVector<f64, M::P>,
+        tape: &'a Tape,
+        opts: &Options,
+        cw: f64,
+    ) -> Self {
+        Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts)
+    }
+
+    /// Forget all history and restart at (s, λ) on segment `seg` (its mode, switch bits and
     /// recorded steps), in the segment's local time s = t − t_start (see
     /// [`crate::adjoint::record`]); then `step(s_stop)` with s_stop < s integrates backwards.
-    pub fn restart_segment(&mut self, seg: &'a SegmentRec, s: f64, y: &AdjState<M::N, M::P>) {
+    pub fn restart_segment(&mut self, seg: &'a SegmentRec, s: f64, lambda: &OVector<f64, M::N>) {
+        // The last step of the previous segment is closed on that segment.
+        self.close_step();
         let sys = &mut self.sys;
         sys.hist.seg = Some(seg);
         sys.hist.cursor = seg.steps.end.saturating_sub(1);
         sys.rhs.mode = seg.mode;
         sys.rhs.sw.clone_from(&seg.sw);
         sys.rhs.t_start = seg.t_start;
-        self.restart_at(s, y);
+        self.restart_at(s, lambda);
+    }
+
+    /// g, the gradient accumulated so far, with the last accepted step's quadrature added
+    /// (the sweep adds the jumps', samples' and end terms to it).
+    pub fn gradient_mut(&mut self) -> &mut OVector<f64, M::P> {
+        self.close_step();
+        &mut self.sys.g
     }
 }

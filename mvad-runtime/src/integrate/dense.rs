@@ -129,7 +129,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         // The step ends at t_cut: the global error estimate is carried that far.
         if self.carry_pending.is_some() {
             self.carry_pending = Some(t_cut - self.t_prev);
-            self.carry_global_error();
+            self.close_step();
         }
         if t_cut == self.t {
             return;

@@ -60,12 +60,13 @@ mod dense;
 mod explicit;
 mod forward;
 mod global_error;
+mod quadrature;
 mod rosenbrock;
 pub mod system;
 mod tsit5;
 mod verner;
 
-pub use adjoint::{AdjState, Backward};
+pub use adjoint::Backward;
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
@@ -251,8 +252,9 @@ pub struct Integrator<Sys: OdeSystem> {
     r: Sys::Vector,
     /// Stage derivatives k_i (and for Verner, the interpolation stages).
     k: Vec<Sys::Vector>,
-    /// Signed length of the last accepted step while the system's global error estimate has
-    /// not been carried over it (see [`Integrator::carry_global_error`]).
+    /// Signed length of the last accepted step while it is not closed: the system's global
+    /// error estimate not carried over it, its quadrature not added (see
+    /// [`Integrator::close_step`]).
     carry_pending: Option<f64>,
     /// k[0] = F(t, y) holds (computed or taken over from the FSAL stage).
     k0_valid: bool,
@@ -326,7 +328,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// (t, y). The adaptive scheme in use is kept; [`Scheme::Exact`] replaces it while the
     /// system's F is constant.
     pub fn restart_at(&mut self, t: f64, y: &Sys::Vector) {
-        self.carry_global_error();
+        self.close_step();
         if self.scheme != Scheme::Exact {
             self.adaptive = self.scheme;
         }
@@ -432,7 +434,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             return Ok(());
         }
         let dir = if t_stop > self.t { 1.0 } else { -1.0 };
-        self.carry_global_error();
+        self.close_step();
         self.ensure_k0()?;
         if self.scheme == Scheme::Exact {
             return self.exact_step(t_stop);
@@ -550,15 +552,23 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         Ok(err)
     }
 
-    /// Carries the system's global error estimate over the last accepted step, if that is
-    /// still pending. A step is carried once it is known where it ends: when the next step
-    /// starts, when [`Integrator::truncate`] cuts it (over the cut length), at a restart, or
-    /// when the caller asks before reading the estimate (at the end of a run). Until then
-    /// t_prev, y_prev, k[0] = F(t_prev, y_prev) and the local error estimate are the step's.
-    pub fn carry_global_error(&mut self) {
+    /// Closes the last accepted step, if that is still pending: carries the system's global
+    /// error estimate over it and adds its quadrature ([`OdeSystem::has_quadrature`]). A
+    /// step is closed once it is known where it ends: when the next step starts, when
+    /// [`Integrator::truncate`] cuts it (over the cut length), at a restart, or when the
+    /// caller asks before reading the estimate or the quadrature (at the end of a run or a
+    /// segment). Until then t_prev, y_prev, the stages k (k[0] = F(t_prev, y_prev)) and the
+    /// local error estimate are the step's. An exact step makes no error, and its flow (a
+    /// function of θ alone) moves none: it carries nothing, but adds its quadrature.
+    pub fn close_step(&mut self) {
         if let Some(h) = self.carry_pending.take() {
-            self.sys
-                .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
+            if self.dense_scheme != Scheme::Exact {
+                self.sys
+                    .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
+            }
+            if self.sys.has_quadrature() {
+                self.add_step_quadrature(h);
+            }
         }
     }
 

@@ -26,7 +26,7 @@ use nalgebra::allocator::Allocator;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Rodas5P stages.
-const NSTAGES: usize = 8;
+pub(super) const NSTAGES: usize = 8;
 /// Slots in the stage vector: k[0] = F(t₀, Y₀), k[1..=8] the stages, k[9..=11] the dense
 /// coefficients D₁, D₂, D₃.
 pub(super) const STAGES: usize = 1 + NSTAGES + 3;
@@ -250,6 +250,34 @@ where
         }
         (log_growth / ITERS as f64).exp()
     }
+}
+
+/// Stage s's row of a (its argument Y₀ + Σ_{j<s} a_sj K_j) and its node c_s.
+pub(super) fn stage_row(s: usize) -> (&'static [f64], f64) {
+    (&A[s][..s], C[s])
+}
+
+/// The weights (ω, ω_t) of a quadrature's Rosenbrock update over a step cut at θ (θ = 1: the
+/// whole step): ΔQ = Σ_s ω_s h (G_s + J_QY K_s) + ω_t h² G_t (see `quadrature.rs`). The stage
+/// weights of the update are v_s = a_{8s} for the solution and
+/// v_s = θ a_{8s} + θ(1−θ)(H_1s + θ H_2s + θ² H_3s) for the dense output; then
+/// (I − γC)ᵀ z = v by back substitution, ω = γz, ω_t = Σ_s ω_s d_s.
+pub(super) fn quadrature_weights(theta: f64) -> ([f64; NSTAGES], f64) {
+    let mut z = A[NSTAGES];
+    if theta != 1.0 {
+        let t1 = theta * (1.0 - theta);
+        for (s, zs) in z.iter_mut().enumerate() {
+            *zs = theta * *zs + t1 * (H[0][s] + theta * (H[1][s] + theta * H[2][s]));
+        }
+    }
+    for s in (0..NSTAGES).rev() {
+        for j in s + 1..NSTAGES {
+            z[s] += GAMMA * CC[j][s] * z[j];
+        }
+    }
+    let omega = z.map(|zs| GAMMA * zs);
+    let omega_t = omega.iter().zip(&D).map(|(w, d)| w * d).sum();
+    (omega, omega_t)
 }
 
 /// Degree in θ of the dense output: θ³(1 − θ) D₃ is its highest term.

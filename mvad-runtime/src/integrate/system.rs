@@ -162,6 +162,15 @@ pub trait OdeSystem {
     }
     /// Evaluations of F so far (including those for difference quotients).
     fn evals(&self) -> usize;
+    /// Whether the system keeps a quadrature Q̇ = G(t, Y) outside the integrated vector (F
+    /// never reads Q, so Q needs no stage of its own: the integrator adds each accepted
+    /// step's share with the scheme's weights, `quadrature.rs`). The default, `false`, has
+    /// none.
+    fn has_quadrature(&self) -> bool {
+        false
+    }
+    /// Q += a·G(t, y) (a stage value of a closed step times its weight h·bᵢ).
+    fn quadrature_add(&mut self, _t: f64, _y: &Self::Vector, _a: f64) {}
     /// The weighted RMS norm of the local error `e` of a step from `y0` to `y1`,
     /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over the controlled
     /// entries with the system's weights w_i. Also the norm of Hairer's initial-step heuristic
@@ -220,6 +229,11 @@ pub trait ImplicitSystem: OdeSystem {
         _le: &Self::Vector,
     ) {
     }
+    /// Q += a·(∂G/∂Y)·v at the step start t0 (the quadrature's block of J, for the Rosenbrock
+    /// update of Q; see `quadrature.rs`).
+    fn quadrature_jac_add(&mut self, _t0: f64, _v: &Self::Vector, _a: f64) {}
+    /// Q += a·∂G/∂t at the step start (t0, y0) (the quadrature's part of F_t).
+    fn quadrature_dt_add(&mut self, _t0: f64, _y0: &Self::Vector, _a: f64) {}
     /// Forgets J, F_t and the factors (new step start, restart, truncation).
     fn invalidate(&mut self);
     /// Evaluates the Jacobian of the primary flow at (t, y) and returns an estimate of its

@@ -21,7 +21,7 @@ where
     pub(super) fn finish(mut self) -> Result<(Solution, Option<Tape>), SolveError> {
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
         let mut fw = FinalWork::new(model);
-        self.integ.carry_global_error();
+        self.integ.close_step();
         let mut x_final = self.integ.y().x.clone();
         let mut s_final = self.integ.y().s.clone();
         let mut grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);

@@ -137,6 +137,29 @@ fn transposed(w: &[f64], triples: impl Iterator<Item = (usize, usize, f64)>, out
 }
 
 impl InterpretedModel {
+    /// Runs ℓ's gradient tape at `at` when w ≠ 0 and the model has a running cost, and hands
+    /// each of its non-zero outputs whose slot is in `slots` (x: 0..n, θ: n..n+p) to `add`;
+    /// false when the tape cannot run.
+    fn running_cost_slots(
+        &self,
+        at: &TapeAt<'_>,
+        regs: &mut [f64],
+        w: f64,
+        slots: std::ops::Range<usize>,
+        mut add: impl FnMut(usize, f64),
+    ) -> bool {
+        let Some(c) = self.running_cost.as_ref().filter(|_| w != 0.0) else {
+            return true;
+        };
+        if !self.run(&c.grad, at, regs) {
+            return false;
+        }
+        for (slot, reg) in c.grad.outputs().filter(|(s, _)| slots.contains(s)) {
+            add(slot, regs[reg]);
+        }
+        true
+    }
+
     /// Whether `s` is n×p and `out` n×p (or, for ℓ, `out` has p entries).
     fn sens_shapes(&self, s: &M, out_len: usize, rows: usize) -> bool {
         s.nrows() == self.n && s.ncols() == self.p && out_len == rows * self.p
@@ -176,6 +199,65 @@ impl ModelAdjoint for InterpretedModel {
             vp.as_mut_slice(),
         );
     }
+
+    /// −(λᵀf_x + w ℓ_x): the flow's f_x tape (its non-zero entries only), then ℓ's gradient
+    /// tape over its x slots (when w ≠ 0); nothing of size p is touched.
+    fn adjoint_rate(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, w: f64, out: &mut X) {
+        let mode = pt.mode;
+        let n = self.n;
+        let mut sc = self.scratch.borrow_mut();
+        let at = at_pt(pt);
+        let m = self
+            .mode(mode)
+            .filter(|_| lambda.len() == n && out.len() == n);
+        let Some(m) = m.filter(|m| self.run(&m.jac_x, &at, &mut sc.regs)) else {
+            out.fill(f64::NAN);
+            return;
+        };
+        let regs = &sc.regs;
+        let vals = m.jac_x.outputs().map(|(s, reg)| (s / n, s % n, regs[reg]));
+        transposed(lambda.as_slice(), vals, out.as_mut_slice());
+        out.neg_mut();
+        let rc = |s: usize, v: f64| out[s] -= w * v;
+        if !self.running_cost_slots(&at, &mut sc.regs, w, 0..n, rc) {
+            out.fill(f64::NAN);
+        }
+    }
+
+    /// g −= a·(λᵀf_θ + w ℓ_θ) over the non-zero entries of the flow's f_θ tape and the θ
+    /// slots of ℓ's gradient tape: O(non-zeros), never O(p).
+    fn adjoint_quadrature_add(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        lambda: &X,
+        w: f64,
+        a: f64,
+        g: &mut X,
+    ) {
+        let mode = pt.mode;
+        let (n, np) = (self.n, self.p);
+        let mut sc = self.scratch.borrow_mut();
+        let at = at_pt(pt);
+        let m = self
+            .mode(mode)
+            .filter(|_| lambda.len() == n && g.len() == np);
+        let Some(m) = m.filter(|m| self.run(&m.jac_p, &at, &mut sc.regs)) else {
+            g.fill(f64::NAN);
+            return;
+        };
+        let regs = &sc.regs;
+        for (slot, reg) in m.jac_p.outputs() {
+            let (r, k) = (slot / np, slot % np);
+            g[k] -= a * (lambda[r] * regs[reg]);
+        }
+        let aw = a * w;
+        let rc = |s: usize, v: f64| g[s - n] -= aw * v;
+        if !self.running_cost_slots(&at, &mut sc.regs, w, n..n + np, rc) {
+            g.fill(f64::NAN);
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
     fn reset_vjp(
         &self,
         occ: Occurrence,
