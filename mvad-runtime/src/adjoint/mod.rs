@@ -44,7 +44,7 @@ use crate::qp::Side;
 use crate::sample::check_times;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind, GradientMode, Options, Solution, Stats};
-use crate::solve::run_loop;
+use crate::solve::{judge, run_loop};
 use crate::vjp::Cotangents;
 use nalgebra::{Const, DefaultAllocator, OVector};
 use record::{Item, JumpKind, Tape};
@@ -139,6 +139,7 @@ where
     let dt_end = horizon_grad(model, params, opts);
     let out = sweep(model, params, &tape, opts, &dt_end, cot.cost, &samples)?;
     sol.gradient = out.gradient;
+    judge_estimate(&mut sol, out.error.as_deref(), params.as_slice(), opts);
     add_sweep_stats(&mut sol.stats, &out.stats);
     if sol
         .diagnostics
@@ -156,6 +157,27 @@ where
     sol.stats.mode = GradientMode::Adjoint;
     sol.stats.wall_seconds = start.elapsed().as_secs_f64();
     Ok(Ok((sol, observables)))
+}
+
+/// The global error estimate of an adjoint result, judged at the tolerances asked for (the
+/// primal run's own judgement, at [`PRIMAL_TOL_FACTOR`] of them, is not made): the error of C
+/// is the primal run's estimate, that of the gradient the sweep's `e_grad` (see
+/// `integrate/global_error.rs`). The same `ill_conditioned` rule as forward mode
+/// ([`crate::solve::judge`]).
+fn judge_estimate(sol: &mut Solution, e_grad: Option<&[f64]>, p: &[f64], opts: &Options) {
+    let Some(primal) = sol.error_estimate.take() else {
+        return;
+    };
+    let grad = e_grad.map(|e| (e, sol.gradient.as_slice()));
+    let (estimate, diagnostic) = judge(
+        (primal.cost, sol.cost),
+        grad,
+        p,
+        (opts.atol, opts.rtol),
+        sol.t_end,
+    );
+    sol.error_estimate = Some(estimate);
+    sol.diagnostics.extend(diagnostic);
 }
 
 /// The samples with their cotangent rows, sorted by time.

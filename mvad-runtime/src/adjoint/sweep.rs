@@ -42,6 +42,9 @@ pub(crate) struct SweepOut {
     pub gradient: Vec<f64>,
     /// Steps, rejections and evaluations of the backward integration.
     pub stats: Stats,
+    /// The estimated global error of `gradient` from the sweep's local errors
+    /// (`Options::global_error`; see `integrate/global_error.rs`).
+    pub error: Option<Vec<f64>>,
 }
 
 /// Scratch for the samples: ∂h/∂x (nobs×n), ∂h/∂θ (nobs×p), row-major, and x(t_s).
@@ -160,6 +163,13 @@ where
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
                 transpose_jump(model, p, cw, j, states, &mut y.lam, &mut y.g, &mut work)?;
+                if let Some(ge) = integ.global_error_mut() {
+                    // The jump's homogeneous part (w = 0) maps the remainder. A failure was
+                    // the main transpose's, reported above.
+                    let r = ge.remainder_mut();
+                    let _ =
+                        transpose_jump(model, p, 0.0, j, states, &mut r.lam, &mut r.g, &mut work);
+                }
                 continue;
             }
             Item::Segment(seg) => seg,
@@ -179,6 +189,7 @@ where
                 integ.step(s_stop)?;
                 h_seed = integ.last_step_size().abs();
             }
+            integ.carry_global_error();
             y.copy_from(integ.y());
             let mut cursor = seg.steps.end - 1;
             while left > 0 && samples[left - 1].t >= stop {
@@ -195,6 +206,13 @@ where
     let mut vp = OVector::<f64, M::P>::zeros_generic(np, Const::<1>);
     model.initial_state_vjp(p, &y.lam, &mut vp);
     y.g += &vp;
+    // e_G = r_g + (∂x₀/∂θ)ᵀ r_λ.
+    let error = integ.global_error_mut().map(|ge| {
+        let r = ge.remainder_mut();
+        model.initial_state_vjp(p, &r.lam, &mut vp);
+        r.g += &vp;
+        r.g.iter().copied().collect()
+    });
     if !y.g.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite {
             t: 0.0,
@@ -204,5 +222,6 @@ where
     Ok(SweepOut {
         gradient: y.g.iter().copied().collect(),
         stats: integ.stats().clone(),
+        error,
     })
 }

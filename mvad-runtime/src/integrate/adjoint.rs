@@ -31,6 +31,7 @@
 //! stepped forwards), so `auto` switches to Rodas5P on it as on the forward run.
 
 use super::aug::{axpy_slice, hermite_slice, mix5_slice, WeightedRms};
+use super::global_error::AdjointError;
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem, StageVector};
 use super::Integrator;
@@ -163,6 +164,8 @@ where
     /// g is under error control (with λ).
     sens_err: bool,
     imp: AdjImplicit<M::N, M::P>,
+    /// The sweep's global error estimate (`Options::global_error`).
+    global: Option<AdjointError<M::N, M::P>>,
 }
 
 /// Everything F needs besides x(t).
@@ -274,7 +277,7 @@ where
         cw: f64,
     ) -> Self {
         let (n, np) = (model.nstates(), model.nparams());
-        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
+        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock) || opts.global_error;
         let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
         Backward {
             rhs: AdjRhs {
@@ -305,6 +308,7 @@ where
                 vp: OVector::zeros_generic(np, Const::<1>),
                 prepared: false,
             },
+            global: opts.global_error.then(|| AdjointError::new(n, np)),
         }
     }
 
@@ -482,6 +486,41 @@ where
         ok
     }
 
+    /// [`AdjointError::carry`] with J = −f_xᵀ and the products f_xᵀv, f_θᵀv at the step
+    /// start (t₀, x(t₀)), evaluated here: the step's own Rosenbrock Jacobian is gone by the
+    /// time it is carried (see [`super::Forward`]'s).
+    fn carry_global_error(
+        &mut self,
+        t0: f64,
+        _y0: &Self::Vector,
+        _f0: &Self::Vector,
+        h: f64,
+        le: &Self::Vector,
+    ) {
+        let Backward {
+            rhs,
+            hist,
+            imp,
+            global,
+            ..
+        } = self;
+        let Some(ge) = global else {
+            return;
+        };
+        hist.at(t0);
+        let model = rhs.model;
+        let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t0, &hist.x, rhs.p);
+        model.rhs_jac_x(pt, &mut imp.w.jac);
+        imp.w.jac.transpose_mut();
+        imp.w.jac.neg_mut();
+        // J now holds the carried step's start, not the next step's.
+        imp.prepared = false;
+        let pattern = &model.info().jacobian_sparsity[rhs.mode];
+        ge.carry(le, &mut imp.w, pattern, h, |v, vx, vp| {
+            model.rhs_vjp(pt, v, vx, vp)
+        });
+    }
+
     fn invalidate(&mut self) {
         self.imp.prepared = false;
         self.imp.w.invalidate();
@@ -520,6 +559,8 @@ where
     /// recorded steps), in the segment's local time s = t − t_start (see
     /// [`crate::adjoint::record`]); then `step(s_stop)` with s_stop < s integrates backwards.
     pub fn restart_segment(&mut self, seg: &'a SegmentRec, s: f64, y: &AdjState<M::N, M::P>) {
+        // A pending step is carried on its own segment.
+        self.carry_global_error();
         let sys = &mut self.sys;
         sys.hist.seg = Some(seg);
         sys.hist.cursor = seg.steps.end.saturating_sub(1);
@@ -527,5 +568,11 @@ where
         sys.rhs.sw.clone_from(&seg.sw);
         sys.rhs.t_start = seg.t_start;
         self.restart_at(s, y);
+    }
+
+    /// The sweep's global error estimate (`None` when `Options::global_error` is off). Carry
+    /// the last step ([`Integrator::carry_global_error`]) before a jump or a new segment.
+    pub fn global_error_mut(&mut self) -> Option<&mut AdjointError<M::N, M::P>> {
+        self.sys.global.as_mut()
     }
 }

@@ -58,6 +58,7 @@
 //! criterion, not a correction. With sensitivity error control off, no local error of S is estimated, and only C
 //! is judged.
 
+use super::adjoint::AdjState;
 use super::aug::AugState;
 use super::rosenbrock::WMatrix;
 use crate::model::ModelAlloc;
@@ -82,6 +83,29 @@ fn for_each_entry(n: usize, pattern: &[(usize, usize)], mut f: impl FnMut(usize,
             f(i, j);
         }
     }
+}
+
+/// m = ⌈2|h|‖J‖∞⌉ (at least 1): the explicit Euler substeps that carry a step of length h
+/// stably (|h/m|‖J‖∞ ≤ 1/2). ‖J‖∞ from the row sums of |J_ij| over the structural non-zeros
+/// `pattern` of f_x (every entry when it is empty); with `transposed` the matrix holds −f_xᵀ
+/// (the adjoint's J), whose non-zeros are the pattern's (j, i). `sums` is n-long scratch.
+fn substeps<N: Dim>(
+    jac: &OMatrix<f64, N, N>,
+    pattern: &[(usize, usize)],
+    transposed: bool,
+    h: f64,
+    sums: &mut OVector<f64, N>,
+) -> f64
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<N, N> + nalgebra::allocator::Allocator<N>,
+{
+    let (n, entries) = (jac.nrows(), jac.as_slice());
+    sums.fill(0.0);
+    for_each_entry(n, pattern, |i, j| {
+        let (i, j) = if transposed { (j, i) } else { (i, j) };
+        sums[i] += entries[i + j * n].abs();
+    });
+    (2.0 * h.abs() * sums.amax()).ceil().max(1.0)
 }
 
 /// out += J v over the entries (i, j) of `pattern`.
@@ -207,11 +231,7 @@ where
             r.s += &le.s;
             r.qp += &le.qp;
         }
-        // ‖J‖∞ from the row sums of |J_ij| over the non-zeros.
-        let (n, jac) = (w.jac.nrows(), w.jac.as_slice());
-        self.w.fill(0.0);
-        for_each_entry(n, pattern, |i, j| self.w[i] += jac[i + j * n].abs());
-        let m = (2.0 * h.abs() * self.w.amax()).ceil().max(1.0);
+        let m = substeps(&w.jac, pattern, false, h, &mut self.w);
         if m <= EXPLICIT_SUBSTEPS {
             let dt = h / m;
             // The quadratures by the trapezoidal rule (r_x is linear across a substep).
@@ -408,6 +428,85 @@ where
             }
         }
         cost
+    }
+}
+
+/// The global error estimate of an adjoint sweep (see the module doc): the remainder
+/// (r_λ, r_g), carried backwards by the sweep's homogeneous linear flow. Every buffer is
+/// allocated when it is built; carrying it allocates nothing.
+#[derive(Clone, Debug)]
+pub struct AdjointError<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// The remainder (r_λ, r_g).
+    r: AdjState<N, P>,
+    /// Scratch: f_xᵀ r_λ, f_θᵀ r_λ and the row sums of |J|.
+    vx: OVector<f64, N>,
+    vp: OVector<f64, P>,
+    sums: OVector<f64, N>,
+}
+
+impl<N: Dim, P: Dim> AdjointError<N, P>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// A zero estimate for n states and p parameters.
+    pub fn new(n: N, p: P) -> Self {
+        AdjointError {
+            r: AdjState::zeros(n, p),
+            vx: OVector::zeros_generic(n, Const::<1>),
+            vp: OVector::zeros_generic(p, Const::<1>),
+            sums: OVector::zeros_generic(n, Const::<1>),
+        }
+    }
+
+    /// Carries the estimate over the accepted backward step from s₀ of signed length h (< 0)
+    /// with local error estimate `le`: J = −f_xᵀ at the step start in `w.jac` (`pattern` the
+    /// structural non-zeros of f_x, every entry when it is empty), and `vjp(v, vx, vp)` the
+    /// model's product vx = f_xᵀv, vp = f_θᵀv at the step start.
+    ///
+    /// r += le; then with m as for a forward step ([`substeps`]): m explicit Euler substeps
+    /// r_λ ← r_λ − (h/m) f_xᵀ r_λ, with r_g −= ∫ f_θᵀ r_λ by the trapezoidal rule (m + 1
+    /// products in all), or for a stiff step one linearly implicit Euler step
+    /// r_λ ← (I + h f_xᵀ)⁻¹ r_λ (L-stable; a singular matrix leaves r_λ as it is),
+    /// r_g −= h f_θᵀ r_λ.
+    pub(super) fn carry(
+        &mut self,
+        le: &AdjState<N, P>,
+        w: &mut WMatrix<N>,
+        pattern: &[(usize, usize)],
+        h: f64,
+        mut vjp: impl FnMut(&OVector<f64, N>, &mut OVector<f64, N>, &mut OVector<f64, P>),
+    ) {
+        let AdjointError { r, vx, vp, sums } = self;
+        r.lam += &le.lam;
+        r.g += &le.g;
+        let m = substeps(&w.jac, pattern, true, h, sums);
+        if m <= EXPLICIT_SUBSTEPS {
+            let dt = h / m;
+            vjp(&r.lam, vx, vp);
+            for _ in 0..m as usize {
+                r.g.axpy(-0.5 * dt, vp, 1.0);
+                r.lam.axpy(-dt, vx, 1.0);
+                vjp(&r.lam, vx, vp);
+                r.g.axpy(-0.5 * dt, vp, 1.0);
+            }
+            return;
+        }
+        if w.factorise(h) {
+            w.solve_mut(&mut r.lam);
+        }
+        // The factors are for h, not a Rosenbrock step's hγ.
+        w.invalidate();
+        vjp(&r.lam, vx, vp);
+        r.g.axpy(-h, vp, 1.0);
+    }
+
+    /// The remainder (r_λ, r_g), for the jumps' transposes (which map it as they map λ and g
+    /// with a zero cost cotangent) and the initial term.
+    pub fn remainder_mut(&mut self) -> &mut AdjState<N, P> {
+        &mut self.r
     }
 }
 

@@ -69,7 +69,7 @@ pub use adjoint::{AdjState, Backward};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
-pub use global_error::{GlobalError, Saltation};
+pub use global_error::{AdjointError, GlobalError, Saltation};
 pub use system::{ImplicitSystem, OdeSystem, StageVector};
 
 use crate::solution::{Method, Options, Stats};
