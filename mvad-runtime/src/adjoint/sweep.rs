@@ -20,7 +20,7 @@
 //! time s = t − t_start (see [`super::record`]).
 
 use super::record::{FinalState, Item, Tape};
-use super::transpose::{transpose_jump, JumpWork};
+use super::transpose::{shift_error, transpose_jump, JumpWork, ShiftWork};
 use crate::error::SolveError;
 use crate::integrate::{AdjState, Integrator, StageVector};
 use crate::model::{HybridModel, ModelAlloc, Point};
@@ -157,18 +157,27 @@ where
     }
     let mut integ = Integrator::backward(model, p, tape, opts, cw);
     let mut work = JumpWork::new(model);
+    let mut shift_work = ShiftWork::new(model);
+    let mut lam_plus = y.lam.clone();
     let mut h_seed = 0.0;
     for item in tape.items().iter().rev() {
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
+                lam_plus.copy_from(&y.lam);
                 transpose_jump(model, p, cw, j, states, &mut y.lam, &mut y.g, &mut work)?;
                 if let Some(ge) = integ.global_error_mut() {
-                    // The jump's homogeneous part (w = 0) maps the remainder. A failure was
-                    // the main transpose's, reported above.
+                    // The jump's homogeneous part (w = 0) maps the remainder (a failure was
+                    // the main transpose's, reported above); the primal run's displacement
+                    // of the jump adds its share.
                     let r = ge.remainder_mut();
                     let _ =
                         transpose_jump(model, p, 0.0, j, states, &mut r.lam, &mut r.g, &mut work);
+                    if let Some(shift) = tape.jump_shift(j) {
+                        let r = (&mut r.lam, &mut r.g);
+                        let (w, s) = (&mut work, &mut shift_work);
+                        shift_error(model, p, cw, j, states, shift, &lam_plus, r, w, s);
+                    }
                 }
                 continue;
             }

@@ -44,7 +44,7 @@
 use super::record::{Jump, JumpKind};
 use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc, Point};
-use nalgebra::{Const, DefaultAllocator, OVector};
+use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
 /// Scratch for the transposes (allocated once per sweep).
 pub(super) struct JumpWork<M: HybridModel>
@@ -207,4 +207,90 @@ where
         return Err(SolveError::NonFinite { t, what });
     }
     Ok(())
+}
+
+/// Scratch for [`shift_error`] (allocated once per sweep, with the estimate).
+pub(super) struct ShiftWork<M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    jump: Option<Jump>,
+    xm: Vec<f64>,
+    xp: Vec<f64>,
+    lam: [OVector<f64, M::N>; 2],
+    g: [OVector<f64, M::P>; 2],
+}
+
+impl<M: HybridModel> ShiftWork<M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Buffers for `model`.
+    pub(super) fn new(model: &M) -> Self {
+        let (n, p) = (model.nstates(), model.nparams());
+        let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        let vp = || OVector::<f64, M::P>::zeros_generic(p, Const::<1>);
+        ShiftWork {
+            jump: None,
+            xm: vec![0.0; n.value()],
+            xp: vec![0.0; n.value()],
+            lam: [vn(), vn()],
+            g: [vp(), vp()],
+        }
+    }
+}
+
+/// The primal run's share of the sweep's error at a jump. The run applied the jump at
+/// (t̃, x̃⁻, x̃⁺), the exact one (t, x⁻, x⁺) moved by its state error:
+/// (δt, d⁻, d⁺) = `shift` (see [`crate::integrate::GlobalError::jump_shift`]). The sweep
+/// transposes the jump there, so it maps (λ⁺, g) by T̃ where the exact jump's transpose is T:
+/// (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺), evaluated as a secant over the actual displacement (its
+/// rounding, ε|T|, is far below any tolerance). What it leaves out: the sweep also changes
+/// segments at t̃ instead of t, which moves (F⁻ − F⁺)·δt of the adjoint's right-hand side
+/// across the jump.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn shift_error<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    cw: f64,
+    jump: &Jump,
+    (x_minus, x_plus): (&[f64], &[f64]),
+    (d_minus, d_plus, dt): (&[f64], &[f64], f64),
+    lam_plus: &OVector<f64, M::N>,
+    (r_lam, r_g): (&mut OVector<f64, M::N>, &mut OVector<f64, M::P>),
+    w: &mut JumpWork<M>,
+    s: &mut ShiftWork<M>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    match &mut s.jump {
+        Some(exact) => exact.clone_from(jump),
+        None => s.jump = Some(jump.clone()),
+    }
+    let Some(exact) = &mut s.jump else {
+        return;
+    };
+    exact.t = jump.t - dt;
+    for (e, (x, d)) in s.xm.iter_mut().zip(x_minus.iter().zip(d_minus)) {
+        *e = x - d;
+    }
+    for (e, (x, d)) in s.xp.iter_mut().zip(x_plus.iter().zip(d_plus)) {
+        *e = x - d;
+    }
+    let [lam_rec, lam_exact] = &mut s.lam;
+    let [g_rec, g_exact] = &mut s.g;
+    lam_rec.copy_from(lam_plus);
+    lam_exact.copy_from(lam_plus);
+    g_rec.fill(0.0);
+    g_exact.fill(0.0);
+    let states = (x_minus, x_plus);
+    let rec = transpose_jump(model, p, cw, jump, states, lam_rec, g_rec, w);
+    let states = (s.xm.as_slice(), s.xp.as_slice());
+    let ex = transpose_jump(model, p, cw, exact, states, lam_exact, g_exact, w);
+    if rec.is_ok() && ex.is_ok() {
+        *r_lam += &*lam_rec;
+        *r_lam -= &*lam_exact;
+        *r_g += &*g_rec;
+        *r_g -= &*g_exact;
+    }
 }

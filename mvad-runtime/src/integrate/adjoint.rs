@@ -164,8 +164,22 @@ where
     /// g is under error control (with λ).
     sens_err: bool,
     imp: AdjImplicit<M::N, M::P>,
-    /// The sweep's global error estimate (`Options::global_error`).
-    global: Option<AdjointError<M::N, M::P>>,
+    /// The sweep's global error estimate (`Options::global_error`) and the buffers of its
+    /// primal coupling.
+    global: Option<(AdjointError<M::N, M::P>, Coupling<M::N, M::P>)>,
+}
+
+/// Buffers of the primal run's share of the sweep's error (see [`Backward`]'s
+/// `carry_global_error`): e_x, its unit direction, f, and two values of the products.
+struct Coupling<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    ex: OVector<f64, N>,
+    zero: OVector<f64, N>,
+    f: OVector<f64, N>,
+    d: AdjState<N, P>,
+    d0: AdjState<N, P>,
 }
 
 /// Everything F needs besides x(t).
@@ -308,7 +322,16 @@ where
                 vp: OVector::zeros_generic(np, Const::<1>),
                 prepared: false,
             },
-            global: opts.global_error.then(|| AdjointError::new(n, np)),
+            global: opts.global_error.then(|| {
+                let coupling = Coupling {
+                    ex: vn(),
+                    zero: vn(),
+                    f: vn(),
+                    d: AdjState::zeros(n, np),
+                    d0: AdjState::zeros(n, np),
+                };
+                (AdjointError::new(n, np), coupling)
+            }),
         }
     }
 
@@ -489,10 +512,17 @@ where
     /// [`AdjointError::carry`] with J = −f_xᵀ and the products f_xᵀv, f_θᵀv at the step
     /// start (t₀, x(t₀)), evaluated here: the step's own Rosenbrock Jacobian is gone by the
     /// time it is carried (see [`super::Forward`]'s).
+    ///
+    /// The primal run's state error e_x = r_x + α f at the step (from the tape) is a forcing:
+    /// F is evaluated along x + e_x, so the step adds h δF with
+    /// δF = −(∂ₓ(f_xᵀλ)·e_x + w ∂ₓℓ_xᵀ·e_x, ∂ₓ(f_θᵀλ)·e_x + w ∂ₓℓ_θᵀ·e_x) at the step start:
+    /// the model's directional products along (1, ê) (ê = e_x/‖e_x‖∞, so a difference
+    /// default differences on the state's scale), less those along (1, 0) where f or ℓ may
+    /// read t, times ‖e_x‖∞.
     fn carry_global_error(
         &mut self,
         t0: f64,
-        _y0: &Self::Vector,
+        y0: &Self::Vector,
         _f0: &Self::Vector,
         h: f64,
         le: &Self::Vector,
@@ -504,19 +534,57 @@ where
             global,
             ..
         } = self;
-        let Some(ge) = global else {
+        let Some((ge, c)) = global else {
             return;
         };
         hist.at(t0);
         let model = rhs.model;
         let pt = Point::new(rhs.mode, &rhs.sw, rhs.t_start + t0, &hist.x, rhs.p);
+        let forcing = match hist.tape.state_error(hist.cursor) {
+            Some((rx, alpha)) => {
+                model.rhs(pt, &mut c.f);
+                c.ex.as_mut_slice().copy_from_slice(rx);
+                c.ex.axpy(alpha, &c.f, 1.0);
+                let size = c.ex.amax();
+                if size > 0.0 && size.is_finite() {
+                    c.ex /= size;
+                    c.d.lam.fill(0.0);
+                    c.d.g.fill(0.0);
+                    if !model.flow_is_constant(rhs.mode) {
+                        model.rhs_vjp_dir(pt, &y0.lam, &c.ex, &mut c.d.lam, &mut c.d.g);
+                        if model.rhs_depends_on_t(rhs.mode) {
+                            let (d0, z) = (&mut c.d0, &c.zero);
+                            model.rhs_vjp_dir(pt, &y0.lam, z, &mut d0.lam, &mut d0.g);
+                            c.d.lam -= &c.d0.lam;
+                            c.d.g -= &c.d0.g;
+                        }
+                    }
+                    if rhs.has_rc && rhs.cw != 0.0 {
+                        let (sw, t, x, p) = (&rhs.sw, pt.t, &hist.x, rhs.p);
+                        let (lx, lp) = (&mut rhs.lx, &mut rhs.lp);
+                        model.running_cost_grad_dir(sw, t, x, p, &c.ex, lx, lp);
+                        c.d.lam.axpy(rhs.cw, lx, 1.0);
+                        c.d.g.axpy(rhs.cw, lp, 1.0);
+                        model.running_cost_grad_dir(sw, t, x, p, &c.zero, lx, lp);
+                        c.d.lam.axpy(-rhs.cw, lx, 1.0);
+                        c.d.g.axpy(-rhs.cw, lp, 1.0);
+                    }
+                    c.d.lam *= -size;
+                    c.d.g *= -size;
+                    Some(&c.d)
+                } else {
+                    None
+                }
+            }
+            None => None,
+        };
         model.rhs_jac_x(pt, &mut imp.w.jac);
         imp.w.jac.transpose_mut();
         imp.w.jac.neg_mut();
         // J now holds the carried step's start, not the next step's.
         imp.prepared = false;
         let pattern = &model.info().jacobian_sparsity[rhs.mode];
-        ge.carry(le, &mut imp.w, pattern, h, |v, vx, vp| {
+        ge.carry(le, forcing, &mut imp.w, pattern, h, |v, vx, vp| {
             model.rhs_vjp(pt, v, vx, vp)
         });
     }
@@ -573,6 +641,6 @@ where
     /// The sweep's global error estimate (`None` when `Options::global_error` is off). Carry
     /// the last step ([`Integrator::carry_global_error`]) before a jump or a new segment.
     pub fn global_error_mut(&mut self) -> Option<&mut AdjointError<M::N, M::P>> {
-        self.sys.global.as_mut()
+        self.sys.global.as_mut().map(|(ge, _)| ge)
     }
 }

@@ -57,6 +57,43 @@
 //! suite; below it where locating events dominates, as for 10⁴ bounces of a ball); it is a
 //! criterion, not a correction. With sensitivity error control off, no local error of S is estimated, and only C
 //! is judged.
+//!
+//! ## Adjoint mode
+//! The backward sweep (`adjoint/sweep.rs`) integrates Y = (λ, g) from T down to 0 with
+//! F(t, Y) = (−f_xᵀλ − w ℓ_xᵀ, −f_θᵀλ − w ℓ_θᵀ) along the primal run's recorded x(t), and
+//! returns G = g(0) + x₀_θᵀλ(0) (w dC/dθ plus the samples' terms: the VJP). F is affine in λ,
+//! so an error (δλ, δg) the sweep makes at t reaches G through the sweep's own homogeneous
+//! (w = 0) linear flow, [`AdjointError`]'s remainder r = (r_λ, r_g):
+//!
+//! ```text
+//!   ṙ_λ = −f_xᵀ r_λ,   ṙ_g = −f_θᵀ r_λ        (from t down to 0)
+//!   at a jump: the transpose with w = 0,  r_λ⁻ = R_xᵀr_λ⁺ − (c/ġ) g_xᵀ,  r_g += R_θᵀr_λ⁺ − (c/ġ) g_θ,
+//!              c = (R_xᵀr_λ⁺)·f⁻ + r_λ⁺ᵀR_t − r_λ⁺·f⁺      (`adjoint/transpose.rs`)
+//!   at 0:      e_G = r_g + x₀_θᵀ r_λ
+//! ```
+//!
+//! (by duality e_G = Σ δλᵀS(t) + δg: the pairing forward mode's estimate forms, without S).
+//! Per backward step, r += le and the transport is the forward one with J = −f_xᵀ: m explicit
+//! Euler substeps, each one product f_xᵀr_λ, f_θᵀr_λ (`rhs_vjp`, over the structural
+//! non-zeros), or one linearly implicit Euler step with (I + h f_xᵀ)⁻¹; the work per step is
+//! that of a few of the sweep's own stages, flat in p beyond λᵀf_θ. The flow-direction
+//! transport (α, β) has no counterpart: the adjoint's exact solution along the flow is the
+//! invariant λᵀf, a scalar, not a direction.
+//!
+//! The primal run's errors (its own estimate, e_x = r_x + α f, kept on the tape per step and
+//! per jump) enter the sweep because it reads x(t): C's error is the primal's e_C; G's gets
+//! - on a segment, the forcing δF = −(∂ₓ(f_xᵀλ)·e_x + w ∂ₓℓ_xᵀ·e_x, ∂ₓ(f_θᵀλ)·e_x +
+//!   w ∂ₓℓ_θᵀ·e_x): second derivatives along λ (`ModelAdjoint::rhs_vjp_dir`,
+//!   `running_cost_grad_dir`), added as h δF per backward step;
+//! - at a jump, which the primal applied at (t̃, x̃⁻, x̃⁺) = (t, x⁻, x⁺) + (δt, d⁻, d⁺) with
+//!   δt = −∇g·e_x⁻/ġ, d⁻ = e_x⁻ + f⁻δt, d⁺ = e_x⁺ + f⁺δt ([`GlobalError::jump_shift`]), the
+//!   difference of the transposes at the displaced and the exact jump applied to λ⁺
+//!   (`adjoint::transpose::shift_error`).
+//!
+//! Left out, as forward mode leaves them out: the error of locating events beyond the
+//! primal's own state error, and the sweep's segments changing at t̃ rather than t (a term
+//! (F⁻ − F⁺)·δt). Samples of observables add h_xᵀw to λ at x̃(t_s); their share of the primal
+//! error is left out too.
 
 use super::adjoint::AdjState;
 use super::aug::AugState;
@@ -144,6 +181,11 @@ where
     events_cost: f64,
     /// The error of Σ dφ_k/dθ so far.
     events_grad: OVector<f64, P>,
+    /// The last jump's displacement: the recorded jump (t̃, x̃⁻, x̃⁺) is the exact one moved
+    /// by (δt, d⁻, d⁺), d⁻ = e_x⁻ + f⁻ δt, d⁺ = e_x⁺ + f⁺ δt (see [`GlobalError::jump_shift`]).
+    d_minus: OVector<f64, N>,
+    d_plus: OVector<f64, N>,
+    shift_dt: f64,
     /// Scratch: two n-vectors, n×p and p.
     xs: OVector<f64, N>,
     w: OVector<f64, N>,
@@ -189,6 +231,9 @@ where
             beta: OVector::zeros_generic(p, Const::<1>),
             events_cost: 0.0,
             events_grad: OVector::zeros_generic(p, Const::<1>),
+            d_minus: OVector::zeros_generic(n, Const::<1>),
+            d_plus: OVector::zeros_generic(n, Const::<1>),
+            shift_dt: 0.0,
             xs: OVector::zeros_generic(n, Const::<1>),
             w: OVector::zeros_generic(n, Const::<1>),
             ss: OMatrix::zeros_generic(n, p),
@@ -376,12 +421,17 @@ where
         let dl = s.l_minus - s.l_plus;
         // x: δt = −∇g·e_x/ġ, e_x⁺ = R_x e_x + w δt.
         let dt = inv_rate * s.gx.dot(&self.r.x);
+        self.d_minus.copy_from(&self.r.x);
+        self.d_minus.axpy(dt, s.f_minus, 1.0);
         match s.rx {
             Some(rx) => self.xs.gemv(1.0, rx, &self.r.x, 0.0),
             None => self.xs.copy_from(&self.r.x),
         }
         self.xs.axpy(dt, &self.w, 1.0);
         self.r.x.copy_from(&self.xs);
+        self.d_plus.copy_from(&self.r.x);
+        self.d_plus.axpy(dt, s.f_plus, 1.0);
+        self.shift_dt = dt;
         self.r.q += dl * dt;
         if let Some((phi_x, phi_t)) = s.cost {
             self.events_cost += phi_x.dot(&self.r.x) + (phi_x.dot(s.f_plus) + phi_t) * dt;
@@ -403,6 +453,19 @@ where
             self.events_grad
                 .axpy(phi_x.dot(s.f_plus) + phi_t, &self.dts, 1.0);
         }
+    }
+
+    /// The estimated error of x now: (r_x, α), e_x = r_x + α f(t, x).
+    pub fn state_error(&self) -> (&OVector<f64, N>, f64) {
+        (&self.r.x, self.alpha)
+    }
+
+    /// The last jump's displacement (d⁻, d⁺, δt): the jump the run applied, at t̃ = t + δt
+    /// from x̃⁻ = x⁻ + d⁻ to x̃⁺ = x⁺ + d⁺, is the exact one (t, x⁻, x⁺) moved by the state
+    /// error e_x⁻ it arrived with: δt = −∇g·e_x⁻/ġ, d⁻ = e_x⁻ + f⁻ δt and d⁺ = e_x⁺ + f⁺ δt =
+    /// R_x d⁻ + R_t δt (the adjoint sweep's transposes are evaluated there).
+    pub fn jump_shift(&self) -> (&OVector<f64, N>, &OVector<f64, N>, f64) {
+        (&self.d_minus, &self.d_plus, self.shift_dt)
     }
 
     /// The estimated errors at T, given f(T), ℓ(T) and, with a final cost, Φ_x(T): returns the
@@ -466,7 +529,8 @@ where
     /// structural non-zeros of f_x, every entry when it is empty), and `vjp(v, vx, vp)` the
     /// model's product vx = f_xᵀv, vp = f_θᵀv at the step start.
     ///
-    /// r += le; then with m as for a forward step ([`substeps`]): m explicit Euler substeps
+    /// r += le + h·`forcing` (the primal run's share, see `Backward`); then with m as for a
+    /// forward step ([`substeps`]): m explicit Euler substeps
     /// r_λ ← r_λ − (h/m) f_xᵀ r_λ, with r_g −= ∫ f_θᵀ r_λ by the trapezoidal rule (m + 1
     /// products in all), or for a stiff step one linearly implicit Euler step
     /// r_λ ← (I + h f_xᵀ)⁻¹ r_λ (L-stable; a singular matrix leaves r_λ as it is),
@@ -474,6 +538,7 @@ where
     pub(super) fn carry(
         &mut self,
         le: &AdjState<N, P>,
+        forcing: Option<&AdjState<N, P>>,
         w: &mut WMatrix<N>,
         pattern: &[(usize, usize)],
         h: f64,
@@ -482,6 +547,10 @@ where
         let AdjointError { r, vx, vp, sums } = self;
         r.lam += &le.lam;
         r.g += &le.g;
+        if let Some(d) = forcing {
+            r.lam.axpy(h, &d.lam, 1.0);
+            r.g.axpy(h, &d.g, 1.0);
+        }
         let m = substeps(&w.jac, pattern, true, h, sums);
         if m <= EXPLICIT_SUBSTEPS {
             let dt = h / m;

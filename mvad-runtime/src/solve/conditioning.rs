@@ -3,9 +3,14 @@
 //! estimated errors of C and dC/dθ, with an `ill_conditioned` diagnostic when either exceeds
 //! [`ILL_CONDITIONED_FACTOR`] times the tolerance atol + rtol·|value|.
 //!
-//! The parameters are weighed as the sensitivities' error control weighs them (column j by
-//! w_j = |θ_j|, 1 for θ_j = 0), so the gradient's error is measured as the change of C it
-//! predicts for relative changes of θ: max_j w_j |e_j| against max_j w_j |dC/dθ_j|.
+//! The gradient's error is measured two ways, and the larger ratio is judged: with the
+//! parameters weighed as the sensitivities' error control weighs them (column j by
+//! w_j = |θ_j|, 1 for θ_j = 0), as the change of C it predicts for relative changes of θ
+//! (max_j w_j |e_j| against max_j w_j |dC/dθ_j|), and unweighted, as the suite measures a
+//! gradient's error (max_j |e_j| against max_j |dC/dθ_j|). The second catches an entry for a
+//! tiny parameter that is wrong by orders of magnitude (dC/dτ of the stiff relay, τ = 1e-8,
+//! from a sweep at rtol 1e-3), which the first scales away; forward mode's error control
+//! weighs S by |θ_j|, adjoint mode's quadrature g is controlled unweighted.
 
 use super::Driver;
 use crate::integrate::{sens_weight, Saltation};
@@ -165,17 +170,26 @@ pub(crate) fn judge(
     t_end: f64,
 ) -> (ErrorEstimate, Option<Diagnostic>) {
     let cost_ratio = e_cost.abs() / (atol + rtol * cost.abs());
-    let weighted_max = |v: &[f64]| {
+    let weighted_max = |v: &[f64], weighted: bool| {
         v.iter()
             .zip(p)
-            .map(|(g, th)| (g * sens_weight(*th)).abs())
+            .map(|(g, th)| (g * if weighted { sens_weight(*th) } else { 1.0 }).abs())
             .fold(0.0, f64::max)
     };
-    let (g_err, g_size) = match grad {
-        Some((e, g)) => (weighted_max(e), weighted_max(g)),
-        None => (0.0, 0.0),
+    // (error, size, ratio) of the gradient, weighted and not; the larger ratio is judged.
+    let measure = |weighted: bool| match grad {
+        Some((e, g)) => {
+            let (err, size) = (weighted_max(e, weighted), weighted_max(g, weighted));
+            (err, size, err / (atol + rtol * size))
+        }
+        None => (0.0, 0.0, 0.0),
     };
-    let gradient_ratio = g_err / (atol + rtol * g_size);
+    let (weighted, plain) = (measure(true), measure(false));
+    let (g_err, g_size, gradient_ratio) = if plain.2 > weighted.2 {
+        plain
+    } else {
+        weighted
+    };
     let mut parts = Vec::new();
     if cost_ratio > ILL_CONDITIONED_FACTOR {
         parts.push(describe("C", e_cost.abs(), cost.abs(), cost_ratio));
