@@ -159,12 +159,14 @@ where
     let mut work = JumpWork::new(model);
     let mut shift_work = ShiftWork::new(model);
     let mut lam_plus = y.lam.clone();
+    let mut g_jump = y.g.clone();
     let mut h_seed = 0.0;
     for item in tape.items().iter().rev() {
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
                 lam_plus.copy_from(&y.lam);
+                g_jump.copy_from(&y.g);
                 transpose_jump(model, p, cw, j, states, &mut y.lam, &mut y.g, &mut work)?;
                 if let Some(ge) = integ.global_error_mut() {
                     // The jump's homogeneous part (w = 0) maps the remainder (a failure was
@@ -174,9 +176,12 @@ where
                     let _ =
                         transpose_jump(model, p, 0.0, j, states, &mut r.lam, &mut r.g, &mut work);
                     if let Some(shift) = tape.jump_shift(j) {
+                        // What the sweep's transpose added to g.
+                        g_jump.axpy(1.0, &y.g, -1.0);
+                        let recorded = (&y.lam, &g_jump);
                         let r = (&mut r.lam, &mut r.g);
                         let (w, s) = (&mut work, &mut shift_work);
-                        shift_error(model, p, cw, j, states, shift, &lam_plus, r, w, s);
+                        shift_error(model, p, cw, j, states, shift, &lam_plus, recorded, r, w, s);
                     }
                 }
                 continue;

@@ -217,8 +217,8 @@ where
     jump: Option<Jump>,
     xm: Vec<f64>,
     xp: Vec<f64>,
-    lam: [OVector<f64, M::N>; 2],
-    g: [OVector<f64, M::P>; 2],
+    lam: OVector<f64, M::N>,
+    g: OVector<f64, M::P>,
 }
 
 impl<M: HybridModel> ShiftWork<M>
@@ -228,14 +228,12 @@ where
     /// Buffers for `model`.
     pub(super) fn new(model: &M) -> Self {
         let (n, p) = (model.nstates(), model.nparams());
-        let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
-        let vp = || OVector::<f64, M::P>::zeros_generic(p, Const::<1>);
         ShiftWork {
             jump: None,
             xm: vec![0.0; n.value()],
             xp: vec![0.0; n.value()],
-            lam: [vn(), vn()],
-            g: [vp(), vp()],
+            lam: OVector::zeros_generic(n, Const::<1>),
+            g: OVector::zeros_generic(p, Const::<1>),
         }
     }
 }
@@ -244,10 +242,11 @@ where
 /// (t̃, x̃⁻, x̃⁺), the exact one (t, x⁻, x⁺) moved by its state error:
 /// (δt, d⁻, d⁺) = `shift` (see [`crate::integrate::GlobalError::jump_shift`]). The sweep
 /// transposes the jump there, so it maps (λ⁺, g) by T̃ where the exact jump's transpose is T:
-/// (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺), evaluated as a secant over the actual displacement (its
-/// rounding, ε|T|, is far below any tolerance). What it leaves out: the sweep also changes
-/// segments at t̃ instead of t, which moves (F⁻ − F⁺)·δt of the adjoint's right-hand side
-/// across the jump.
+/// (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺). T̃(λ⁺) is what the sweep computed, `recorded` = (λ⁻, its
+/// addition to g); T(λ⁺) is evaluated here, so the difference is a secant over the actual
+/// displacement (its rounding, ε|T|, is far below any tolerance). Nothing is added when the
+/// jump was not displaced. What it leaves out: the sweep also changes segments at t̃ instead
+/// of t, which moves (F⁻ − F⁺)·δt of the adjoint's right-hand side across the jump.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn shift_error<M: HybridModel>(
     model: &M,
@@ -257,12 +256,16 @@ pub(super) fn shift_error<M: HybridModel>(
     (x_minus, x_plus): (&[f64], &[f64]),
     (d_minus, d_plus, dt): (&[f64], &[f64], f64),
     lam_plus: &OVector<f64, M::N>,
+    recorded: (&OVector<f64, M::N>, &OVector<f64, M::P>),
     (r_lam, r_g): (&mut OVector<f64, M::N>, &mut OVector<f64, M::P>),
     w: &mut JumpWork<M>,
     s: &mut ShiftWork<M>,
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    if dt == 0.0 && d_minus.iter().chain(d_plus).all(|&d| d == 0.0) {
+        return;
+    }
     match &mut s.jump {
         Some(exact) => exact.clone_from(jump),
         None => s.jump = Some(jump.clone()),
@@ -277,20 +280,13 @@ pub(super) fn shift_error<M: HybridModel>(
     for (e, (x, d)) in s.xp.iter_mut().zip(x_plus.iter().zip(d_plus)) {
         *e = x - d;
     }
-    let [lam_rec, lam_exact] = &mut s.lam;
-    let [g_rec, g_exact] = &mut s.g;
-    lam_rec.copy_from(lam_plus);
-    lam_exact.copy_from(lam_plus);
-    g_rec.fill(0.0);
-    g_exact.fill(0.0);
-    let states = (x_minus, x_plus);
-    let rec = transpose_jump(model, p, cw, jump, states, lam_rec, g_rec, w);
+    s.lam.copy_from(lam_plus);
+    s.g.fill(0.0);
     let states = (s.xm.as_slice(), s.xp.as_slice());
-    let ex = transpose_jump(model, p, cw, exact, states, lam_exact, g_exact, w);
-    if rec.is_ok() && ex.is_ok() {
-        *r_lam += &*lam_rec;
-        *r_lam -= &*lam_exact;
-        *r_g += &*g_rec;
-        *r_g -= &*g_exact;
+    if transpose_jump(model, p, cw, exact, states, &mut s.lam, &mut s.g, w).is_ok() {
+        *r_lam += recorded.0;
+        *r_lam -= &s.lam;
+        *r_g += recorded.1;
+        *r_g -= &s.g;
     }
 }

@@ -145,11 +145,13 @@ where
     (2.0 * h.abs() * sums.amax()).ceil().max(1.0)
 }
 
-/// out += J v over the entries (i, j) of `pattern`.
+/// out += J v over the entries (i, j) of `pattern`, or with `transposed` over their mirror
+/// images (j, i) (J = −f_xᵀ stored, `pattern` f_x's).
 #[inline]
 fn sparse_product<N: Dim>(
     jac: &OMatrix<f64, N, N>,
     pattern: &[(usize, usize)],
+    transposed: bool,
     v: &[f64],
     out: &mut [f64],
 ) where
@@ -158,6 +160,7 @@ fn sparse_product<N: Dim>(
     let n = jac.nrows();
     let j_entries = jac.as_slice();
     for &(i, j) in pattern {
+        let (i, j) = if transposed { (j, i) } else { (i, j) };
         out[i] += j_entries[i + j * n] * v[j];
     }
 }
@@ -319,13 +322,19 @@ where
         } else {
             let n = self.r.x.len();
             self.xs.fill(0.0);
-            sparse_product(jac, pattern, self.r.x.as_slice(), self.xs.as_mut_slice());
+            sparse_product(
+                jac,
+                pattern,
+                false,
+                self.r.x.as_slice(),
+                self.xs.as_mut_slice(),
+            );
             if sens {
                 self.ss.fill(0.0);
                 let src = self.r.s.as_slice().chunks_exact(n);
                 let dst = self.ss.as_mut_slice().chunks_exact_mut(n);
                 for (v, out) in src.zip(dst) {
-                    sparse_product(jac, pattern, v, out);
+                    sparse_product(jac, pattern, false, v, out);
                 }
             }
         }
@@ -504,10 +513,11 @@ where
 {
     /// The remainder (r_λ, r_g).
     r: AdjState<N, P>,
-    /// Scratch: f_xᵀ r_λ, f_θᵀ r_λ and the row sums of |J|.
+    /// Scratch: f_xᵀ r_λ, f_θᵀ r_λ, the row sums of |J| and Σ_k w_k r_λ⁽ᵏ⁾.
     vx: OVector<f64, N>,
     vp: OVector<f64, P>,
     sums: OVector<f64, N>,
+    acc: OVector<f64, N>,
 }
 
 impl<N: Dim, P: Dim> AdjointError<N, P>
@@ -521,6 +531,7 @@ where
             vx: OVector::zeros_generic(n, Const::<1>),
             vp: OVector::zeros_generic(p, Const::<1>),
             sums: OVector::zeros_generic(n, Const::<1>),
+            acc: OVector::zeros_generic(n, Const::<1>),
         }
     }
 
@@ -530,11 +541,12 @@ where
     /// model's product vx = f_xᵀv, vp = f_θᵀv at the step start.
     ///
     /// r += le + h·`forcing` (the primal run's share, see `Backward`); then with m as for a
-    /// forward step ([`substeps`]): m explicit Euler substeps
-    /// r_λ ← r_λ − (h/m) f_xᵀ r_λ, with r_g −= ∫ f_θᵀ r_λ by the trapezoidal rule (m + 1
-    /// products in all), or for a stiff step one linearly implicit Euler step
-    /// r_λ ← (I + h f_xᵀ)⁻¹ r_λ (L-stable; a singular matrix leaves r_λ as it is),
-    /// r_g −= h f_θᵀ r_λ.
+    /// forward step ([`substeps`]): m explicit Euler substeps r_λ ← r_λ + (h/m) J r_λ over J's
+    /// non-zeros, with r_g −= ∫ f_θᵀ r_λ by the trapezoidal rule — f_θ is frozen at the step
+    /// start, so that is one product f_θᵀ(Σ_k w_k r_λ⁽ᵏ⁾) with the trapezoidal weights w_k, and
+    /// the O(p) work is once per step, not per substep — or for a stiff step one linearly
+    /// implicit Euler step r_λ ← (I + h f_xᵀ)⁻¹ r_λ (L-stable; a singular matrix leaves r_λ as
+    /// it is), r_g −= h f_θᵀ r_λ.
     pub(super) fn carry(
         &mut self,
         le: &AdjState<N, P>,
@@ -544,7 +556,13 @@ where
         h: f64,
         mut vjp: impl FnMut(&OVector<f64, N>, &mut OVector<f64, N>, &mut OVector<f64, P>),
     ) {
-        let AdjointError { r, vx, vp, sums } = self;
+        let AdjointError {
+            r,
+            vx,
+            vp,
+            sums,
+            acc,
+        } = self;
         r.lam += &le.lam;
         r.g += &le.g;
         if let Some(d) = forcing {
@@ -554,13 +572,21 @@ where
         let m = substeps(&w.jac, pattern, true, h, sums);
         if m <= EXPLICIT_SUBSTEPS {
             let dt = h / m;
-            vjp(&r.lam, vx, vp);
-            for _ in 0..m as usize {
-                r.g.axpy(-0.5 * dt, vp, 1.0);
-                r.lam.axpy(-dt, vx, 1.0);
-                vjp(&r.lam, vx, vp);
-                r.g.axpy(-0.5 * dt, vp, 1.0);
+            acc.copy_from(&r.lam);
+            *acc *= 0.5 * dt;
+            for k in 0..m as usize {
+                if pattern.is_empty() {
+                    vx.gemv(1.0, &w.jac, &r.lam, 0.0);
+                } else {
+                    vx.fill(0.0);
+                    sparse_product(&w.jac, pattern, true, r.lam.as_slice(), vx.as_mut_slice());
+                }
+                r.lam.axpy(dt, vx, 1.0);
+                let weight = if k + 1 == m as usize { 0.5 } else { 1.0 };
+                acc.axpy(weight * dt, &r.lam, 1.0);
             }
+            vjp(acc, vx, vp);
+            r.g -= &*vp;
             return;
         }
         if w.factorise(h) {
