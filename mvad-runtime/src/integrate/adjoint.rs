@@ -170,17 +170,19 @@ where
 }
 
 /// Buffers of the primal run's share of the sweep's error (see [`Backward`]'s
-/// `carry_global_error`): e_x, its unit direction, f, and two values of the products.
+/// `carry_global_error`): e_x (then its scaled direction), f, and the products.
 struct Coupling<N: Dim, P: Dim>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
     ex: OVector<f64, N>,
-    zero: OVector<f64, N>,
     f: OVector<f64, N>,
     d: AdjState<N, P>,
-    d0: AdjState<N, P>,
 }
+
+/// The length, relative to max(1, ‖x‖∞), of the state direction the primal coupling's
+/// directional products take with unit speed in t (see `carry_global_error`).
+const DIRECTION_SCALE: f64 = 1e8;
 
 /// Everything F needs besides x(t).
 struct AdjRhs<'a, M: HybridModel>
@@ -325,10 +327,8 @@ where
             global: opts.global_error.then(|| {
                 let coupling = Coupling {
                     ex: vn(),
-                    zero: vn(),
                     f: vn(),
                     d: AdjState::zeros(n, np),
-                    d0: AdjState::zeros(n, np),
                 };
                 (AdjointError::new(n, np), coupling)
             }),
@@ -516,9 +516,8 @@ where
     /// The primal run's state error e_x = r_x + α f at the step (from the tape) is a forcing:
     /// F is evaluated along x + e_x, so the step adds h δF with
     /// δF = −(∂ₓ(f_xᵀλ)·e_x + w ∂ₓℓ_xᵀ·e_x, ∂ₓ(f_θᵀλ)·e_x + w ∂ₓℓ_θᵀ·e_x) at the step start:
-    /// the model's directional products along (1, ê) (ê = e_x/‖e_x‖∞, so a difference
-    /// default differences on the state's scale), less those along (1, 0) where f or ℓ may
-    /// read t, times ‖e_x‖∞.
+    /// the model's directional products along (1, s ê), ê = e_x/‖e_x‖∞, with s large, so
+    /// that divided by s they are the derivatives along ê up to ∂ₜ/s, times ‖e_x‖∞.
     fn carry_global_error(
         &mut self,
         t0: f64,
@@ -547,17 +546,16 @@ where
                 c.ex.axpy(alpha, &c.f, 1.0);
                 let size = c.ex.amax();
                 if size > 0.0 && size.is_finite() {
-                    c.ex /= size;
+                    // Along (1, s ê) with s = DIRECTION_SCALE·max(1, ‖x‖∞): the product is
+                    // s ∂ₓ·ê + ∂ₜ, so divided by s it is ∂ₓ·ê up to ∂ₜ/s (one product, not
+                    // two; a difference default then steps 1e-4·max(1, ‖x‖) in x and ~1e-12
+                    // in t).
+                    let s = DIRECTION_SCALE * hist.x.amax().max(1.0);
+                    c.ex *= s / size;
                     c.d.lam.fill(0.0);
                     c.d.g.fill(0.0);
                     if !model.flow_is_constant(rhs.mode) {
                         model.rhs_vjp_dir(pt, &y0.lam, &c.ex, &mut c.d.lam, &mut c.d.g);
-                        if model.rhs_depends_on_t(rhs.mode) {
-                            let (d0, z) = (&mut c.d0, &c.zero);
-                            model.rhs_vjp_dir(pt, &y0.lam, z, &mut d0.lam, &mut d0.g);
-                            c.d.lam -= &c.d0.lam;
-                            c.d.g -= &c.d0.g;
-                        }
                     }
                     if rhs.has_rc && rhs.cw != 0.0 {
                         let (sw, t, x, p) = (&rhs.sw, pt.t, &hist.x, rhs.p);
@@ -565,12 +563,9 @@ where
                         model.running_cost_grad_dir(sw, t, x, p, &c.ex, lx, lp);
                         c.d.lam.axpy(rhs.cw, lx, 1.0);
                         c.d.g.axpy(rhs.cw, lp, 1.0);
-                        model.running_cost_grad_dir(sw, t, x, p, &c.zero, lx, lp);
-                        c.d.lam.axpy(-rhs.cw, lx, 1.0);
-                        c.d.g.axpy(-rhs.cw, lp, 1.0);
                     }
-                    c.d.lam *= -size;
-                    c.d.g *= -size;
+                    c.d.lam *= -size / s;
+                    c.d.g *= -size / s;
                     Some(&c.d)
                 } else {
                     None
