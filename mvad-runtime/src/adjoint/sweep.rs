@@ -178,10 +178,9 @@ where
                     if let Some(shift) = tape.jump_shift(j) {
                         // What the sweep's transpose added to g.
                         g_jump.axpy(1.0, &y.g, -1.0);
-                        let recorded = (&y.lam, &g_jump);
-                        let r = (&mut r.lam, &mut r.g);
                         let (w, s) = (&mut work, &mut shift_work);
-                        shift_error(model, p, cw, j, states, shift, &lam_plus, recorded, r, w, s);
+                        let (lm, ga) = (&y.lam, &g_jump);
+                        shift_error(model, p, cw, j, states, shift, &lam_plus, lm, ga, r, w, s);
                     }
                 }
                 continue;

@@ -43,6 +43,7 @@
 
 use super::record::{Jump, JumpKind};
 use crate::error::SolveError;
+use crate::integrate::AdjState;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -242,8 +243,8 @@ where
 /// (t̃, x̃⁻, x̃⁺), the exact one (t, x⁻, x⁺) moved by its state error:
 /// (δt, d⁻, d⁺) = `shift` (see [`crate::integrate::GlobalError::jump_shift`]). The sweep
 /// transposes the jump there, so it maps (λ⁺, g) by T̃ where the exact jump's transpose is T:
-/// (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺). T̃(λ⁺) is what the sweep computed, `recorded` = (λ⁻, its
-/// addition to g); T(λ⁺) is evaluated here, so the difference is a secant over the actual
+/// the remainder r = (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺). T̃(λ⁺) is what the sweep computed, λ⁻
+/// (`lam_minus`) and its addition to g (`g_added`); T(λ⁺) is evaluated here, so the difference is a secant over the actual
 /// displacement (its rounding, ε|T|, is far below any tolerance). Nothing is added when the
 /// jump was not displaced. What it leaves out: the sweep also changes segments at t̃ instead
 /// of t, which moves (F⁻ − F⁺)·δt of the adjoint's right-hand side across the jump.
@@ -256,8 +257,9 @@ pub(super) fn shift_error<M: HybridModel>(
     (x_minus, x_plus): (&[f64], &[f64]),
     (d_minus, d_plus, dt): (&[f64], &[f64], f64),
     lam_plus: &OVector<f64, M::N>,
-    recorded: (&OVector<f64, M::N>, &OVector<f64, M::P>),
-    (r_lam, r_g): (&mut OVector<f64, M::N>, &mut OVector<f64, M::P>),
+    lam_minus: &OVector<f64, M::N>,
+    g_added: &OVector<f64, M::P>,
+    r: &mut AdjState<M::N, M::P>,
     w: &mut JumpWork<M>,
     s: &mut ShiftWork<M>,
 ) where
@@ -284,9 +286,9 @@ pub(super) fn shift_error<M: HybridModel>(
     s.g.fill(0.0);
     let states = (s.xm.as_slice(), s.xp.as_slice());
     if transpose_jump(model, p, cw, exact, states, &mut s.lam, &mut s.g, w).is_ok() {
-        *r_lam += recorded.0;
-        *r_lam -= &s.lam;
-        *r_g += recorded.1;
-        *r_g -= &s.g;
+        r.lam += lam_minus;
+        r.lam -= &s.lam;
+        r.g += g_added;
+        r.g -= &s.g;
     }
 }

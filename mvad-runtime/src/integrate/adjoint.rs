@@ -164,9 +164,10 @@ where
     /// g is under error control (with λ).
     sens_err: bool,
     imp: AdjImplicit<M::N, M::P>,
-    /// The sweep's global error estimate (`Options::global_error`) and the buffers of its
-    /// primal coupling.
-    global: Option<(AdjointError<M::N, M::P>, Coupling<M::N, M::P>)>,
+    /// The sweep's global error estimate (`Options::global_error`).
+    global: Option<AdjointError<M::N, M::P>>,
+    /// The buffers of its primal coupling (with it).
+    coupling: Option<Coupling<M::N, M::P>>,
 }
 
 /// Buffers of the primal run's share of the sweep's error (see [`Backward`]'s
@@ -324,13 +325,11 @@ where
                 vp: OVector::zeros_generic(np, Const::<1>),
                 prepared: false,
             },
-            global: opts.global_error.then(|| {
-                let coupling = Coupling {
-                    ex: vn(),
-                    f: vn(),
-                    d: AdjState::zeros(n, np),
-                };
-                (AdjointError::new(n, np), coupling)
+            global: opts.global_error.then(|| AdjointError::new(n, np)),
+            coupling: opts.global_error.then(|| Coupling {
+                ex: vn(),
+                f: vn(),
+                d: AdjState::zeros(n, np),
             }),
         }
     }
@@ -531,9 +530,10 @@ where
             hist,
             imp,
             global,
+            coupling,
             ..
         } = self;
-        let Some((ge, c)) = global else {
+        let (Some(ge), Some(c)) = (global, coupling) else {
             return;
         };
         hist.at(t0);
@@ -636,6 +636,6 @@ where
     /// The sweep's global error estimate (`None` when `Options::global_error` is off). Carry
     /// the last step ([`Integrator::carry_global_error`]) before a jump or a new segment.
     pub fn global_error_mut(&mut self) -> Option<&mut AdjointError<M::N, M::P>> {
-        self.sys.global.as_mut().map(|(ge, _)| ge)
+        self.sys.global.as_mut()
     }
 }
