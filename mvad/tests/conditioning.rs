@@ -71,36 +71,54 @@ fn grad_error(a: &[f64], r: &[f64]) -> f64 {
 /// a factor 20 below and (at rtol ≤ 1e-8) 100 above the true error.
 #[test]
 fn an_unstable_flow_is_reported_at_every_method_and_tolerance() {
+    // Measured: est/err from 0.07 (Rosenbrock, rtol 1e-6, a = 3) to 30 at rtol ≤ 1e-8; with
+    // long steps on the unstable flow (Verner 9 at rtol 1e-6) the first-order transport
+    // overestimates by up to 10⁸, in the safe direction.
+    unstable_flow_is_reported(GradientMode::Forward, 100.0, 0);
+}
+
+/// The runs of the unstable tracking flow (a = 2, 3) in `mode` at every method and rtol 1e-6,
+/// 1e-8, 1e-10: wherever the gradient's error exceeds 10³ × rtol, `ill_conditioned` is raised
+/// (in at least 20 of the 24 runs it does); the estimate is above 0.05 × the error, and at
+/// rtol ≤ 1e-8 below `above` × the error. At most `failures` runs may end in an error (which
+/// is reported, not silent).
+fn unstable_flow_is_reported(mode: GradientMode, above: f64, failures: usize) {
     let m = load("suite/unstable_tracking.hyb");
     let exact = [0.0, 1.0 - 10f64.cos()];
-    let mut wrong = 0;
+    let (mut wrong, mut errors) = (0, 0);
     for a in [2.0, 3.0] {
         for method in Method::ALL {
             for rtol in [1e-6, 1e-8, 1e-10] {
-                let sol = run(&m, &[a, 1.0], method, rtol);
+                let sol = match try_run(&m, &[a, 1.0], method, rtol, mode) {
+                    Ok(sol) => sol,
+                    Err(e) => {
+                        eprintln!("a = {a}, {mode:?}, {method:?}, rtol {rtol:e}: {e}");
+                        errors += 1;
+                        continue;
+                    }
+                };
                 let err = grad_error(&sol.gradient, &exact);
                 let est = sol.error_estimate.as_ref().expect("an estimate");
                 let est_rel = est.gradient.iter().map(|e| e.abs()).fold(0.0, f64::max) / exact[1];
                 let what = format!(
-                    "a = {a}, {method:?}, rtol {rtol:e}: error {err:.1e}, estimate {est_rel:.1e}"
+                    "a = {a}, {mode:?}, {method:?}, rtol {rtol:e}: error {err:.1e}, estimate {est_rel:.1e}"
                 );
+                eprintln!("{what}");
                 if err > 1e3 * rtol {
                     assert!(ill_conditioned(&sol), "silently wrong: {what}");
                     wrong += 1;
                 }
-                // Measured: est/err from 0.07 (Rosenbrock, rtol 1e-6, a = 3) to 30 at rtol ≤ 1e-8;
-                // with long steps on the unstable flow (Verner 9 at rtol 1e-6) the first-order
-                // transport overestimates by up to 10⁸, in the safe direction.
                 assert!(est_rel > 0.05 * err, "estimate below the error: {what}");
                 if rtol <= 1e-8 {
                     assert!(
-                        est_rel < 100.0 * err,
+                        est_rel < above * err,
                         "estimate far above the error: {what}"
                     );
                 }
             }
         }
     }
+    assert!(errors <= failures, "{errors} runs failed");
     assert!(
         wrong >= 20,
         "only {wrong} of 24 runs are off by more than 1e3 x rtol"
@@ -112,6 +130,12 @@ fn an_unstable_flow_is_reported_at_every_method_and_tolerance() {
 /// bounds the error, the runs meet 10³ × rtol and stay silent, at every method.
 #[test]
 fn a_bounded_error_raises_nothing() {
+    bounded_cases_raise_nothing(GradientMode::Forward, |_, _| false);
+}
+
+/// The runs of the bounded cases in `mode` meet 10³ × rtol and raise nothing, but where
+/// `allowed(method, rtol)` says an alarm is known.
+fn bounded_cases_raise_nothing(mode: GradientMode, allowed: impl Fn(Method, f64) -> bool) {
     let tracking = load("suite/unstable_tracking.hyb");
     let growth = load("suite/exponential_growth.hyb");
     let e = (2.0f64 * 10.0).exp();
@@ -123,16 +147,15 @@ fn a_bounded_error_raises_nothing() {
     for (m, p, exact) in cases {
         for method in Method::ALL {
             for rtol in [1e-6, 1e-8, 1e-10] {
-                let sol = run(m, &p, method, rtol);
+                let sol = run_in(m, &p, method, rtol, mode);
                 let err = grad_error(&sol.gradient, &exact);
                 let what = format!(
-                    "{}, {method:?}, rtol {rtol:e}: error {err:.1e}",
+                    "{}, {mode:?}, {method:?}, rtol {rtol:e}: error {err:.1e}",
                     m.info().name
                 );
                 assert!(err < 1e3 * rtol, "{what}");
-                let known = method == Method::Rosenbrock && rtol == 1e-10;
                 assert!(
-                    known || !ill_conditioned(&sol),
+                    allowed(method, rtol) || !ill_conditioned(&sol),
                     "false alarm: {what}: {:?}",
                     sol.diagnostics
                 );
@@ -182,53 +205,12 @@ fn the_estimate_can_be_switched_off() {
     assert_eq!(on.gradient, off.gradient);
 }
 
-/// Adjoint mode (issue 8): the sweep's estimate on the unstable flow. Wherever the gradient's
-/// error exceeds 10³ × rtol the run says so, at every method; the estimate is never far below
-/// the error and, at rtol ≤ 1e-8, not far above it.
+/// Adjoint mode (issue 8): the sweep's estimate on the unstable flow. Measured: est/err from
+/// 2 to 330 (up to 65 at rtol ≤ 1e-8 but a = 3 at 1e-10: 230); Verner 9 at rtol 1e-10 for
+/// a = 3 runs out of steps in the primal run (at rtol 1e-12).
 #[test]
 fn an_unstable_flow_is_reported_in_adjoint_mode() {
-    let m = load("suite/unstable_tracking.hyb");
-    let exact = [0.0, 1.0 - 10f64.cos()];
-    let (mut wrong, mut errors) = (0, 0);
-    for a in [2.0, 3.0] {
-        for method in Method::ALL {
-            for rtol in [1e-6, 1e-8, 1e-10] {
-                // An error is reported, not silent: Verner 9 at rtol 1e-10 runs out of steps
-                // on the primal run (at rtol 1e-12) for a = 3.
-                let sol = match try_run(&m, &[a, 1.0], method, rtol, GradientMode::Adjoint) {
-                    Ok(sol) => sol,
-                    Err(e) => {
-                        eprintln!("a = {a}, {method:?}, rtol {rtol:e}: {e}");
-                        errors += 1;
-                        continue;
-                    }
-                };
-                let err = grad_error(&sol.gradient, &exact);
-                let est = sol.error_estimate.as_ref().expect("an estimate");
-                let est_rel = est.gradient.iter().map(|e| e.abs()).fold(0.0, f64::max) / exact[1];
-                let what = format!(
-                    "a = {a}, {method:?}, rtol {rtol:e}: error {err:.1e}, estimate {est_rel:.1e}"
-                );
-                eprintln!("{what}");
-                if err > 1e3 * rtol {
-                    assert!(ill_conditioned(&sol), "silently wrong: {what}");
-                    wrong += 1;
-                }
-                assert!(est_rel > 0.05 * err, "estimate below the error: {what}");
-                if rtol <= 1e-8 {
-                    assert!(
-                        est_rel < 1000.0 * err,
-                        "estimate far above the error: {what}"
-                    );
-                }
-            }
-        }
-    }
-    assert!(errors <= 1, "{errors} runs failed");
-    assert!(
-        wrong >= 20,
-        "only {wrong} of 24 runs are off by more than 1e3 x rtol"
-    );
+    unstable_flow_is_reported(GradientMode::Adjoint, 1000.0, 1);
 }
 
 /// Adjoint mode on the bounded cases of `a_bounded_error_raises_nothing`: the adjoint meets
@@ -238,33 +220,9 @@ fn an_unstable_flow_is_reported_in_adjoint_mode() {
 /// alarm there is known and allowed, not required.
 #[test]
 fn a_bounded_error_raises_nothing_in_adjoint_mode() {
-    let tracking = load("suite/unstable_tracking.hyb");
-    let growth = load("suite/exponential_growth.hyb");
-    let e = (2.0f64 * 10.0).exp();
-    let growth_exact = [10.0 * e / 2.0 - (e - 1.0) / 4.0, (e - 1.0) / 2.0];
-    let cases: [(&mvad::interp::InterpretedModel, [f64; 2], [f64; 2]); 2] = [
-        (&tracking, [0.5, 1.0], [0.0, 1.0 - 10f64.cos()]),
-        (&growth, [2.0, 1.0], growth_exact),
-    ];
-    for (m, p, exact) in cases {
-        for method in Method::ALL {
-            for rtol in [1e-6, 1e-8, 1e-10] {
-                let sol = run_in(m, &p, method, rtol, GradientMode::Adjoint);
-                let err = grad_error(&sol.gradient, &exact);
-                let what = format!(
-                    "{}, {method:?}, rtol {rtol:e}: error {err:.1e}",
-                    m.info().name
-                );
-                assert!(err < 1e3 * rtol, "{what}");
-                let known = method == Method::Rosenbrock && rtol == 1e-10;
-                assert!(
-                    known || !ill_conditioned(&sol),
-                    "false alarm: {what}: {:?}",
-                    sol.diagnostics
-                );
-            }
-        }
-    }
+    bounded_cases_raise_nothing(GradientMode::Adjoint, |method, rtol| {
+        method == Method::Rosenbrock && rtol == 1e-10
+    });
 }
 
 /// Van der Pol at μ = 10⁶ (`the_fold_of_van_der_pol_is_reported`) in adjoint mode: the

@@ -23,6 +23,12 @@
 //! so in its `zeno` diagnostic and in `Stats::mode`. Errors (a tangential crossing, too many
 //! events) are those of forward mode.
 //!
+//! ## Global error estimate
+//! With `Options::global_error` the primal run carries forward mode's estimate of x and C
+//! (and keeps its state errors on the tape), the sweep carries the estimate of the VJP
+//! (`integrate/global_error.rs`, "Adjoint mode"), and `pull_back` judges both at the
+//! tolerances asked for by forward mode's rule (`ill_conditioned`, `Solution::error_estimate`).
+//!
 //! [`crate::vjp::vjp`] is the entry point for reverse-mode callers (a JAX `custom_vjp`, a
 //! torch `autograd.Function`): cotangents of C and of observables at sample times in, dθ out;
 //! in adjoint mode it calls [`pull_back`].
