@@ -15,10 +15,6 @@ fn load(file: &str) -> mvad::interp::InterpretedModel {
     mvad::load::load(&path).expect("the model loads")
 }
 
-fn run(m: &mvad::interp::InterpretedModel, p: &[f64], method: Method, rtol: f64) -> Solution {
-    run_in(m, p, method, rtol, GradientMode::Forward)
-}
-
 fn run_in(
     m: &mvad::interp::InterpretedModel,
     p: &[f64],
