@@ -43,7 +43,7 @@
 
 use super::record::{Jump, JumpKind};
 use crate::error::SolveError;
-use crate::integrate::AdjointError;
+use crate::integrate::{AdjointError, LamGrad};
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -274,7 +274,7 @@ pub(super) fn transpose_jump_with_error<M: HybridModel>(
     jump: &Jump,
     states: (&[f64], &[f64]),
     shift: Option<(&[f64], &[f64], f64)>,
-    (lam, g): (&mut OVector<f64, M::N>, &mut OVector<f64, M::P>),
+    (lam, g): LamGrad<'_, M::N, M::P>,
     ge: &mut AdjointError<M::N, M::P>,
     w: &mut JumpWork<M>,
     s: &mut JumpErrorWork<M>,
@@ -315,7 +315,7 @@ fn shift_error<M: HybridModel>(
     (x_minus, x_plus): (&[f64], &[f64]),
     (d_minus, d_plus, dt): (&[f64], &[f64], f64),
     lam_minus: &OVector<f64, M::N>,
-    (r_lam, r_g): (&mut OVector<f64, M::N>, &mut OVector<f64, M::P>),
+    (r_lam, r_g): LamGrad<'_, M::N, M::P>,
     w: &mut JumpWork<M>,
     s: &mut JumpErrorWork<M>,
 ) where

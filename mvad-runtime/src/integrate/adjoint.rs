@@ -135,6 +135,10 @@ where
     coupling: Option<Coupling<M::N>>,
 }
 
+/// g and the sweep's global error estimate, borrowed together
+/// ([`Integrator::gradient_and_error_mut`]).
+pub type GradientAndError<'a, N, P> = (&'a mut OVector<f64, P>, Option<&'a mut AdjointError<N, P>>);
+
 /// Buffers of the primal run's share of the sweep's error (see [`Backward`]'s
 /// `carry_global_error`): e_x, x + e_x, f, and δF.
 struct Coupling<N: Dim>
@@ -630,12 +634,7 @@ where
 
     /// g and the sweep's global error estimate (`None` when `Options::global_error` is off),
     /// with the last accepted step closed (its quadrature and its error added).
-    pub fn gradient_and_error_mut(
-        &mut self,
-    ) -> (
-        &mut OVector<f64, M::P>,
-        Option<&mut AdjointError<M::N, M::P>>,
-    ) {
+    pub fn gradient_and_error_mut(&mut self) -> GradientAndError<'_, M::N, M::P> {
         self.close_step();
         (&mut self.sys.g, self.sys.global.as_mut())
     }

@@ -63,6 +63,10 @@ use super::rosenbrock::WMatrix;
 use crate::model::ModelAlloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
+/// The λ-part and the g-part of the sweep's state, or of the estimate's remainder, borrowed
+/// together.
+pub type LamGrad<'a, N, P> = (&'a mut OVector<f64, N>, &'a mut OVector<f64, P>);
+
 /// The global error estimate of an adjoint sweep (see the module doc): the remainder
 /// (r_λ, r_g), carried backwards by the sweep's homogeneous linear flow. Every buffer is
 /// allocated when it is built; carrying it allocates nothing and touches nothing of size p
@@ -160,7 +164,7 @@ where
 
     /// The remainder (r_λ, r_g), for the jumps' transposes (which map it as they map λ and g
     /// with a zero cost cotangent) and the primal run's shares.
-    pub fn remainder_mut(&mut self) -> (&mut OVector<f64, N>, &mut OVector<f64, P>) {
+    pub fn remainder_mut(&mut self) -> LamGrad<'_, N, P> {
         (&mut self.lam, &mut self.g)
     }
 }

@@ -68,7 +68,7 @@ mod tsit5;
 mod verner;
 
 pub use adjoint::Backward;
-pub use adjoint_error::AdjointError;
+pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
