@@ -6,44 +6,17 @@
 //! the cubic Hermite interpolant of (Y₀, F₀, Y₁, F₁)). Works for either direction of time.
 
 use super::explicit::Tableau;
-use super::system::{ImplicitSystem, PrimarySlice, StageVector};
+use super::system::{ImplicitSystem, StageVector};
 use super::{rosenbrock, tsit5::TSIT5, verner, verner::VERNER9, Integrator, Scheme};
-
-/// Coefficients of the longest dense polynomial of any scheme (Verner's, degree 9).
-pub(super) const MAX_COEFS: usize = 1 + max(
-    max(TSIT5.degree(), VERNER9.degree()),
-    max(rosenbrock::DENSE_DEGREE, 3),
-);
-
-const fn max(a: usize, b: usize) -> usize {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
 
 impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// Dense output of the primary part (x) between t_prev and t (cheap; for root finding).
-    /// Once [`Integrator::ensure_dense`] has formed the step's polynomial c₀ + θc₁ + … + θᴰc_D
-    /// ([`Integrator::dense_poly`]), one Horner evaluation; before, the same polynomial from
-    /// the stages (equal to rounding).
     pub fn dense_x(&self, t: f64, out: &mut <Sys::Vector as StageVector>::Primary) {
         if self.dense_h == 0.0 {
             self.y.primary_into(out);
             return;
         }
         let theta = (t - self.t_prev) / self.dense_h;
-        if let Some(deg) = self.poly_degree {
-            let o = out.slice_mut();
-            o.copy_from_slice(self.poly[deg].slice());
-            for c in self.poly[..deg].iter().rev() {
-                for (oi, ci) in o.iter_mut().zip(c.slice()) {
-                    *oi = *oi * theta + ci;
-                }
-            }
-            return;
-        }
         let (k, y0, y1, h) = (&self.k[..], &self.y_prev, self.end_state(), self.dense_h);
         if self.dense_pending {
             let f1 = &k[VERNER9.fsal_slot()];
@@ -186,9 +159,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// Makes the full-order dense output of the last accepted step available (evaluates
-    /// Verner's pending interpolation stages) and forms the polynomial of its primary part
-    /// that [`Integrator::dense_x`] then evaluates (once per step: the driver asks before it
-    /// samples the guards on the step).
+    /// Verner's pending interpolation stages; nothing for the other methods).
     pub fn ensure_dense(&mut self) {
         if self.dense_pending {
             let h = self.dense_h;
@@ -199,11 +170,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             );
             self.dense_pending = false;
             self.stats.rhs_evals = self.sys.evals();
-        }
-        if self.poly_degree.is_none() && self.dense_h != 0.0 {
-            let mut poly = std::mem::take(&mut self.poly);
-            self.poly_degree = Some(self.dense_poly(&mut poly));
-            self.poly = poly;
         }
     }
 

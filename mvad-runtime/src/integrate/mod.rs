@@ -75,7 +75,6 @@ pub use system::{ImplicitSystem, OdeSystem, StageVector};
 
 use crate::solution::{Method, Options, Stats};
 use control::Controller;
-use system::PrimarySlice;
 use std::fmt;
 use tsit5::TSIT5;
 use verner::VERNER9;
@@ -268,12 +267,6 @@ pub struct Integrator<Sys: OdeSystem> {
     lazy_dense: bool,
     /// The last accepted Verner step's interpolation stages 18..26 are not evaluated yet.
     dense_pending: bool,
-    /// The primary part of the last accepted step's dense output as a polynomial in θ,
-    /// c₀ … c_D ([`Integrator::dense_poly`]), once [`Integrator::ensure_dense`] has formed it
-    /// (`Some(D)`), so that every [`Integrator::dense_x`] of the step is one Horner
-    /// evaluation instead of a combination of all its stages.
-    poly: Vec<<Sys::Vector as StageVector>::Primary>,
-    poly_degree: Option<usize>,
     /// Hairer's stiffness estimate |h|·‖k₇ − k₆‖/‖y₇ − y₆‖ of the last Tsit5 attempt.
     stiff_ratio: f64,
     stiff_count: usize,
@@ -292,7 +285,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let slots = Scheme::slots(opts.method);
         let scheme = Scheme::initial(opts.method);
         let zero = || sys.zeros();
-        let primary_len = zero().primary().len();
         let mut it = Integrator {
             rtol: opts.rtol,
             atol: opts.atol,
@@ -320,10 +312,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             ctrl: Controller::new(),
             lazy_dense: false,
             dense_pending: false,
-            poly: (0..dense::MAX_COEFS)
-                .map(|_| PrimarySlice::zeros(primary_len))
-                .collect(),
-            poly_degree: None,
             stiff_ratio: 0.0,
             stiff_count: 0,
             nonstiff_count: 0,
@@ -362,7 +350,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.ctrl.last_rejected = false;
         self.dense_scheme = self.scheme;
         self.dense_pending = false;
-        self.poly_degree = None;
         self.sys.invalidate();
     }
 
@@ -675,7 +662,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.fsal_slot = self.scheme.info().3;
         self.sys.invalidate();
         self.dense_pending = false;
-        self.poly_degree = None;
         if self.scheme == Scheme::Verner9 {
             self.accepted_interp_stages(&VERNER9, h);
         }

@@ -121,13 +121,6 @@ pub trait StageVector {
 
 /// A primary part the stage loops write into: a contiguous slice of f64.
 pub trait PrimarySlice {
-    /// A primary part of `len` zeros (allocates for `Dyn` sizes; called only when an
-    /// integrator is built).
-    fn zeros(len: usize) -> Self
-    where
-        Self: Sized;
-    /// The entries.
-    fn slice(&self) -> &[f64];
     /// The entries, mutably.
     fn slice_mut(&mut self) -> &mut [f64];
 }
@@ -136,13 +129,6 @@ impl<N: Dim> PrimarySlice for OVector<f64, N>
 where
     DefaultAllocator: Allocator<N>,
 {
-    fn zeros(len: usize) -> Self {
-        OVector::zeros_generic(N::from_usize(len), nalgebra::Const::<1>)
-    }
-    #[inline]
-    fn slice(&self) -> &[f64] {
-        self.as_slice()
-    }
     #[inline]
     fn slice_mut(&mut self) -> &mut [f64] {
         self.as_mut_slice()
