@@ -323,7 +323,7 @@ impl WeightedRms {
     pub(super) fn add(&mut self, e: &[f64], y0: &[f64], y1: &[f64], w: f64) {
         let rw = self.rtol * w;
         for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
-            self.add_one(*ei, a.abs().max(b.abs()), w, rw);
+            self.add_one(*ei, magnitude(*a, *b), w, rw);
         }
     }
 
@@ -353,6 +353,19 @@ impl WeightedRms {
     }
 }
 
+/// max(|a|, |b|) for the scale of an error entry, as one compare (no NaN-aware `f64::max`:
+/// the end state `b` of a step is NaN only in an attempt that the stepper rejects for it
+/// anyway, whatever its norm; the start state `a` of a step is always finite).
+#[inline(always)]
+fn magnitude(a: f64, b: f64) -> f64 {
+    let (a, b) = (a.abs(), b.abs());
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
 /// [`WeightedRms`] over x, q (with a running cost) and, under sensitivity error control
 /// (`sens_err`), S and q_θ. The weight is 1 on x and q and [`sens_weight`]`(θ_j)` on column j
 /// of S and on q_θ[j], so both are measured as the change θ_j·S_j they predict for a relative
@@ -374,7 +387,7 @@ where
     let mut rms = WeightedRms::new(atol, rtol);
     rms.add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
     if has_rc {
-        rms.add_one(e.q, y0.q.abs().max(y1.q.abs()), 1.0, rtol);
+        rms.add_one(e.q, magnitude(y0.q, y1.q), 1.0, rtol);
     }
     if sens_err {
         // Column j of S, then q_θ[j], in one pass over the columns.
@@ -385,8 +398,7 @@ where
             let col = j * n..(j + 1) * n;
             rms.add(&es[col.clone()], &as_[col.clone()], &bs[col], w);
             if has_rc {
-                let m = y0.qp[j].abs().max(y1.qp[j].abs());
-                rms.add_one(e.qp[j], m, w, rtol * w);
+                rms.add_one(e.qp[j], magnitude(y0.qp[j], y1.qp[j]), w, rtol * w);
             }
         }
     }
