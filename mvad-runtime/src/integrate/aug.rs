@@ -24,60 +24,83 @@ impl<N: Dim, P: Dim> AugState<N, P>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    /// self = start + h Σ_j c_j k_j over x and q, and S and q_θ too when `all` (zero
-    /// coefficients skipped), with start = `base` ([`StageVector::combine`]) or 0
+    /// self = start + h Σ_j c_j k_j over x, S when `sens`, q when `quad` and q_θ when both
+    /// (zero coefficients skipped), with start = `base` ([`StageVector::combine`]) or 0
     /// ([`StageVector::lincomb`]). The first term writes start + a k (no separate copy or
     /// fill pass); every operation is the one of copy-then-axpy, in the same order.
     #[inline(always)]
-    fn accumulate(&mut self, base: Option<&Self>, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
+    fn accumulate(
+        &mut self,
+        base: Option<&Self>,
+        h: f64,
+        (coefs, ks): (&[f64], &[Self]),
+        sens: bool,
+        quad: bool,
+    ) {
         let mut terms = coefs.iter().zip(ks).filter(|(c, _)| **c != 0.0);
         let Some((c, k)) = terms.next() else {
             // No term: start itself.
             match base {
-                Some(b) => self.copy_parts_from(b, all),
-                None => self.fill_parts(0.0, all),
+                Some(b) => self.copy_parts_from(b, sens, quad),
+                None => self.fill_parts(0.0, sens, quad),
             }
             return;
         };
         let a = h * c;
-        self.q = base.map_or(0.0, |b| b.q) + a * k.q;
         axpy_into(self.x.as_mut_slice(), base.map(|b| b.x.as_slice()), a, k.x.as_slice());
-        if all {
+        if quad {
+            self.q = base.map_or(0.0, |b| b.q) + a * k.q;
+        }
+        if sens {
             let s0 = base.map(|b| b.s.as_slice());
             axpy_into(self.s.as_mut_slice(), s0, a, k.s.as_slice());
-            let qp0 = base.map(|b| b.qp.as_slice());
-            axpy_into(self.qp.as_mut_slice(), qp0, a, k.qp.as_slice());
+            if quad {
+                let qp0 = base.map(|b| b.qp.as_slice());
+                axpy_into(self.qp.as_mut_slice(), qp0, a, k.qp.as_slice());
+            }
         }
         for (c, k) in terms {
             let a = h * c;
             axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
-            self.q += a * k.q;
-            if all {
+            if quad {
+                self.q += a * k.q;
+            }
+            if sens {
                 axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
-                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+                if quad {
+                    axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+                }
             }
         }
     }
 
-    /// Copies x, q and, when `all`, S and q_θ of `other`.
+    /// Copies x, S when `sens`, q when `quad` and q_θ when both from `other`.
     #[inline]
-    fn copy_parts_from(&mut self, other: &Self, all: bool) {
+    fn copy_parts_from(&mut self, other: &Self, sens: bool, quad: bool) {
         self.x.as_mut_slice().copy_from_slice(other.x.as_slice());
-        self.q = other.q;
-        if all {
+        if quad {
+            self.q = other.q;
+        }
+        if sens {
             self.s.as_mut_slice().copy_from_slice(other.s.as_slice());
-            self.qp.as_mut_slice().copy_from_slice(other.qp.as_slice());
+            if quad {
+                self.qp.as_mut_slice().copy_from_slice(other.qp.as_slice());
+            }
         }
     }
 
-    /// Sets x, q and, when `all`, S and q_θ to `v`.
+    /// Sets x, S when `sens`, q when `quad` and q_θ when both to `v`.
     #[inline]
-    fn fill_parts(&mut self, v: f64, all: bool) {
+    fn fill_parts(&mut self, v: f64, sens: bool, quad: bool) {
         self.x.fill(v);
-        self.q = v;
-        if all {
+        if quad {
+            self.q = v;
+        }
+        if sens {
             self.s.fill(v);
-            self.qp.fill(v);
+            if quad {
+                self.qp.fill(v);
+            }
         }
     }
 
@@ -242,12 +265,19 @@ where
 
     #[inline]
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.accumulate(Some(base), h, coefs, ks, all);
+        self.accumulate(Some(base), h, (coefs, ks), all, true);
     }
 
     #[inline]
     fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.accumulate(None, h, coefs, ks, all);
+        self.accumulate(None, h, (coefs, ks), all, true);
+    }
+
+    /// x and, when `reads`, S: F never reads the quadratures q and q_θ of its argument, so
+    /// a stage argument leaves them as they were.
+    #[inline]
+    fn combine_argument(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], reads: bool) {
+        self.accumulate(Some(base), h, (coefs, ks), reads, false);
     }
 
     #[inline]
