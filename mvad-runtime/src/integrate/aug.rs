@@ -47,7 +47,12 @@ where
             return;
         };
         let a = h * c;
-        axpy_into(self.x.as_mut_slice(), base.map(|b| b.x.as_slice()), a, k.x.as_slice());
+        axpy_into(
+            self.x.as_mut_slice(),
+            base.map(|b| b.x.as_slice()),
+            a,
+            k.x.as_slice(),
+        );
         if quad {
             self.q = base.map_or(0.0, |b| b.q) + a * k.q;
         }
