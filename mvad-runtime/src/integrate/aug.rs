@@ -24,20 +24,87 @@ impl<N: Dim, P: Dim> AugState<N, P>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    /// self += h Σ_j c_j k_j over x and q, and S and q_θ too when `all` (zero coefficients
-    /// skipped): the sum both [`StageVector::combine`] and [`StageVector::lincomb`] end with.
+    /// self = start + h Σ_j c_j k_j over x, S when `sens`, q when `quad` and q_θ when both
+    /// (zero coefficients skipped), with start = `base` ([`StageVector::combine`]) or 0
+    /// ([`StageVector::lincomb`]). The first term writes start + a k (no separate copy or
+    /// fill pass); every operation is the one of copy-then-axpy, in the same order.
     #[inline(always)]
-    fn accumulate(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        for (c, k) in coefs.iter().zip(ks) {
-            if *c == 0.0 {
-                continue;
+    fn accumulate(
+        &mut self,
+        base: Option<&Self>,
+        h: f64,
+        (coefs, ks): (&[f64], &[Self]),
+        sens: bool,
+        quad: bool,
+    ) {
+        let mut terms = coefs.iter().zip(ks).filter(|(c, _)| **c != 0.0);
+        let Some((c, k)) = terms.next() else {
+            // No term: start itself.
+            match base {
+                Some(b) => self.copy_parts_from(b, sens, quad),
+                None => self.fill_parts(0.0, sens, quad),
             }
+            return;
+        };
+        let a = h * c;
+        axpy_into(
+            self.x.as_mut_slice(),
+            base.map(|b| b.x.as_slice()),
+            a,
+            k.x.as_slice(),
+        );
+        if quad {
+            self.q = base.map_or(0.0, |b| b.q) + a * k.q;
+        }
+        if sens {
+            let s0 = base.map(|b| b.s.as_slice());
+            axpy_into(self.s.as_mut_slice(), s0, a, k.s.as_slice());
+            if quad {
+                let qp0 = base.map(|b| b.qp.as_slice());
+                axpy_into(self.qp.as_mut_slice(), qp0, a, k.qp.as_slice());
+            }
+        }
+        for (c, k) in terms {
             let a = h * c;
             axpy_slice(self.x.as_mut_slice(), a, k.x.as_slice());
-            self.q += a * k.q;
-            if all {
+            if quad {
+                self.q += a * k.q;
+            }
+            if sens {
                 axpy_slice(self.s.as_mut_slice(), a, k.s.as_slice());
-                axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+                if quad {
+                    axpy_slice(self.qp.as_mut_slice(), a, k.qp.as_slice());
+                }
+            }
+        }
+    }
+
+    /// Copies x, S when `sens`, q when `quad` and q_θ when both from `other`.
+    #[inline]
+    fn copy_parts_from(&mut self, other: &Self, sens: bool, quad: bool) {
+        self.x.as_mut_slice().copy_from_slice(other.x.as_slice());
+        if quad {
+            self.q = other.q;
+        }
+        if sens {
+            self.s.as_mut_slice().copy_from_slice(other.s.as_slice());
+            if quad {
+                self.qp.as_mut_slice().copy_from_slice(other.qp.as_slice());
+            }
+        }
+    }
+
+    /// Sets x, S when `sens`, q when `quad` and q_θ when both to `v`.
+    #[inline]
+    fn fill_parts(&mut self, v: f64, sens: bool, quad: bool) {
+        self.x.fill(v);
+        if quad {
+            self.q = v;
+        }
+        if sens {
+            self.s.fill(v);
+            if quad {
+                self.qp.fill(v);
             }
         }
     }
@@ -92,11 +159,51 @@ where
     }
 }
 
-/// `y += a x` on raw slices.
+/// `y += a x` on raw slices, four entries per iteration (so pairs of them vectorise) with
+/// no bounds checks.
 #[inline]
 pub(super) fn axpy_slice(y: &mut [f64], a: f64, x: &[f64]) {
-    for (yi, xi) in y.iter_mut().zip(x) {
+    let len = y.len().min(x.len());
+    let (y, x) = (&mut y[..len], &x[..len]);
+    let mut yc = y.chunks_exact_mut(4);
+    let mut xc = x.chunks_exact(4);
+    for (yy, xx) in (&mut yc).zip(&mut xc) {
+        yy[0] += a * xx[0];
+        yy[1] += a * xx[1];
+        yy[2] += a * xx[2];
+        yy[3] += a * xx[3];
+    }
+    for (yi, xi) in yc.into_remainder().iter_mut().zip(xc.remainder()) {
         *yi += a * xi;
+    }
+}
+
+/// `y = b + a x` with b = `base` or 0 (bit-identical to copying b, or filling 0, and then
+/// [`axpy_slice`]), four entries per iteration.
+#[inline]
+fn axpy_into(y: &mut [f64], base: Option<&[f64]>, a: f64, x: &[f64]) {
+    let Some(b) = base else {
+        let len = y.len().min(x.len());
+        let (y, x) = (&mut y[..len], &x[..len]);
+        for (yi, xi) in y.iter_mut().zip(x) {
+            *yi = 0.0 + a * xi;
+        }
+        return;
+    };
+    let len = y.len().min(x.len()).min(b.len());
+    let (y, x, b) = (&mut y[..len], &x[..len], &b[..len]);
+    let mut yc = y.chunks_exact_mut(4);
+    let mut xc = x.chunks_exact(4);
+    let mut bc = b.chunks_exact(4);
+    for ((yy, xx), bb) in (&mut yc).zip(&mut xc).zip(&mut bc) {
+        yy[0] = bb[0] + a * xx[0];
+        yy[1] = bb[1] + a * xx[1];
+        yy[2] = bb[2] + a * xx[2];
+        yy[3] = bb[3] + a * xx[3];
+    }
+    let rest = yc.into_remainder().iter_mut().zip(xc.remainder());
+    for ((yi, xi), bi) in rest.zip(bc.remainder()) {
+        *yi = bi + a * xi;
     }
 }
 
@@ -163,24 +270,19 @@ where
 
     #[inline]
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.x.as_mut_slice().copy_from_slice(base.x.as_slice());
-        self.q = base.q;
-        if all {
-            self.s.as_mut_slice().copy_from_slice(base.s.as_slice());
-            self.qp.as_mut_slice().copy_from_slice(base.qp.as_slice());
-        }
-        self.accumulate(h, coefs, ks, all);
+        self.accumulate(Some(base), h, (coefs, ks), all, true);
     }
 
     #[inline]
     fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool) {
-        self.x.fill(0.0);
-        self.q = 0.0;
-        if all {
-            self.s.fill(0.0);
-            self.qp.fill(0.0);
-        }
-        self.accumulate(h, coefs, ks, all);
+        self.accumulate(None, h, (coefs, ks), all, true);
+    }
+
+    /// x and, when `reads`, S: F never reads the quadratures q and q_θ of its argument, so
+    /// a stage argument leaves them as they were.
+    #[inline]
+    fn combine_argument(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], reads: bool) {
+        self.accumulate(Some(base), h, (coefs, ks), reads, false);
     }
 
     #[inline]
@@ -254,16 +356,22 @@ impl WeightedRms {
     /// the step, and its weight `w`.
     #[inline]
     pub(super) fn add(&mut self, e: &[f64], y0: &[f64], y1: &[f64], w: f64) {
+        let rw = self.rtol * w;
         for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
-            let scale = self.atol + self.rtol * w * a.abs().max(b.abs());
-            // A component with scale 0 (atol = 0 and y = 0 at both ends, as S at t = 0 when
-            // x₀ does not depend on θ) has no relative accuracy to hold: it is left out, rather
-            // than making the norm infinite and the (first) step zero.
-            if scale == 0.0 {
-                continue;
-            }
-            if *ei != 0.0 {
-                let r = w * ei / scale;
+            self.add_one(*ei, magnitude(*a, *b), w, rw);
+        }
+    }
+
+    /// Adds one entry: error `e`, magnitude `m` = max(|y0|, |y1|), weight `w`, `rw` = rtol·w.
+    #[inline(always)]
+    fn add_one(&mut self, e: f64, m: f64, w: f64, rw: f64) {
+        let scale = self.atol + rw * m;
+        // A component with scale 0 (atol = 0 and y = 0 at both ends, as S at t = 0 when
+        // x₀ does not depend on θ) has no relative accuracy to hold: it is left out, rather
+        // than making the norm infinite and the (first) step zero.
+        if scale != 0.0 {
+            if e != 0.0 {
+                let r = w * e / scale;
                 self.sum += r * r;
             }
             self.count += 1;
@@ -277,6 +385,19 @@ impl WeightedRms {
             return 0.0;
         }
         (self.sum / self.count as f64).sqrt()
+    }
+}
+
+/// max(|a|, |b|) for the scale of an error entry, as one compare (no NaN-aware `f64::max`:
+/// the end state `b` of a step is NaN only in an attempt that the stepper rejects for it
+/// anyway, whatever its norm; the start state `a` of a step is always finite).
+#[inline(always)]
+fn magnitude(a: f64, b: f64) -> f64 {
+    let (a, b) = (a.abs(), b.abs());
+    if a > b {
+        a
+    } else {
+        b
     }
 }
 
@@ -301,21 +422,18 @@ where
     let mut rms = WeightedRms::new(atol, rtol);
     rms.add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
     if has_rc {
-        rms.add(&[e.q], &[y0.q], &[y1.q], 1.0);
+        rms.add_one(e.q, magnitude(y0.q, y1.q), 1.0, rtol);
     }
     if sens_err {
+        // Column j of S, then q_θ[j], in one pass over the columns.
         let n = e.x.len();
+        let [es, as_, bs] = [e, y0, y1].map(|v| v.s.as_slice());
         for (j, th) in theta.iter().enumerate() {
             let w = sens_weight(*th);
             let col = j * n..(j + 1) * n;
-            rms.add(
-                &e.s.as_slice()[col.clone()],
-                &y0.s.as_slice()[col.clone()],
-                &y1.s.as_slice()[col],
-                w,
-            );
+            rms.add(&es[col.clone()], &as_[col.clone()], &bs[col], w);
             if has_rc {
-                rms.add(&[e.qp[j]], &[y0.qp[j]], &[y1.qp[j]], w);
+                rms.add_one(e.qp[j], magnitude(y0.qp[j], y1.qp[j]), w, rtol * w);
             }
         }
     }

@@ -126,12 +126,14 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let t = self.t;
         for i in 1..S {
             // A stage argument needs only what F reads, unless it is the solution itself.
-            let (dst, parts) = if tab.last_stage_is_solution && i == S - 1 {
-                (&mut self.ynew, all)
+            let dst = if tab.last_stage_is_solution && i == S - 1 {
+                self.ynew.combine(&self.y, h, tab.a[i], &self.k[..i], all);
+                &self.ynew
             } else {
-                (&mut self.tmp, reads)
+                let (y, ks) = (&self.y, &self.k[..i]);
+                self.tmp.combine_argument(y, h, tab.a[i], ks, reads);
+                &self.tmp
             };
-            dst.combine(&self.y, h, tab.a[i], &self.k[..i], parts);
             self.sys.eval(t + tab.c[i] * h, dst, &mut self.k[i]);
         }
         if !tab.last_stage_is_solution {
@@ -166,7 +168,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         for i in stages {
             let row = tab.a[i];
             self.tmp
-                .combine(&self.y_prev, h, row, &self.k[..row.len()], reads);
+                .combine_argument(&self.y_prev, h, row, &self.k[..row.len()], reads);
             self.sys.eval(t0 + tab.c[i] * h, &self.tmp, &mut self.k[i]);
         }
     }

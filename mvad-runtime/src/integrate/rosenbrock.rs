@@ -387,7 +387,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         } else {
             let reads = self.sys.reads_secondary();
             self.tmp
-                .combine(&self.y, 1.0, &A[s][..s], &self.k[1..=s], reads);
+                .combine_argument(&self.y, 1.0, &A[s][..s], &self.k[1..=s], reads);
             self.sys.eval(t0 + C[s] * h, &self.tmp, &mut self.r);
             for (c, kj) in CC[s][..s].iter().zip(&self.k[1..=s]) {
                 self.r.axpy(c / h, kj, all);

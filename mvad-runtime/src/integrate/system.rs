@@ -37,6 +37,17 @@ pub trait StageVector {
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], all: bool)
     where
         Self: Sized;
+    /// A stage argument `self = base + h Σ_j c_j k_j` over what F reads: the primary part,
+    /// and the secondary parts when `reads` ([`OdeSystem::reads_secondary`]). Parts that F
+    /// never reads (the forward system's quadratures) may be left as they were; by default
+    /// [`StageVector::combine`] with `all = reads`.
+    #[inline]
+    fn combine_argument(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], reads: bool)
+    where
+        Self: Sized,
+    {
+        self.combine(base, h, coefs, ks, reads);
+    }
     /// `self = h Σ_j c_j k_j`.
     fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], all: bool)
     where
