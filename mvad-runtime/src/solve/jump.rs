@@ -28,6 +28,10 @@ struct Approach {
     scale: f64,
     /// The cosine is below the grazing tolerance.
     grazing: bool,
+    /// The signed guard d·g at the state the event fires from (after the snap onto the
+    /// guard; 0 for a time event): below zero when it fired within the simultaneity window
+    /// of an earlier crossing (see [`crate::event`] on re-arming).
+    signed_guard: f64,
 }
 
 impl<M: HybridModel> Driver<'_, M>
@@ -97,7 +101,7 @@ where
                 .copy_from_slice(self.s_plus.as_slice());
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
-        self.fired[k] = true;
+        self.fired[k] = Some(approach.signed_guard);
         if zeno_stop.is_some() {
             self.zeno_stop = zeno_stop;
         } else if stuck {
@@ -125,10 +129,15 @@ where
         })?;
         let timed = info.events[k].is_time_event();
         let gt = sens::event_guard_grad(model, k, j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        let g = if timed {
+            0.0
+        } else {
+            model.guard(k, At::new(t, &self.y.x, p))
+        };
         if !(gt.is_finite()
+            && g.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
-            && self.gp.iter().all(|v| v.is_finite())
-            && (timed || model.guard(k, At::new(t, &self.y.x, p)).is_finite()))
+            && self.gp.iter().all(|v| v.is_finite()))
         {
             return Err(SolveError::NonFinite {
                 t,
@@ -146,15 +155,18 @@ where
         };
         let cosine = sens::cosine_of(rate, scale);
         let grazing = sens::is_grazing_cosine(cosine, self.opts.grazing_tol);
-        if !timed && !grazing {
-            self.snap_onto_guard(k, t, gt);
-        }
+        let g = if !timed && !grazing {
+            self.snap_onto_guard(k, t, g, rate)
+        } else {
+            g
+        };
         let approach = Approach {
             rate,
             gt,
             cosine,
             scale,
             grazing,
+            signed_guard: info.events[k].direction.sign() * g,
         };
         if !self.sens {
             return Ok(approach);
@@ -178,21 +190,24 @@ where
     /// queue that drains ends with w = 0 exactly, as w − (−1)·(w/(−1)) = 0). It is taken only
     /// when it is that small (|g/ġ| ≤ [`super::time_resolution`]), i.e. it never moves the state by more than
     /// the time resolution does, and only when it leaves the state on or past the guard.
-    fn snap_onto_guard(&mut self, k: usize, t: f64, gt: f64) {
+    /// `g` is the guard at x⁻ and `rate` = ∇g·f⁻ + ∂g/∂t; returns the guard at x⁻ as left.
+    fn snap_onto_guard(&mut self, k: usize, t: f64, g: f64, rate: f64) -> f64 {
         let (model, p) = (self.model, self.p);
-        let g = model.guard(k, At::new(t, &self.y.x, p));
-        let shift = g / (self.gx.dot(&self.f_minus) + gt);
+        let shift = g / rate;
         if shift == 0.0 || shift.abs() > super::time_resolution(t) {
-            return;
+            return g;
         }
         // Keep the root finder's promise: the state handed to the reset is on or past the
         // guard, never short of it.
         self.xs.copy_from(&self.y.x);
         self.xs.axpy(-shift, &self.f_minus, 1.0);
         let d = model.info().events[k].direction.sign();
-        if d * model.guard(k, At::new(t, &self.xs, p)) >= 0.0 {
+        let g_snapped = model.guard(k, At::new(t, &self.xs, p));
+        if d * g_snapped >= 0.0 {
             self.y.x.copy_from(&self.xs);
+            return g_snapped;
         }
+        g
     }
 
     /// t' = −(∇g·S⁻ + ∂g/∂θ)/(∇g·f⁻ + ∂g/∂t) into `self.dt`, from ∇g and ∂g/∂θ in

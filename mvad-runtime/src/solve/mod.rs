@@ -279,7 +279,9 @@ where
     /// Accumulated event costs Σ φ_k and their total derivatives.
     c_ev: CompensatedSum,
     g_ev: OVector<f64, M::P>,
-    fired: Vec<bool>,
+    /// The events applied at the last instant, each with its signed guard at the state it
+    /// fired from (see [`Scanner::restart_one`]).
+    fired: Vec<Option<f64>>,
     /// Occurrence indices and next times of the events (the time events' source).
     schedule: Schedule,
     /// User events applied so far.
@@ -363,7 +365,7 @@ where
             obs_plus: vec![0.0; nobs],
             c_ev: CompensatedSum::default(),
             g_ev: vp(),
-            fired: vec![false; nev],
+            fired: vec![None; nev],
             schedule: Schedule::new(nev),
             nevents: 0,
             table_events: 0,
@@ -486,10 +488,10 @@ where
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
             }
-            let fired = w < nev && self.fired[w];
+            let fired = if w < nev { self.fired[w] } else { None };
             self.scanner.restart_one(w, active, v, fired);
         }
-        self.fired.fill(false);
+        self.fired.fill(None);
         self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
