@@ -244,17 +244,24 @@ impl Scanner {
         w >= self.nevents
     }
 
-    /// (Re)initialises function w at a restart with its signed value `v` at the new state:
+    /// Function w is not watched from this restart on (its other fields are set again by
+    /// [`Scanner::restart_one`] when it is).
+    #[inline]
+    pub fn deactivate(&mut self, w: usize) {
+        self.active[w] = false;
+    }
+
+    /// (Re)activates function w at a restart with its signed value `v` at the new state:
     /// events are armed iff v ≤ 0 (a guard that starts exactly on zero fires at once if the
     /// flow carries it into the firing side), except an event that just fired from the
     /// signed value v_f (`fired` = `Some(v_f)`), which is disarmed until v < min(v_f, 0)
     /// (armed at once if v⁺ already is); switches are always armed.
     #[inline]
-    pub fn restart_one(&mut self, w: usize, active: bool, v: f64, fired: Option<f64>) {
-        self.active[w] = active;
+    pub fn restart_one(&mut self, w: usize, v: f64, fired: Option<f64>) {
+        self.active[w] = true;
         self.start_val[w] = v;
         self.rising[w] = false;
-        self.fresh[w] = fired.is_some() && active && !self.strict(w);
+        self.fresh[w] = fired.is_some() && !self.strict(w);
         let below = fired.map_or(0.0, |vf| vf.min(0.0));
         self.rearm_below[w] = below;
         self.armed[w] = if self.strict(w) {
@@ -611,8 +618,8 @@ mod tests {
         let f = |t: f64| 1e-4 - (t - 0.5) * (t - 0.5);
         let g = |t: f64| -1.0 + 0.0 * t;
         let mut sc = Scanner::new(2, 0);
-        sc.restart_one(0, true, f(0.0), None);
-        sc.restart_one(1, true, g(0.0), None);
+        sc.restart_one(0, f(0.0), None);
+        sc.restart_one(1, g(0.0), None);
         let vals = |t: f64, out: &mut [f64]| {
             out[0] = f(t);
             out[1] = g(t);
@@ -638,7 +645,7 @@ mod tests {
         // interior sample and t₁ (for any INTERIOR ≥ 1).
         let f = |t: f64| 1e-10 - (t - 0.95) * (t - 0.95);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), None);
+        sc.restart_one(0, f(0.0), None);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1, "the dip at 0.95 ± 1e-5 is missed");
@@ -652,7 +659,7 @@ mod tests {
         // v(0) = 0, v < 0 on (0, 0.6), crosses up at 0.6.
         let f = |t: f64| t * (t - 0.6);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), Some(0.0));
+        sc.restart_one(0, f(0.0), Some(0.0));
         assert!(!sc.armed[0]);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
@@ -661,7 +668,7 @@ mod tests {
         // The same function without a crossing after the zero never fires: v = −t.
         let g = |t: f64| -t;
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, 0.0, Some(0.0));
+        sc.restart_one(0, 0.0, Some(0.0));
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
@@ -670,7 +677,7 @@ mod tests {
         // for t > 0.5 is positive: no negative excursion ⇒ stays disarmed.
         let k = |t: f64| (t - 0.5).max(0.0);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, 0.0, Some(0.0));
+        sc.restart_one(0, 0.0, Some(0.0));
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
@@ -684,7 +691,7 @@ mod tests {
     fn a_hop_before_the_first_sample_after_firing_is_found() {
         let f = |t: f64| t * (t - 0.05);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), Some(0.0));
+        sc.restart_one(0, f(0.0), Some(0.0));
         assert!(sc.fresh[0] && !sc.armed[0]);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
@@ -694,7 +701,7 @@ mod tests {
         // searched again.
         let g = |t: f64| t * t;
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, 0.0, Some(0.0));
+        sc.restart_one(0, 0.0, Some(0.0));
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
@@ -721,7 +728,7 @@ mod tests {
         let fs: [fn(f64) -> f64; 3] = [|t| t - 0.3, |t| t - 0.3 - 1e-15, |t| t - 0.7];
         let mut sc = Scanner::new(3, 0);
         for (w, fw) in fs.iter().enumerate() {
-            sc.restart_one(w, true, fw(0.0), None);
+            sc.restart_one(w, fw(0.0), None);
         }
         sc.scan(
             0.0,
@@ -746,7 +753,7 @@ mod tests {
     fn a_linear_step_evaluates_only_its_end_and_finds_the_crossing() {
         let f = |t: f64| 3.0 * t - 0.3;
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), Some(0.0));
+        sc.restart_one(0, f(0.0), Some(0.0));
         let (mut samples, mut evals) = (0, 0);
         sc.scan(
             0.0,

@@ -32,6 +32,10 @@ struct Approach {
     /// guard; 0 for a time event): below zero when it fired within the simultaneity window
     /// of an earlier crossing (see [`crate::event`] on re-arming).
     signed_guard: f64,
+    /// f⁻ (and, by the reset, f⁺) were evaluated. A time event whose time does not move
+    /// with θ (t' = 0) skips both when nothing else reads them (no global error estimate
+    /// to carry): every term they enter is multiplied by t' = 0, so they are zero instead.
+    flows: bool,
 }
 
 impl<M: HybridModel> Driver<'_, M>
@@ -52,7 +56,7 @@ where
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
         let mode_before = self.mode;
-        self.event_reset(k, j, t)?;
+        self.event_reset(k, j, t, approach.flows)?;
         let l_plus = self.event_costs(k, j, t)?;
         self.error_through_event(k, j, t, approach.rate, l_plus);
         // Time events neither accumulate nor get stuck: their times are given.
@@ -120,15 +124,20 @@ where
         let info = model.info();
         let name = &info.events[k].name;
         self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
-        model.rhs(
-            Point::new(self.mode, &self.sw, t, &self.y.x, p),
-            &mut self.f_minus,
-        );
-        self.nonfinite_x(t, &self.f_minus, || {
-            format!("flow of mode `{}`", info.modes[self.mode])
-        })?;
         let timed = info.events[k].is_time_event();
         let gt = sens::event_guard_grad(model, k, j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        let flows = !timed || self.flows_matter_at_time_event();
+        if flows {
+            model.rhs(
+                Point::new(self.mode, &self.sw, t, &self.y.x, p),
+                &mut self.f_minus,
+            );
+            self.nonfinite_x(t, &self.f_minus, || {
+                format!("flow of mode `{}`", info.modes[self.mode])
+            })?;
+        } else {
+            self.f_minus.fill(0.0);
+        }
         let g = if timed {
             0.0
         } else {
@@ -167,6 +176,7 @@ where
             scale,
             grazing,
             signed_guard: info.events[k].direction.sign() * g,
+            flows,
         };
         if !self.sens {
             return Ok(approach);
@@ -181,6 +191,14 @@ where
             });
         }
         Ok(approach)
+    }
+
+    /// Whether a time event must evaluate f⁻ and f⁺ (∂τ/∂θ = −∂g/∂θ already in `gp`): they
+    /// enter the saltation jump and the cost terms only through t' = ∂τ/∂θ, and the global
+    /// error estimate's jump (nothing while it is zero).
+    fn flows_matter_at_time_event(&mut self) -> bool {
+        (self.sens && self.gp.iter().any(|&v| v != 0.0))
+            || self.integ.global_error_mut().is_some_and(|ge| !ge.is_zero())
     }
 
     /// Moves x⁻ along the flow onto the guard of event k: x⁻ ← x⁻ − f⁻·g/(∇g·f⁻ + ∂g/∂t), one
@@ -225,9 +243,10 @@ where
     }
 
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
-    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ and, with sensitivities, S⁺ by the saltation
-    /// jump (see [`sens::jump`]) into `self.s_plus`.
-    fn event_reset(&mut self, k: usize, j: usize, t: f64) -> Result<(), SolveError> {
+    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (zero unless `flows`, see
+    /// [`Approach::flows`]) and, with sensitivities, S⁺ by the saltation jump (see
+    /// [`sens::jump`]) into `self.s_plus`.
+    fn event_reset(&mut self, k: usize, j: usize, t: f64, flows: bool) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
         let ev = &info.events[k];
@@ -240,13 +259,17 @@ where
         let mode_after = ev.target.unwrap_or(self.mode);
         self.mode = mode_after;
         self.switch_bits(t, true, true);
-        model.rhs(
-            Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
-            &mut self.f_plus,
-        );
-        self.nonfinite_x(t, &self.f_plus, || {
-            format!("flow of mode `{}`", info.modes[mode_after])
-        })?;
+        if flows {
+            model.rhs(
+                Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
+                &mut self.f_plus,
+            );
+            self.nonfinite_x(t, &self.f_plus, || {
+                format!("flow of mode `{}`", info.modes[mode_after])
+            })?;
+        } else {
+            self.f_plus.fill(0.0);
+        }
         if self.sens {
             model.reset_jac(
                 Occurrence::new(k, j),

@@ -480,16 +480,16 @@ where
         let watch = &self.watch[self.mode];
         self.affine_watch = watch.affine;
         for (w, &active) in watch.active.iter().enumerate() {
-            let v = if active {
-                Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
-            } else {
-                0.0
-            };
+            if !active {
+                self.scanner.deactivate(w);
+                continue;
+            }
+            let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x);
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
             }
             let fired = if w < nev { self.fired[w] } else { None };
-            self.scanner.restart_one(w, active, v, fired);
+            self.scanner.restart_one(w, v, fired);
         }
         self.fired.fill(None);
         self.integ.restart(t, &self.y, self.mode, &self.sw);
