@@ -199,7 +199,10 @@ where
     /// error estimate's jump (nothing while it is zero).
     fn flows_matter_at_time_event(&mut self) -> bool {
         (self.sens && self.gp.iter().any(|&v| v != 0.0))
-            || self.integ.global_error_mut().is_some_and(|ge| !ge.is_zero())
+            || self
+                .integ
+                .global_error_mut()
+                .is_some_and(|ge| !ge.is_zero())
     }
 
     /// Moves x⁻ along the flow onto the guard of event k: x⁻ ← x⁻ − f⁻·g/(∇g·f⁻ + ∂g/∂t), one
