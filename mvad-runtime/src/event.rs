@@ -5,11 +5,15 @@
 //!
 //! - event k with guard g_k and direction d_k ∈ {+1 (`Up`), −1 (`Down`)}: v = d_k·g_k. It fires
 //!   when v reaches zero from below (v ≥ 0 after v < 0). After it fires it is *disarmed*
-//!   until v has been strictly negative again (it left zero in the opposite sense), so a guard
-//!   that is exactly zero after the reset neither re-triggers nor hides the next crossing.
-//!   Every other event is re-armed at a restart iff v ≤ 0 there, so a guard that starts
-//!   exactly on zero and is carried into the firing side fires at once (a ball released on
-//!   the floor moving down bounces at t = 0);
+//!   until v has been strictly below min(v_f, 0) again, v_f its value at the state it fired
+//!   from (it left zero in the opposite sense), so a guard that is exactly zero after the
+//!   reset neither re-triggers nor hides the next crossing. v_f < 0 when the event fired
+//!   within the simultaneity window of an earlier crossing, before its own guard had
+//!   triggered: its own crossing, a moment later, is the one it already stood for, and
+//!   re-arming at v < 0 would fire it a second time there (two guards 10⁻¹² apart fired
+//!   one event twice). Every other event is re-armed at a restart iff v ≤ 0 there, so a
+//!   guard that starts exactly on zero and is carried into the firing side fires at once (a
+//!   ball released on the floor moving down bounces at t = 0);
 //! - switching function σ_j with frozen bit b_j: v = −σ_j if b_j is set, +σ_j otherwise. It
 //!   triggers when the sign of σ_j strictly disagrees with the bit (v > 0); it is always armed.
 //!
@@ -178,6 +182,9 @@ pub struct Scanner {
     pub active: Vec<bool>,
     /// Armed flags (switches: always true).
     pub armed: Vec<bool>,
+    /// A disarmed function re-arms once v < `rearm_below[w]`: min(v_f, 0) for the event
+    /// that fired at the last restart from the value v_f, 0 for every other.
+    pub rearm_below: Vec<f64>,
     /// Signed value v_w at the start of the current step.
     pub start_val: Vec<f64>,
     /// Whether v_w was increasing at the end of the previous step (dip detection at t₀).
@@ -202,6 +209,7 @@ impl Scanner {
             nevents,
             active: vec![false; nw],
             armed: vec![false; nw],
+            rearm_below: vec![0.0; nw],
             start_val: vec![0.0; nw],
             rising: vec![false; nw],
             fresh: vec![false; nw],
@@ -236,20 +244,32 @@ impl Scanner {
         w >= self.nevents
     }
 
-    /// (Re)initialises function w at a restart with its signed value `v` at the new state:
-    /// events are armed iff v ≤ 0 (a guard that starts exactly on zero fires at once if the
-    /// flow carries it into the firing side), except the event that just `fired`, which is
-    /// disarmed until v < 0; switches are always armed.
+    /// Function w is not watched from this restart on (its other fields are set again by
+    /// [`Scanner::restart_one`] when it is).
     #[inline]
-    pub fn restart_one(&mut self, w: usize, active: bool, v: f64, fired: bool) {
-        self.active[w] = active;
+    pub fn deactivate(&mut self, w: usize) {
+        self.active[w] = false;
+    }
+
+    /// (Re)activates function w at a restart with its signed value `v` at the new state:
+    /// events are armed iff v ≤ 0 (a guard that starts exactly on zero fires at once if the
+    /// flow carries it into the firing side), except an event that just fired from the
+    /// signed value v_f (`fired` = `Some(v_f)`), which is disarmed until v < min(v_f, 0)
+    /// (armed at once if v⁺ already is); switches are always armed.
+    #[inline]
+    pub fn restart_one(&mut self, w: usize, v: f64, fired: Option<f64>) {
+        self.active[w] = true;
         self.start_val[w] = v;
         self.rising[w] = false;
-        self.fresh[w] = fired && active && !self.strict(w);
+        self.fresh[w] = fired.is_some() && !self.strict(w);
+        let below = fired.map_or(0.0, |vf| vf.min(0.0));
+        self.rearm_below[w] = below;
         self.armed[w] = if self.strict(w) {
             true
+        } else if fired.is_some() {
+            v < below
         } else {
-            !fired && v <= 0.0
+            v <= 0.0
         };
     }
 
@@ -301,7 +321,8 @@ impl Scanner {
                     // The line from v₀ to v₁: negative somewhere iff at an end; its last
                     // interior sample as `bracket_curve` would have interpolated it.
                     let (a, b) = (self.start_val[w], self.tmp[w]);
-                    if !self.armed[w] && (a < 0.0 || b < 0.0) {
+                    let below = self.rearm_below[w];
+                    if !self.armed[w] && (a < below || b < below) {
                         self.armed[w] = true;
                     }
                     self.start_val[w] = b;
@@ -309,7 +330,8 @@ impl Scanner {
                     continue;
                 }
                 let v = &self.vals[w];
-                if !self.armed[w] && v.iter().any(|&x| x < 0.0) {
+                let below = self.rearm_below[w];
+                if !self.armed[w] && v.iter().any(|&x| x < below) {
                     self.armed[w] = true;
                 }
                 self.start_val[w] = v[NSAMP - 1];
@@ -365,10 +387,11 @@ impl Scanner {
                 return Err((w, sample_times(t0, t1)[i]));
             }
             let strict = self.strict(w);
-            // A line that fired at t₀ and starts below zero re-armed there (its minimum).
-            let armed = self.armed[w] || (self.fresh[w] && a < 0.0);
+            // A line that fired at t₀ and starts below its re-arming level was armed at the
+            // restart; one that starts above it and falls re-arms only past t₁ (a line has
+            // its minimum at an end).
             self.fresh[w] = false;
-            if !(armed && triggered(b, strict)) {
+            if !(self.armed[w] && triggered(b, strict)) {
                 continue;
             }
             let times = sample_times(t0, t1);
@@ -425,12 +448,13 @@ impl Scanner {
             }
             let strict = self.strict(w);
             let mut armed = self.armed[w];
+            let below = self.rearm_below[w];
             let mut armed_from = if armed { Some(0) } else { None };
             let mut bracket = None;
             for i in 1..NSAMP {
                 let vi = v[i];
                 if !armed {
-                    if vi < 0.0 {
+                    if vi < below {
                         armed = true;
                         armed_from = Some(i);
                     }
@@ -443,13 +467,13 @@ impl Scanner {
                 if let Some(i0) = armed_from {
                     bracket = dip(&v, times, i0, self.rising[w], strict, |t| eval(w, t));
                 } else if self.fresh[w] {
-                    // The event fired at t₀ and no sample went below zero: the whole
-                    // excursion to the negative side and back (a short hop of a ball after
-                    // its bounce) may lie between t₀ and the first sample. Look for the
-                    // minimum there; if it is negative the event re-armed at that time and
-                    // the first sample, which has triggered, closes the bracket.
+                    // The event fired at t₀ and no sample went below its re-arming level:
+                    // the whole excursion to the negative side and back (a short hop of a
+                    // ball after its bounce) may lie between t₀ and the first sample. Look
+                    // for the minimum there; if it is below the level the event re-armed at
+                    // that time and the first sample, which has triggered, closes the bracket.
                     let (tm, neg) = maximize(|t| -eval(w, t), times[0], times[1]);
-                    if neg > 0.0 && triggered(v[1], strict) {
+                    if -neg < below && triggered(v[1], strict) {
                         bracket = Some((tm, -neg, times[1], v[1]));
                     }
                 }
@@ -594,8 +618,8 @@ mod tests {
         let f = |t: f64| 1e-4 - (t - 0.5) * (t - 0.5);
         let g = |t: f64| -1.0 + 0.0 * t;
         let mut sc = Scanner::new(2, 0);
-        sc.restart_one(0, true, f(0.0), false);
-        sc.restart_one(1, true, g(0.0), false);
+        sc.restart_one(0, f(0.0), None);
+        sc.restart_one(1, g(0.0), None);
         let vals = |t: f64, out: &mut [f64]| {
             out[0] = f(t);
             out[1] = g(t);
@@ -621,7 +645,7 @@ mod tests {
         // interior sample and t₁ (for any INTERIOR ≥ 1).
         let f = |t: f64| 1e-10 - (t - 0.95) * (t - 0.95);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), false);
+        sc.restart_one(0, f(0.0), None);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1, "the dip at 0.95 ± 1e-5 is missed");
@@ -635,7 +659,7 @@ mod tests {
         // v(0) = 0, v < 0 on (0, 0.6), crosses up at 0.6.
         let f = |t: f64| t * (t - 0.6);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), true);
+        sc.restart_one(0, f(0.0), Some(0.0));
         assert!(!sc.armed[0]);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
@@ -644,7 +668,7 @@ mod tests {
         // The same function without a crossing after the zero never fires: v = −t.
         let g = |t: f64| -t;
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, 0.0, true);
+        sc.restart_one(0, 0.0, Some(0.0));
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
@@ -653,7 +677,7 @@ mod tests {
         // for t > 0.5 is positive: no negative excursion ⇒ stays disarmed.
         let k = |t: f64| (t - 0.5).max(0.0);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, 0.0, true);
+        sc.restart_one(0, 0.0, Some(0.0));
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
@@ -667,7 +691,7 @@ mod tests {
     fn a_hop_before_the_first_sample_after_firing_is_found() {
         let f = |t: f64| t * (t - 0.05);
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), true);
+        sc.restart_one(0, f(0.0), Some(0.0));
         assert!(sc.fresh[0] && !sc.armed[0]);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
@@ -677,7 +701,7 @@ mod tests {
         // searched again.
         let g = |t: f64| t * t;
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, 0.0, true);
+        sc.restart_one(0, 0.0, Some(0.0));
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
@@ -704,7 +728,7 @@ mod tests {
         let fs: [fn(f64) -> f64; 3] = [|t| t - 0.3, |t| t - 0.3 - 1e-15, |t| t - 0.7];
         let mut sc = Scanner::new(3, 0);
         for (w, fw) in fs.iter().enumerate() {
-            sc.restart_one(w, true, fw(0.0), false);
+            sc.restart_one(w, fw(0.0), None);
         }
         sc.scan(
             0.0,
@@ -729,7 +753,7 @@ mod tests {
     fn a_linear_step_evaluates_only_its_end_and_finds_the_crossing() {
         let f = |t: f64| 3.0 * t - 0.3;
         let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, true, f(0.0), true);
+        sc.restart_one(0, f(0.0), Some(0.0));
         let (mut samples, mut evals) = (0, 0);
         sc.scan(
             0.0,

@@ -5,7 +5,7 @@
 
 use approx::assert_relative_eq;
 use mvad::interp::InterpretedModel;
-use mvad::runtime::solution::Options;
+use mvad::runtime::solution::{GradientMode, Options};
 use mvad::runtime::solve::solve;
 use mvad::{HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
@@ -48,6 +48,16 @@ where
     // One step per segment: K events cut K + 1 segments.
     assert_eq!(sol.stats.steps, k + 1, "{name}: {:?}", sol.stats);
     assert_eq!(sol.stats.rejected_steps, 0, "{name}");
+    // Adjoint mode steps the same exact segments backwards and adds g += −h λᵀf_θ over
+    // each (the quadrature of a closed exact step).
+    let adjoint = Options {
+        gradient_mode: GradientMode::Adjoint,
+        ..opts
+    };
+    let sol = solve(m, &p, &adjoint).expect("runs");
+    for (i, &gi) in g.iter().enumerate() {
+        assert_relative_eq!(sol.gradient[i], gi, max_relative = 1e-13);
+    }
 }
 
 #[test]

@@ -530,7 +530,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             return Err(StepError::NonFinite { t: self.t, what });
         }
         self.accept(h, true, t_stop);
-        self.carry_pending = None;
+        // Pending like any accepted step: `close_step` carries no global error over an
+        // exact step but adds its quadrature (the adjoint's g += −h λᵀf_θ).
+        self.carry_pending = Some(h);
         Ok(())
     }
 

@@ -28,6 +28,14 @@ struct Approach {
     scale: f64,
     /// The cosine is below the grazing tolerance.
     grazing: bool,
+    /// The signed guard d·g at the state the event fires from (after the snap onto the
+    /// guard; 0 for a time event): below zero when it fired within the simultaneity window
+    /// of an earlier crossing (see [`crate::event`] on re-arming).
+    signed_guard: f64,
+    /// f⁻ (and, by the reset, f⁺) were evaluated. A time event whose time does not move
+    /// with θ (t' = 0) skips both when nothing else reads them (no global error estimate
+    /// to carry): every term they enter is multiplied by t' = 0, so they are zero instead.
+    flows: bool,
 }
 
 impl<M: HybridModel> Driver<'_, M>
@@ -48,7 +56,7 @@ where
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
         let mode_before = self.mode;
-        self.event_reset(k, j, t)?;
+        self.event_reset(k, j, t, approach.flows)?;
         let l_plus = self.event_costs(k, j, t)?;
         self.error_through_event(k, j, t, approach.rate, l_plus);
         // Time events neither accumulate nor get stuck: their times are given.
@@ -98,7 +106,7 @@ where
                 .copy_from_slice(self.s_plus.as_slice());
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
-        self.fired[k] = true;
+        self.fired[k] = Some(approach.signed_guard);
         if zeno_stop.is_some() {
             self.zeno_stop = zeno_stop;
         } else if stuck {
@@ -117,19 +125,29 @@ where
         let info = model.info();
         let name = &info.events[k].name;
         self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
-        model.rhs(
-            Point::new(self.mode, &self.sw, t, &self.y.x, p),
-            &mut self.f_minus,
-        );
-        self.nonfinite_x(t, &self.f_minus, || {
-            format!("flow of mode `{}`", info.modes[self.mode])
-        })?;
         let timed = info.events[k].is_time_event();
         let gt = sens::event_guard_grad(model, k, j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
+        let flows = !timed || self.flows_matter_at_time_event();
+        if flows {
+            model.rhs(
+                Point::new(self.mode, &self.sw, t, &self.y.x, p),
+                &mut self.f_minus,
+            );
+            self.nonfinite_x(t, &self.f_minus, || {
+                format!("flow of mode `{}`", info.modes[self.mode])
+            })?;
+        } else {
+            self.f_minus.fill(0.0);
+        }
+        let g = if timed {
+            0.0
+        } else {
+            model.guard(k, At::new(t, &self.y.x, p))
+        };
         if !(gt.is_finite()
+            && g.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
-            && self.gp.iter().all(|v| v.is_finite())
-            && (timed || model.guard(k, At::new(t, &self.y.x, p)).is_finite()))
+            && self.gp.iter().all(|v| v.is_finite()))
         {
             return Err(SolveError::NonFinite {
                 t,
@@ -147,15 +165,19 @@ where
         };
         let cosine = sens::cosine_of(rate, scale);
         let grazing = sens::is_grazing_cosine(cosine, self.opts.grazing_tol);
-        if !timed && !grazing {
-            self.snap_onto_guard(k, t, gt);
-        }
+        let g = if !timed && !grazing {
+            self.snap_onto_guard(k, t, g, rate)
+        } else {
+            g
+        };
         let approach = Approach {
             rate,
             gt,
             cosine,
             scale,
             grazing,
+            signed_guard: info.events[k].direction.sign() * g,
+            flows,
         };
         if !self.sens {
             return Ok(approach);
@@ -172,6 +194,17 @@ where
         Ok(approach)
     }
 
+    /// Whether a time event must evaluate f⁻ and f⁺ (∂τ/∂θ = −∂g/∂θ already in `gp`): they
+    /// enter the saltation jump and the cost terms only through t' = ∂τ/∂θ, and the global
+    /// error estimate's jump (nothing while it is zero).
+    fn flows_matter_at_time_event(&mut self) -> bool {
+        (self.sens && self.gp.iter().any(|&v| v != 0.0))
+            || self
+                .integ
+                .global_error_mut()
+                .is_some_and(|ge| !ge.is_zero())
+    }
+
     /// Moves x⁻ along the flow onto the guard of event k: x⁻ ← x⁻ − f⁻·g/(∇g·f⁻ + ∂g/∂t), one
     /// Newton step of the crossing time applied to the state. The root is located to the
     /// resolution of t (a few ulp of t), so the state there misses the guard by up to
@@ -179,21 +212,24 @@ where
     /// queue that drains ends with w = 0 exactly, as w − (−1)·(w/(−1)) = 0). It is taken only
     /// when it is that small (|g/ġ| ≤ [`super::time_resolution`]), i.e. it never moves the state by more than
     /// the time resolution does, and only when it leaves the state on or past the guard.
-    fn snap_onto_guard(&mut self, k: usize, t: f64, gt: f64) {
+    /// `g` is the guard at x⁻ and `rate` = ∇g·f⁻ + ∂g/∂t; returns the guard at x⁻ as left.
+    fn snap_onto_guard(&mut self, k: usize, t: f64, g: f64, rate: f64) -> f64 {
         let (model, p) = (self.model, self.p);
-        let g = model.guard(k, At::new(t, &self.y.x, p));
-        let shift = g / (self.gx.dot(&self.f_minus) + gt);
+        let shift = g / rate;
         if shift == 0.0 || shift.abs() > super::time_resolution(t) {
-            return;
+            return g;
         }
         // Keep the root finder's promise: the state handed to the reset is on or past the
         // guard, never short of it.
         self.xs.copy_from(&self.y.x);
         self.xs.axpy(-shift, &self.f_minus, 1.0);
         let d = model.info().events[k].direction.sign();
-        if d * model.guard(k, At::new(t, &self.xs, p)) >= 0.0 {
+        let g_snapped = model.guard(k, At::new(t, &self.xs, p));
+        if d * g_snapped >= 0.0 {
             self.y.x.copy_from(&self.xs);
+            return g_snapped;
         }
+        g
     }
 
     /// t' = −(∇g·S⁻ + ∂g/∂θ)/(∇g·f⁻ + ∂g/∂t) into `self.dt`, from ∇g and ∂g/∂θ in
@@ -211,9 +247,10 @@ where
     }
 
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
-    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ and, with sensitivities, S⁺ by the saltation
-    /// jump (see [`sens::jump`]) into `self.s_plus`.
-    fn event_reset(&mut self, k: usize, j: usize, t: f64) -> Result<(), SolveError> {
+    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (zero unless `flows`, see
+    /// [`Approach::flows`]) and, with sensitivities, S⁺ by the saltation jump (see
+    /// [`sens::jump`]) into `self.s_plus`.
+    fn event_reset(&mut self, k: usize, j: usize, t: f64, flows: bool) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
         let ev = &info.events[k];
@@ -226,13 +263,17 @@ where
         let mode_after = ev.target.unwrap_or(self.mode);
         self.mode = mode_after;
         self.switch_bits(t, true, true);
-        model.rhs(
-            Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
-            &mut self.f_plus,
-        );
-        self.nonfinite_x(t, &self.f_plus, || {
-            format!("flow of mode `{}`", info.modes[mode_after])
-        })?;
+        if flows {
+            model.rhs(
+                Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
+                &mut self.f_plus,
+            );
+            self.nonfinite_x(t, &self.f_plus, || {
+                format!("flow of mode `{}`", info.modes[mode_after])
+            })?;
+        } else {
+            self.f_plus.fill(0.0);
+        }
         if self.sens {
             model.reset_jac(
                 Occurrence::new(k, j),

@@ -281,7 +281,9 @@ where
     /// Accumulated event costs Σ φ_k and their total derivatives.
     c_ev: CompensatedSum,
     g_ev: OVector<f64, M::P>,
-    fired: Vec<bool>,
+    /// The events applied at the last instant, each with its signed guard at the state it
+    /// fired from (see [`Scanner::restart_one`]).
+    fired: Vec<Option<f64>>,
     /// Occurrence indices and next times of the events (the time events' source).
     schedule: Schedule,
     /// User events applied so far.
@@ -367,7 +369,7 @@ where
             obs_plus: vec![0.0; nobs],
             c_ev: CompensatedSum::default(),
             g_ev: vp(),
-            fired: vec![false; nev],
+            fired: vec![None; nev],
             schedule: Schedule::new(nev),
             nevents: 0,
             table_events: 0,
@@ -483,18 +485,18 @@ where
         let watch = &self.watch[self.mode];
         self.affine_watch = watch.affine;
         for (w, &active) in watch.active.iter().enumerate() {
-            let v = if active {
-                Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x)
-            } else {
-                0.0
-            };
+            if !active {
+                self.scanner.deactivate(w);
+                continue;
+            }
+            let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x);
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
             }
-            let fired = w < nev && self.fired[w];
-            self.scanner.restart_one(w, active, v, fired);
+            let fired = if w < nev { self.fired[w] } else { None };
+            self.scanner.restart_one(w, v, fired);
         }
-        self.fired.fill(false);
+        self.fired.fill(None);
         self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
