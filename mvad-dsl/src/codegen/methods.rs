@@ -14,10 +14,10 @@ impl Gen<'_> {
     pub(super) fn info(&self, k: &ModelKernels) -> TokenStream {
         let pr = quote!(::mvad::__private);
         let strs = |v: &[String]| quote!(#pr::names(&[#(#v),*]));
-        let name = &k.name;
-        let states = strs(&k.states);
-        let params = strs(&k.params);
-        let defaults: Vec<TokenStream> = k.param_defaults.iter().map(|&v| lit(v)).collect();
+        let name = &k.names.name;
+        let states = strs(&k.names.states);
+        let params = strs(&k.names.params);
+        let defaults: Vec<TokenStream> = k.names.param_defaults.iter().map(|&v| lit(v)).collect();
         let modes = strs(&k.mode_names);
         let init = usize_lit(k.initial_mode);
         let opt = |o: Option<usize>| match o {
@@ -499,7 +499,7 @@ impl Gen<'_> {
 /// `let row = self.row(j);` in the event methods of a model that reads table columns: the
 /// values of row j (the occurrence) that [`Node::Column`](crate::ir::Node::Column) leaves read.
 pub(super) fn row_binding(k: &ModelKernels) -> TokenStream {
-    if k.columns.is_empty() {
+    if k.names.columns.is_empty() {
         quote!()
     } else {
         quote!(let row = self.row(j);)
