@@ -81,6 +81,7 @@ type Pv<M> = OVector<f64, <M as ModelDims>::P>;
 type Nn<M> = OMatrix<f64, <M as ModelDims>::N, <M as ModelDims>::N>;
 type Np<M> = OMatrix<f64, <M as ModelDims>::N, <M as ModelDims>::P>;
 type Pt<'a, M> = mvad::Point<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
+type AtM<'a, M> = At<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
 
 impl<M: ModelDims> ModelDims for Defaults<M> {
     type N = M::N;
@@ -117,53 +118,25 @@ where
         fn rhs_dt(&self, pt: Pt<'_, M>, ft: &mut Xv<M>);
         fn rhs_depends_on_t(&self, mode: usize) -> bool;
         fn flow_is_constant(&self, mode: usize) -> bool;
-        fn guard(&self, k: usize, at: At<'_, M::N, M::P>) -> f64;
+        fn guard(&self, k: usize, at: AtM<'_, M>) -> f64;
         fn guard_is_affine(&self, k: usize) -> bool;
-        fn guard_grad(
-            &self,
-            k: usize,
-            at: At<'_, M::N, M::P>,
-            gx: &mut Xv<M>,
-            gp: &mut Pv<M>,
-        ) -> f64;
-        fn reset(&self, occ: Occurrence, at: At<'_, M::N, M::P>, xplus: &mut Xv<M>);
-        fn reset_jac(
-            &self,
-            occ: Occurrence,
-            at: At<'_, M::N, M::P>,
-            rx: &mut Nn<M>,
-            rp: &mut Np<M>,
-            rt: &mut Xv<M>,
-        );
+        fn guard_grad(&self, k: usize, at: AtM<'_, M>, gx: &mut Xv<M>, gp: &mut Pv<M>) -> f64;
+        fn reset(&self, occ: Occurrence, at: AtM<'_, M>, xplus: &mut Xv<M>);
+        fn reset_jac(&self, occ: Occurrence, at: AtM<'_, M>,
+            rx: &mut Nn<M>, rp: &mut Np<M>, rt: &mut Xv<M>);
         fn event_time(&self, occ: Occurrence, p: &Pv<M>) -> f64;
         fn event_time_grad(&self, occ: Occurrence, p: &Pv<M>, dtau: &mut Pv<M>);
-        fn switch_value(&self, j: usize, at: At<'_, M::N, M::P>) -> f64;
-        fn switch_grad(
-            &self,
-            j: usize,
-            at: At<'_, M::N, M::P>,
-            gx: &mut Xv<M>,
-            gp: &mut Pv<M>,
-        ) -> f64;
-        fn observe(&self, at: At<'_, M::N, M::P>, y: &mut [f64]);
-        fn observe_jac(&self, at: At<'_, M::N, M::P>, yx: &mut [f64], yp: &mut [f64]);
-        fn running_cost(&self, sw: &mvad::Switches, at: At<'_, M::N, M::P>) -> f64;
-        fn running_cost_value_grad(
-            &self,
-            sw: &mvad::Switches,
-            at: At<'_, M::N, M::P>,
-            lx: &mut Xv<M>,
-            lp: &mut Pv<M>,
-        ) -> f64;
-        fn event_cost(&self, occ: Occurrence, at: At<'_, M::N, M::P>) -> f64;
-        fn event_cost_grad(
-            &self,
-            occ: Occurrence,
-            at: At<'_, M::N, M::P>,
-            cx: &mut Xv<M>,
-            cp: &mut Pv<M>,
-        ) -> f64;
-        fn final_cost(&self, at: At<'_, M::N, M::P>) -> f64;
-        fn final_cost_grad(&self, at: At<'_, M::N, M::P>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64;
+        fn switch_value(&self, j: usize, at: AtM<'_, M>) -> f64;
+        fn switch_grad(&self, j: usize, at: AtM<'_, M>, gx: &mut Xv<M>, gp: &mut Pv<M>) -> f64;
+        fn observe(&self, at: AtM<'_, M>, y: &mut [f64]);
+        fn observe_jac(&self, at: AtM<'_, M>, yx: &mut [f64], yp: &mut [f64]);
+        fn running_cost(&self, sw: &mvad::Switches, at: AtM<'_, M>) -> f64;
+        fn running_cost_value_grad(&self, sw: &mvad::Switches, at: AtM<'_, M>,
+            lx: &mut Xv<M>, lp: &mut Pv<M>) -> f64;
+        fn event_cost(&self, occ: Occurrence, at: AtM<'_, M>) -> f64;
+        fn event_cost_grad(&self, occ: Occurrence, at: AtM<'_, M>,
+            cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64;
+        fn final_cost(&self, at: AtM<'_, M>) -> f64;
+        fn final_cost_grad(&self, at: AtM<'_, M>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64;
     }
 }
