@@ -102,10 +102,7 @@ where
         nodes,
         atoms,
     };
-    let zeno = solution
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::Zeno);
+    let zeno = solution.diagnostic(DiagnosticKind::Zeno);
     if let Some(d) = zeno {
         mu.add_zeno_tail_atom(d.t);
     }

@@ -351,6 +351,13 @@ pub struct Segment {
     pub end_step: usize,
 }
 
+impl Solution {
+    /// The first diagnostic of `kind` the run raised, if any.
+    pub fn diagnostic(&self, kind: DiagnosticKind) -> Option<&Diagnostic> {
+        self.diagnostics.iter().find(|d| d.kind == kind)
+    }
+}
+
 /// The recorded trajectory: x(t) and S(t) = ∂x/∂θ on every accepted step.
 ///
 /// Each step [t₀, t₁] keeps x and S at [`TRAJ_NODES`] equispaced nodes, filled from the

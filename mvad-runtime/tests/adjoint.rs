@@ -206,10 +206,7 @@ fn simultaneous_events_undone_in_reverse_order() {
             ..fine(GradientMode::Adjoint)
         };
         let sol = solve(&AdModel::new(Twin), &DVector::from_column_slice(&p), &o).unwrap();
-        assert!(sol
-            .diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::SimultaneousEvents));
+        assert!(sol.diagnostic(DiagnosticKind::SimultaneousEvents).is_some());
         assert_eq!(sol.events.len(), 2);
         assert_cost_grad(
             &format!("{method:?}"),
@@ -230,11 +227,7 @@ fn zeno_falls_back_to_forward_mode() {
     let p = spec.defaults.clone();
     let (f, a) = both(spec, &p, &fine(GradientMode::Forward));
     assert_eq!(a.stats.mode, GradientMode::Forward);
-    let z = a
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::Zeno)
-        .expect("zeno diagnostic");
+    let z = a.diagnostic(DiagnosticKind::Zeno).expect("zeno diagnostic");
     assert!(z.message.contains("forward mode"), "{}", z.message);
     assert_eq!(a.gradient, f.gradient);
 }

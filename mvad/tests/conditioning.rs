@@ -26,9 +26,7 @@ fn run(m: &mvad::interp::InterpretedModel, p: &[f64], method: Method, rtol: f64)
 }
 
 fn ill_conditioned(sol: &Solution) -> bool {
-    sol.diagnostics
-        .iter()
-        .any(|d| d.kind == DiagnosticKind::IllConditioned)
+    sol.diagnostic(DiagnosticKind::IllConditioned).is_some()
 }
 
 /// max_i |a_i − r_i| / max_i |r_i|, the suite's error of a gradient.
@@ -128,9 +126,7 @@ fn the_fold_of_van_der_pol_is_reported() {
     p[0] = 1e6;
     let sol = solve(&m, &p, &Options::default()).expect("the run succeeds");
     let d = sol
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::IllConditioned)
+        .diagnostic(DiagnosticKind::IllConditioned)
         .expect("ill_conditioned raised");
     assert!(d.message.contains("dC/dθ"), "{}", d.message);
     let est = sol.error_estimate.expect("an estimate");

@@ -55,10 +55,7 @@ where
     assert_eq!(a.events.len(), f.events.len(), "{what}: events");
     let ran = a.stats.mode == GradientMode::Adjoint;
     if !ran {
-        let z = a
-            .diagnostics
-            .iter()
-            .find(|d| d.kind == DiagnosticKind::Zeno);
+        let z = a.diagnostic(DiagnosticKind::Zeno);
         assert!(
             z.is_some_and(|d| d.message.contains("forward mode")),
             "{what}: fell back without saying so: {:?}",
@@ -237,7 +234,7 @@ fn qp_kink_at_t_gives_both_one_sided_gradients_in_adjoint_mode() {
         let f = solve(&m, &p, &fine(Method::Auto, GradientMode::Forward)).expect("forward");
         let s = solve(&m, &p, &fine(Method::Auto, GradientMode::Adjoint)).expect("adjoint");
         assert_eq!(s.stats.mode, GradientMode::Adjoint);
-        let kink = s.diagnostics.iter().any(|d| d.kind == DiagnosticKind::Kink);
+        let kink = s.diagnostic(DiagnosticKind::Kink).is_some();
         assert_eq!(kink, theta == 0.0, "{:?}", s.diagnostics);
         let right = 2.0 * theta * (1.0 - (-2.0 * a * t).exp()) / (2.0 * a) + (-a * t).exp();
         println!(
