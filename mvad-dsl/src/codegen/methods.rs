@@ -351,21 +351,9 @@ impl Gen<'_> {
 
         // Cost (ℓ reads qps under the frozen bits, as the flow does).
         self.frozen.set(true);
-        let (rc, rcg) = match &k.running_cost {
-            Some(c) => (
-                self.scalar(&c.value),
-                self.grad_body(c, n, p, quote!(lx), quote!(lp)),
-            ),
-            None => (quote!(0.0), quote!(lx.fill(0.0); lp.fill(0.0); 0.0)),
-        };
+        let (rc, rcg) = self.cost_bodies(k.running_cost.as_ref(), n, p, quote!(lx), quote!(lp));
         self.frozen.set(false);
-        let (fc, fcg) = match &k.final_cost {
-            Some(c) => (
-                self.scalar(&c.value),
-                self.grad_body(c, n, p, quote!(cx), quote!(cp)),
-            ),
-            None => (quote!(0.0), quote!(cx.fill(0.0); cp.fill(0.0); 0.0)),
-        };
+        let (fc, fcg) = self.cost_bodies(k.final_cost.as_ref(), n, p, quote!(cx), quote!(cp));
 
         let sens_methods = quote! {
             #[inline]
