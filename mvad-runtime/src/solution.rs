@@ -261,8 +261,10 @@ pub struct ErrorEstimate {
     pub gradient: Vec<f64>,
     /// |error of C| / (atol + rtol |C|).
     pub cost_ratio: f64,
-    /// max_j w_j |error of dC/dθ_j| / (atol + rtol max_j w_j |dC/dθ_j|), w_j = |θ_j| (1 for
-    /// θ_j = 0), the weighting of the sensitivities' error control (0 without sensitivities).
+    /// max_j w_j |error of dC/dθ_j| / (atol + rtol max_j w_j |dC/dθ_j|), the larger of its
+    /// values with w_j = |θ_j| (1 for θ_j = 0; the weighting of the sensitivities' error
+    /// control) and w_j = 1 (0 without sensitivities). In adjoint mode the gradient is the
+    /// VJP the sweep returned.
     pub gradient_ratio: f64,
 }
 

@@ -37,7 +37,7 @@ use serde_json::Value;
 use crate::interp::InterpretedModel;
 use crate::runtime::error::SolveError;
 use crate::runtime::fd::fd_step;
-use crate::runtime::solution::{Method, Options, Solution};
+use crate::runtime::solution::{GradientMode, Method, Options, Solution};
 use crate::runtime::solve::solve;
 use crate::HybridModel;
 
@@ -150,6 +150,10 @@ pub struct Outcome {
     pub error: Option<String>,
     /// Wall time of the run.
     pub seconds: f64,
+    /// The run's global error estimate of C and of dC/dθ, relative as `cost_err` and
+    /// `grad_err` are (the gradient's: max |e| / max |ref| over the reference's parameters),
+    /// when it carried one.
+    pub estimate: Option<(f64, f64)>,
 }
 
 /// Whether a case passed, and why.
@@ -435,6 +439,24 @@ impl Case {
         match result {
             Ok(sol) => {
                 let gradient: Vec<f64> = reference.wrt.iter().map(|&k| sol.gradient[k]).collect();
+                // Measured as the errors are: the reference moved by the estimate.
+                let estimate = sol.error_estimate.as_ref().map(|e| {
+                    let r = &reference.gradient;
+                    let moved: Vec<f64> = match e.gradient.is_empty() {
+                        true => r.clone(),
+                        false => reference
+                            .wrt
+                            .iter()
+                            .zip(r)
+                            .map(|(&k, v)| v + e.gradient[k])
+                            .collect(),
+                    };
+                    let cost = match reference.cost.is_nan() {
+                        true => 0.0,
+                        false => rel_error(reference.cost + e.cost, reference.cost),
+                    };
+                    (cost, grad_error(&moved, r))
+                });
                 let mut diagnostics: Vec<String> = Vec::new();
                 for d in &sol.diagnostics {
                     let k = d.kind.name().to_string();
@@ -456,6 +478,7 @@ impl Case {
                     diagnostics,
                     error: None,
                     seconds,
+                    estimate,
                 }
             }
             Err(e) => Outcome {
@@ -471,6 +494,7 @@ impl Case {
                     .unwrap_or_else(|| vec!["error".to_string()]),
                 error: Some(e.to_string()),
                 seconds,
+                estimate: None,
             },
         }
     }
@@ -519,11 +543,25 @@ impl Case {
 
     /// Runs the checked configuration once and judges it: (reference, outcome, verdict).
     pub fn check_in(&self, dir: &Path) -> Result<(Reference, Outcome, Verdict), String> {
+        self.check_in_mode(dir, GradientMode::Forward)
+    }
+
+    /// [`Case::check_in`] with the gradient computed in `mode` (the case's bounds and
+    /// diagnostics are the same in every mode).
+    pub fn check_in_mode(
+        &self,
+        dir: &Path,
+        mode: GradientMode,
+    ) -> Result<(Reference, Outcome, Verdict), String> {
         let model = self.load_model(dir)?;
         let params = self.params(&model)?;
         let reference = self.reference(&model, &params)?;
+        let opts = Options {
+            gradient_mode: mode,
+            ..self.options(self.check)
+        };
         let start = Instant::now();
-        let result = solve(&model, &params, &self.options(self.check));
+        let result = solve(&model, &params, &opts);
         let outcome = self.outcome(result, start.elapsed().as_secs_f64(), &reference);
         let verdict = self.verdict(&outcome);
         Ok((reference, outcome, verdict))
@@ -549,6 +587,7 @@ mod tests {
             diagnostics: diagnostics.iter().map(|s| s.to_string()).collect(),
             error: None,
             seconds: 0.0,
+            estimate: None,
         }
     }
 

@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use mvad::runtime::solution::GradientMode;
 use mvad::suite::Suite;
 
 fn suite() -> Suite {
@@ -55,4 +56,64 @@ fn every_case_names_a_model_that_loads_and_parameters_it_has() {
         let m = case.load_model(&s.dir).expect("model loads");
         case.params(&m).expect("known parameters");
     }
+}
+
+/// Cases whose adjoint-mode answer is wrong with no diagnostic, for a reason outside the
+/// global error estimate, with the reason.
+const KNOWN_SILENT_IN_ADJOINT: [(&str, &str); 1] = [(
+    "two guards 1e-12 apart",
+    "the event loop, not the integration: at rtol <= 1e-12 (the adjoint's primal run here; \
+     forward mode at --rtol 1e-12 too) `second`, applied with `first` inside the \
+     simultaneity window before its own crossing, is disarmed until its guard goes \
+     negative, which it already is (-1e-12): a short first step re-arms it and it fires a \
+     second time, C off by 8e-2",
+)];
+
+/// The fast cases in adjoint mode (issue 8): each meets its bound, raises a diagnostic that
+/// excuses it, or raises `ill_conditioned` (the adjoint's global error estimate says the
+/// answer is off); none is wrong with no diagnostic (but the known cases above). Required
+/// diagnostics are forward mode's business (the adjoint hands accumulations over to it).
+#[test]
+fn every_fast_case_in_adjoint_mode_meets_its_bound_or_says_why_not() {
+    let s = suite();
+    let mut failed = Vec::new();
+    let (mut ran, mut flagged) = (0, 0);
+    for case in s.cases.iter().filter(|c| c.fast) {
+        let (_, o, v) = case
+            .check_in_mode(&s.dir, GradientMode::Adjoint)
+            .expect("the case runs");
+        let ill = o.diagnostics.iter().any(|d| d == "ill_conditioned");
+        let within = o.cost_err <= case.bound_cost && o.grad_err <= case.bound_gradient;
+        let excused = case.excuse.iter().any(|k| o.diagnostics.contains(k));
+        let reported = o.error.is_some();
+        let status = match (within, excused, ill, reported) {
+            (true, ..) => "within its bound",
+            (_, true, ..) => "excused",
+            (_, _, true, _) => "off its bound, ill_conditioned",
+            (.., true) => "the run failed with an error",
+            _ => "WRONG WITH NO DIAGNOSTIC",
+        };
+        eprintln!(
+            "{:40} err C {:.1e} err dC {:.1e} [{}] {status}",
+            case.name,
+            o.cost_err,
+            o.grad_err,
+            o.diagnostics.join(","),
+        );
+        ran += 1;
+        flagged += usize::from(!within && ill);
+        if within || excused || ill || reported {
+            continue;
+        }
+        match KNOWN_SILENT_IN_ADJOINT
+            .iter()
+            .find(|(n, _)| *n == case.name)
+        {
+            Some((_, why)) => eprintln!("  known: {why}"),
+            None => failed.push(format!("{}: {}", case.name, v.reason)),
+        }
+    }
+    eprintln!("{ran} fast cases in adjoint mode, {flagged} off their bound and flagged");
+    assert!(ran >= 20, "only {ran} fast cases");
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
 }

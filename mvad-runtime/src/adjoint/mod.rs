@@ -23,6 +23,12 @@
 //! so in its `zeno` diagnostic and in `Stats::mode`. Errors (a tangential crossing, too many
 //! events) are those of forward mode.
 //!
+//! ## Global error estimate
+//! With `Options::global_error` the primal run carries forward mode's estimate of x and C
+//! (and keeps its state errors on the tape), the sweep carries the estimate of the VJP
+//! (`integrate/adjoint_error.rs`), and `pull_back` judges both at the
+//! tolerances asked for by forward mode's rule (`ill_conditioned`, `Solution::error_estimate`).
+//!
 //! [`crate::vjp::vjp`] is the entry point for reverse-mode callers (a JAX `custom_vjp`, a
 //! torch `autograd.Function`): cotangents of C and of observables at sample times in, dθ out;
 //! in adjoint mode it calls [`pull_back`].
@@ -44,7 +50,7 @@ use crate::qp::Side;
 use crate::sample::check_times;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind, GradientMode, Options, Solution, Stats};
-use crate::solve::run_loop;
+use crate::solve::{judge, run_loop};
 use crate::vjp::Cotangents;
 use nalgebra::{Const, DefaultAllocator, OVector};
 use record::{Item, JumpKind, Tape};
@@ -142,6 +148,7 @@ where
     let dt_end = horizon_grad(model, params, opts);
     let out = sweep(model, params, &tape, opts, &dt_end, cot.cost, &samples)?;
     sol.gradient = out.gradient;
+    judge_estimate(&mut sol, out.error.as_deref(), params.as_slice(), opts);
     add_sweep_stats(&mut sol.stats, &out.stats);
     if sol
         .diagnostics
@@ -159,6 +166,27 @@ where
     sol.stats.mode = GradientMode::Adjoint;
     sol.stats.wall_seconds = start.elapsed().as_secs_f64();
     Ok(Ok((sol, observables)))
+}
+
+/// The global error estimate of an adjoint result, judged at the tolerances asked for (the
+/// primal run's own judgement, at [`PRIMAL_TOL_FACTOR`] of them, is not made): the error of C
+/// is the primal run's estimate, that of the gradient the sweep's `e_grad` (see
+/// `integrate/adjoint_error.rs`). The same `ill_conditioned` rule as forward mode
+/// ([`crate::solve::judge`]).
+fn judge_estimate(sol: &mut Solution, e_grad: Option<&[f64]>, p: &[f64], opts: &Options) {
+    let Some(primal) = sol.error_estimate.take() else {
+        return;
+    };
+    let grad = e_grad.map(|e| (e, sol.gradient.as_slice()));
+    let (estimate, diagnostic) = judge(
+        (primal.cost, sol.cost),
+        grad,
+        p,
+        (opts.atol, opts.rtol),
+        sol.t_end,
+    );
+    sol.error_estimate = Some(estimate);
+    sol.diagnostics.extend(diagnostic);
 }
 
 /// The samples with their cotangent rows, sorted by time.

@@ -28,9 +28,16 @@
 //!   and the switch bits on both sides; everything else the transpose needs (f⁻, f⁺, ∇g, ℓ⁻,
 //!   ℓ⁺, the costs) is recomputed from these.
 //!
+//! - **State errors** (with `Options::global_error`): the primal run's global error estimate
+//!   of x at each step's start, (r_x, α) with e_x = r_x + α f, and at each jump the
+//!   displacement (d⁻, d⁺, δt) of the jump it applied from the exact one
+//!   ([`crate::integrate::GlobalError::jump_shift`]); the sweep's estimate reads them
+//!   (`integrate/adjoint_error.rs`).
+//!
 //! Memory: 8·(D + 1)·n bytes of nodes plus 32 bytes per step (40n + 32 for Tsit5 and
 //! Rodas5P, 80n + 32 for Verner 9(8)); per jump 16n bytes of states plus about 100 bytes
-//! (switch bits beyond 64 add 8 bytes per 64 on each side). [`Tape::bytes`] counts it.
+//! (switch bits beyond 64 add 8 bytes per 64 on each side); with the global error estimate
+//! 8(n + 1) bytes more per step and 8(2n + 1) per jump. [`Tape::bytes`] counts it.
 
 use crate::model::Switches;
 use std::ops::Range;
@@ -138,6 +145,10 @@ pub struct Tape {
     steps: Vec<StepPoly>,
     nodes: Vec<f64>,
     jump_x: Vec<f64>,
+    /// (r_x, α) at each step's start (n + 1 per step), or empty.
+    state_errors: Vec<f64>,
+    /// (d⁻, d⁺, δt) of each jump (2n + 1 per jump), or empty.
+    jump_shifts: Vec<f64>,
     items: Vec<Item>,
     open_start: f64,
     open_first: usize,
@@ -154,6 +165,8 @@ impl Tape {
             steps: Vec::new(),
             nodes: Vec::new(),
             jump_x: Vec::new(),
+            state_errors: Vec::new(),
+            jump_shifts: Vec::new(),
             items: Vec::new(),
             open_start: 0.0,
             open_first: 0,
@@ -173,12 +186,14 @@ impl Tape {
     /// event time inside it), whose dense output has degree `deg` ≤ 9: `coefs(m, out)`
     /// writes c_m (length n) into `out`, m = 0..=deg. In local time the step starts where
     /// the last one ended and lasts h (the states advanced by exactly h), or cut − t0.
+    /// `err` is the primal run's state error (r_x, α) at the step's start, if it keeps one.
     pub(crate) fn record_step(
         &mut self,
         (t0, h): (f64, f64),
         cut: Option<f64>,
         deg: usize,
         mut coefs: impl FnMut(usize, &mut [f64]),
+        err: Option<(&[f64], f64)>,
     ) {
         let len = match cut {
             Some(te) => te - t0,
@@ -204,6 +219,10 @@ impl Tape {
             coefs(m, &mut self.nodes[start..]);
         }
         self.steps.push(step);
+        if let Some((rx, alpha)) = err {
+            self.state_errors.extend_from_slice(rx);
+            self.state_errors.push(alpha);
+        }
     }
 
     /// Closes the open segment at t in `mode` with bits `sw` (dropped if it has no steps).
@@ -222,7 +241,8 @@ impl Tape {
         self.open_first = end;
     }
 
-    /// Records a jump: what fired at t, x⁻ and x⁺, the modes and bits on both sides.
+    /// Records a jump: what fired at t, x⁻ and x⁺, the modes and bits on both sides, and
+    /// the displacement (d⁻, d⁺, δt) from the exact jump, if the run estimates it.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn jump(
         &mut self,
@@ -233,7 +253,13 @@ impl Tape {
         modes: (usize, usize),
         sw_before: &Switches,
         sw_after: &Switches,
+        shift: Option<(&[f64], &[f64], f64)>,
     ) {
+        if let Some((d_minus, d_plus, dt)) = shift {
+            self.jump_shifts.extend_from_slice(d_minus);
+            self.jump_shifts.extend_from_slice(d_plus);
+            self.jump_shifts.push(dt);
+        }
         let at = self.jump_x.len();
         self.jump_x.extend_from_slice(x_before);
         self.jump_x.extend_from_slice(x_after);
@@ -282,6 +308,24 @@ impl Tape {
         )
     }
 
+    /// The primal run's state error (r_x, α) at the start of step k (an index
+    /// [`Tape::state_at`] leaves in its cursor), if it was recorded.
+    pub fn state_error(&self, k: usize) -> Option<(&[f64], f64)> {
+        let n = self.n;
+        let e = self.state_errors.get(k * (n + 1)..(k + 1) * (n + 1))?;
+        Some((&e[..n], e[n]))
+    }
+
+    /// The displacement (d⁻, d⁺, δt) of jump `j` from the exact jump, if it was recorded.
+    pub fn jump_shift(&self, j: &Jump) -> Option<(&[f64], &[f64], f64)> {
+        let n = self.n;
+        let k = j.at.checked_div(2 * n)?;
+        let e = self
+            .jump_shifts
+            .get(k * (2 * n + 1)..(k + 1) * (2 * n + 1))?;
+        Some((&e[..n], &e[n..2 * n], e[2 * n]))
+    }
+
     /// Recorded steps.
     pub fn nsteps(&self) -> usize {
         self.steps.len()
@@ -293,6 +337,7 @@ impl Tape {
         let sw_bytes = |s: &Switches| std::mem::size_of_val(s.high_words());
         self.steps.len() * std::mem::size_of::<StepPoly>()
             + (self.nodes.len() + self.jump_x.len()) * f
+            + (self.state_errors.len() + self.jump_shifts.len()) * f
             + self.items.len() * std::mem::size_of::<Item>()
             + self
                 .items
@@ -415,12 +460,20 @@ mod tests {
         c[9][1] = 3.0;
         let mut tape = Tape::new(2);
         tape.open_segment(0.3);
-        tape.record_step((0.3, 0.4), Some(0.6), 9, |m, out| {
-            out.copy_from_slice(&c[m])
-        });
-        tape.record_step((0.6, 0.3), None, 0, |_, out| {
-            out.copy_from_slice(&[5.0, 6.0])
-        });
+        tape.record_step(
+            (0.3, 0.4),
+            Some(0.6),
+            9,
+            |m, out| out.copy_from_slice(&c[m]),
+            None,
+        );
+        tape.record_step(
+            (0.6, 0.3),
+            None,
+            0,
+            |_, out| out.copy_from_slice(&[5.0, 6.0]),
+            None,
+        );
         tape.close_segment(0.9, 0, &Switches::default());
         tape.finish(0.9, &[5.0, 6.0], 0, &Switches::default());
         let Item::Segment(seg) = &tape.items()[0] else {

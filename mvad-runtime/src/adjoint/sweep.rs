@@ -28,7 +28,7 @@
 //! time s = t − t_start (see [`super::record`]).
 
 use super::record::{FinalState, Item, Tape};
-use super::transpose::{transpose_jump, JumpWork};
+use super::transpose::{transpose_jump, transpose_jump_with_error, JumpErrorWork, JumpWork};
 use crate::error::SolveError;
 use crate::integrate::Integrator;
 use crate::model::{At, HybridModel, ModelAlloc, Point};
@@ -54,6 +54,9 @@ pub(crate) struct SweepOut {
     pub gradient: Vec<f64>,
     /// Steps, rejections and evaluations of the backward integration.
     pub stats: Stats,
+    /// The estimated global error of `gradient` from the sweep's local errors
+    /// (`Options::global_error`; see `integrate/adjoint_error.rs`).
+    pub error: Option<Vec<f64>>,
 }
 
 /// Scratch for the samples: ∂h/∂x (nobs×n), ∂h/∂θ (nobs×p), row-major, and x(t_s).
@@ -179,13 +182,23 @@ where
         left -= 1;
     }
     let mut work = JumpWork::new(model);
+    let mut error_work = opts.global_error.then(|| JumpErrorWork::new(model));
     let mut h_seed = 0.0;
     for item in tape.items().iter().rev() {
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
-                let g = integ.gradient_mut();
-                transpose_jump(model, p, cw, j, states, &mut lam, g, &mut work)?;
+                let (g, ge) = integ.gradient_and_error_mut();
+                match (ge, &mut error_work) {
+                    (Some(ge), Some(ew)) => {
+                        let shift = tape.jump_shift(j);
+                        let y = (&mut lam, g);
+                        transpose_jump_with_error(
+                            model, p, cw, j, states, shift, y, ge, &mut work, ew,
+                        )?;
+                    }
+                    _ => transpose_jump(model, p, cw, j, states, &mut lam, g, &mut work)?,
+                }
                 continue;
             }
             Item::Segment(seg) => seg,
@@ -230,8 +243,15 @@ where
     }
     let mut vp = OVector::<f64, M::P>::zeros_generic(np, Const::<1>);
     model.initial_state_vjp(p, &lam, &mut vp);
-    let g = integ.gradient_mut();
+    let (g, ge) = integ.gradient_and_error_mut();
     *g += &vp;
+    // e_Γ = r_g + (∂x₀/∂θ)ᵀ r_λ.
+    let error = ge.map(|ge| {
+        let (r_lam, r_g) = ge.remainder_mut();
+        model.initial_state_vjp(p, r_lam, &mut vp);
+        *r_g += &vp;
+        r_g.iter().copied().collect()
+    });
     if !g.iter().all(|v| v.is_finite()) {
         return Err(SolveError::NonFinite {
             t: 0.0,
@@ -241,5 +261,6 @@ where
     Ok(SweepOut {
         gradient: integ.gradient_mut().iter().copied().collect(),
         stats: integ.stats().clone(),
+        error,
     })
 }

@@ -43,8 +43,9 @@
 
 use super::record::{Jump, JumpKind};
 use crate::error::SolveError;
+use crate::integrate::{AdjointError, LamGrad};
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
-use nalgebra::{Const, DefaultAllocator, OVector};
+use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
 /// Scratch for the transposes (allocated once per sweep).
 pub(super) struct JumpWork<M: HybridModel>
@@ -220,4 +221,130 @@ where
         return Err(SolveError::NonFinite { t, what });
     }
     Ok(())
+}
+
+/// Scratch for the estimate's share of a jump (allocated once per sweep, with the estimate).
+pub(super) struct JumpErrorWork<M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// The exact jump (the recorded one moved back by its displacement) and its states.
+    jump: Option<Jump>,
+    xm: Vec<f64>,
+    xp: Vec<f64>,
+    /// λ⁺ and g before the sweep's transpose, then what it added to g.
+    lam_plus: OVector<f64, M::N>,
+    g_added: OVector<f64, M::P>,
+    /// T(λ⁺) at the exact jump.
+    lam: OVector<f64, M::N>,
+    g: OVector<f64, M::P>,
+}
+
+impl<M: HybridModel> JumpErrorWork<M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// Buffers for `model`.
+    pub(super) fn new(model: &M) -> Self {
+        let (n, p) = (model.nstates(), model.nparams());
+        let vn = || OVector::zeros_generic(n, Const::<1>);
+        let vp = || OVector::zeros_generic(p, Const::<1>);
+        JumpErrorWork {
+            jump: None,
+            xm: vec![0.0; n.value()],
+            xp: vec![0.0; n.value()],
+            lam_plus: vn(),
+            g_added: vp(),
+            lam: vn(),
+            g: vp(),
+        }
+    }
+}
+
+/// The sweep's transpose of jump `jump` ([`transpose_jump`], λ and g in place) with its share
+/// of the global error estimate `ge`: the jump's homogeneous part (w = 0) maps the remainder
+/// (r_λ, r_g) as the transpose maps (λ, g), and the primal run's displacement `shift` of the
+/// jump, if it was recorded, adds [`shift_error`]. O(n + p) per jump (the transposes' own
+/// products are).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn transpose_jump_with_error<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    cw: f64,
+    jump: &Jump,
+    states: (&[f64], &[f64]),
+    shift: Option<(&[f64], &[f64], f64)>,
+    (lam, g): LamGrad<'_, M::N, M::P>,
+    ge: &mut AdjointError<M::N, M::P>,
+    w: &mut JumpWork<M>,
+    s: &mut JumpErrorWork<M>,
+) -> Result<(), SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    s.lam_plus.copy_from(lam);
+    s.g_added.copy_from(g);
+    transpose_jump(model, p, cw, jump, states, lam, g, w)?;
+    // What the sweep's transpose added to g.
+    s.g_added.axpy(1.0, g, -1.0);
+    let (r_lam, r_g) = ge.remainder_mut();
+    // A failure would have been the main transpose's, reported above.
+    let _ = transpose_jump(model, p, 0.0, jump, states, r_lam, r_g, w);
+    if let Some(shift) = shift {
+        shift_error(model, p, cw, jump, states, shift, lam, (r_lam, r_g), w, s);
+    }
+    Ok(())
+}
+
+/// The primal run's share of the sweep's error at a jump. The run applied the jump at
+/// (t̃, x̃⁻, x̃⁺), the exact one (t, x⁻, x⁺) moved by its state error:
+/// (δt, d⁻, d⁺) = `shift` (see [`crate::integrate::GlobalError::jump_shift`]). The sweep
+/// transposes the jump there, so it maps (λ⁺, g) by T̃ where the exact jump's transpose is T:
+/// the remainder r = (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺). T̃(λ⁺) is what the sweep computed, λ⁻
+/// (`lam_minus`) and its addition to g (`s.g_added`); T(λ⁺) is evaluated here, so the
+/// difference is a secant over the actual displacement (its rounding, ε|T|, is far below any
+/// tolerance). Nothing is added when the jump was not displaced. What it leaves out: the
+/// sweep also changes segments at t̃ instead of t, which moves (F⁻ − F⁺)·δt of the adjoint's
+/// right-hand side across the jump.
+#[allow(clippy::too_many_arguments)]
+fn shift_error<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    cw: f64,
+    jump: &Jump,
+    (x_minus, x_plus): (&[f64], &[f64]),
+    (d_minus, d_plus, dt): (&[f64], &[f64], f64),
+    lam_minus: &OVector<f64, M::N>,
+    (r_lam, r_g): LamGrad<'_, M::N, M::P>,
+    w: &mut JumpWork<M>,
+    s: &mut JumpErrorWork<M>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    if dt == 0.0 && d_minus.iter().chain(d_plus).all(|&d| d == 0.0) {
+        return;
+    }
+    let exact = match &mut s.jump {
+        Some(exact) => {
+            exact.clone_from(jump);
+            exact
+        }
+        None => s.jump.insert(jump.clone()),
+    };
+    exact.t = jump.t - dt;
+    for (e, (x, d)) in s.xm.iter_mut().zip(x_minus.iter().zip(d_minus)) {
+        *e = x - d;
+    }
+    for (e, (x, d)) in s.xp.iter_mut().zip(x_plus.iter().zip(d_plus)) {
+        *e = x - d;
+    }
+    s.lam.copy_from(&s.lam_plus);
+    s.g.fill(0.0);
+    let states = (s.xm.as_slice(), s.xp.as_slice());
+    if transpose_jump(model, p, cw, exact, states, &mut s.lam, &mut s.g, w).is_ok() {
+        *r_lam += lam_minus;
+        *r_lam -= &s.lam;
+        *r_g += &s.g_added;
+        *r_g -= &s.g;
+    }
 }

@@ -46,9 +46,10 @@
 //! eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x stepped forwards), so `auto`
 //! switches to Rodas5P on it as on the forward run.
 
+use super::adjoint_error::AdjointError;
 use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
 use super::rosenbrock::WMatrix;
-use super::system::{ImplicitSystem, OdeSystem, StageVector};
+use super::system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
@@ -128,6 +129,26 @@ where
     /// g: the gradient quadrature, with whatever the sweep adds to it (jumps, samples, the
     /// terminal and initial terms).
     g: OVector<f64, M::P>,
+    /// The sweep's global error estimate (`Options::global_error`).
+    global: Option<AdjointError<M::N, M::P>>,
+    /// The buffers of its primal coupling (with it).
+    coupling: Option<Coupling<M::N>>,
+}
+
+/// g and the sweep's global error estimate, borrowed together
+/// ([`Integrator::gradient_and_error_mut`]).
+pub type GradientAndError<'a, N, P> = (&'a mut OVector<f64, P>, Option<&'a mut AdjointError<N, P>>);
+
+/// Buffers of the primal run's share of the sweep's error (see [`Backward`]'s
+/// `carry_global_error`): e_x, x + e_x, f, and δF.
+struct Coupling<N: Dim>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<N>,
+{
+    ex: OVector<f64, N>,
+    xe: OVector<f64, N>,
+    f: OVector<f64, N>,
+    d: OVector<f64, N>,
 }
 
 /// Everything F needs besides x(t).
@@ -221,7 +242,7 @@ where
         cw: f64,
     ) -> Self {
         let (n, np) = (model.nstates(), model.nparams());
-        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock);
+        let used = matches!(opts.method, Method::Auto | Method::Rosenbrock) || opts.global_error;
         let vn = || OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
         // G_t's buffers, like the WMatrix: empty for `Dyn` sizes unless Rodas5P may run.
         let stiff_np = if used || M::P::try_to_usize().is_some() {
@@ -259,6 +280,13 @@ where
                 prepared: false,
             },
             g: OVector::zeros_generic(np, Const::<1>),
+            global: opts.global_error.then(|| AdjointError::new(n, np)),
+            coupling: opts.global_error.then(|| Coupling {
+                ex: vn(),
+                xe: vn(),
+                f: vn(),
+                d: vn(),
+            }),
         }
     }
 
@@ -374,15 +402,40 @@ where
         true
     }
 
-    /// g += a·G(t, λ) = −a (λᵀf_θ + w ℓ_θ) at x(t): the model's sparse product.
+    /// The quadrature's local error goes into the sweep's estimate, when it keeps one.
     #[inline]
-    fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64) {
+    fn estimates_quadrature_error(&self) -> bool {
+        self.global.is_some()
+    }
+
+    /// `sum` += a·G(t, λ) = −a (λᵀf_θ + w ℓ_θ) at x(t): the model's sparse product (g, or
+    /// the estimate's r_g).
+    #[inline]
+    fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64, sum: QuadratureSum) {
         self.hist.at(t);
+        let Some(target) = quadrature_sum(&mut self.g, &mut self.global, sum) else {
+            return;
+        };
         let rhs = &mut self.rhs;
         rhs.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
-        rhs.model
-            .adjoint_quadrature_add(pt, y, rhs.w, a, &mut self.g);
+        rhs.model.adjoint_quadrature_add(pt, y, rhs.w, a, target);
+    }
+}
+
+/// The vector a quadrature term goes to: g, or the estimate's r_g (`None` without one).
+#[inline]
+fn quadrature_sum<'b, N: Dim, P: Dim>(
+    g: &'b mut OVector<f64, P>,
+    global: &'b mut Option<AdjointError<N, P>>,
+    sum: QuadratureSum,
+) -> Option<&'b mut OVector<f64, P>>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    match sum {
+        QuadratureSum::Value => Some(g),
+        QuadratureSum::Error => global.as_mut().map(|ge| ge.remainder_mut().1),
     }
 }
 
@@ -435,21 +488,92 @@ where
         self.imp.w.solve_mut(k)
     }
 
-    /// g += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
-    fn quadrature_jac_add(&mut self, t0: f64, v: &Self::Vector, a: f64) {
+    /// `sum` += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
+    fn quadrature_jac_add(&mut self, t0: f64, v: &Self::Vector, a: f64, sum: QuadratureSum) {
         self.hist.at(t0);
+        let Some(target) = quadrature_sum(&mut self.g, &mut self.global, sum) else {
+            return;
+        };
         let rhs = &mut self.rhs;
         let pt = rhs.point(t0, &self.hist.x);
-        rhs.model.adjoint_quadrature_add(pt, v, 0.0, a, &mut self.g);
+        rhs.model.adjoint_quadrature_add(pt, v, 0.0, a, target);
     }
 
-    /// g += a·G_t at the step start (from `prepare`, recomputed if it was for another one).
-    fn quadrature_dt_add(&mut self, t0: f64, y0: &Self::Vector, a: f64) {
+    /// `sum` += a·G_t at the step start (from `prepare`, recomputed if it was for another
+    /// one).
+    fn quadrature_dt_add(&mut self, t0: f64, y0: &Self::Vector, a: f64, sum: QuadratureSum) {
         if self.imp.dt_at != Some(t0) {
             self.time_derivatives(t0, y0);
             self.imp.prepared = false;
         }
-        self.g.axpy(a, &self.imp.dt_g, 1.0);
+        if let Some(target) = quadrature_sum(&mut self.g, &mut self.global, sum) {
+            target.axpy(a, &self.imp.dt_g, 1.0);
+        }
+    }
+
+    /// [`AdjointError::carry`] with J = −f_xᵀ and the sparse product f_θᵀv at the step start
+    /// (t₀, x(t₀)), evaluated here: the step's own Rosenbrock Jacobian is gone by the time it
+    /// is carried (see [`super::Forward`]'s). g's own local error is added by the quadrature
+    /// (`QuadratureSum::Error`).
+    ///
+    /// The primal run's state error e_x = r_x + α f at the step (from the tape) is a forcing:
+    /// F and G are evaluated along x + e_x, so the step adds h δF to r_λ and h δG to r_g with
+    /// δF = F(t₀, x + e_x, λ₀) − F(t₀, x, λ₀) and δG likewise: secants over the actual
+    /// displacement (`adjoint_rate` twice, and the sparse `adjoint_quadrature_add` with ±h,
+    /// never a p-long vector). A displacement at which F is not finite adds nothing.
+    fn carry_global_error(
+        &mut self,
+        t0: f64,
+        y0: &Self::Vector,
+        _f0: &Self::Vector,
+        h: f64,
+        le: &Self::Vector,
+    ) {
+        let Backward {
+            rhs,
+            hist,
+            imp,
+            global,
+            coupling,
+            ..
+        } = self;
+        let (Some(ge), Some(c)) = (global, coupling) else {
+            return;
+        };
+        hist.at(t0);
+        let model = rhs.model;
+        let pt = rhs.point(t0, &hist.x);
+        let (_, r_g) = ge.remainder_mut();
+        let mut forcing = None;
+        if let Some((rx, alpha)) = hist.tape.state_error(hist.cursor) {
+            c.ex.as_mut_slice().copy_from_slice(rx);
+            if alpha != 0.0 {
+                model.rhs(pt, &mut c.f);
+                c.ex.axpy(alpha, &c.f, 1.0);
+            }
+            if c.ex.iter().any(|&e| e != 0.0) {
+                c.xe.copy_from(&hist.x);
+                c.xe += &c.ex;
+                let pe = rhs.point(t0, &c.xe);
+                model.adjoint_rate(pe, y0, rhs.w, &mut c.d);
+                model.adjoint_rate(pt, y0, rhs.w, &mut c.f);
+                c.d -= &c.f;
+                if c.d.iter().all(|v| v.is_finite()) {
+                    model.adjoint_quadrature_add(pe, y0, rhs.w, h, r_g);
+                    model.adjoint_quadrature_add(pt, y0, rhs.w, -h, r_g);
+                    forcing = Some(&c.d);
+                }
+            }
+        }
+        model.rhs_jac_x(pt, &mut imp.w.jac);
+        imp.w.jac.transpose_mut();
+        imp.w.jac.neg_mut();
+        // J now holds the carried step's start, not the next step's.
+        imp.prepared = false;
+        let pattern = &model.info().jacobian_sparsity[rhs.mode];
+        ge.carry(le, forcing, &mut imp.w, pattern, h, |v, a, g| {
+            model.adjoint_quadrature_add(pt, v, 0.0, a, g)
+        });
     }
 
     fn invalidate(&mut self) {
@@ -506,5 +630,12 @@ where
     pub fn gradient_mut(&mut self) -> &mut OVector<f64, M::P> {
         self.close_step();
         &mut self.sys.g
+    }
+
+    /// g and the sweep's global error estimate (`None` when `Options::global_error` is off),
+    /// with the last accepted step closed (its quadrature and its error added).
+    pub fn gradient_and_error_mut(&mut self) -> GradientAndError<'_, M::N, M::P> {
+        self.close_step();
+        (&mut self.sys.g, self.sys.global.as_mut())
     }
 }

@@ -511,6 +511,12 @@ where
     pub fn switches(&self) -> &Switches {
         &self.sys.rhs.sw
     }
+    /// The run's global error estimate (`None` when `Options::global_error` is off); the
+    /// last accepted step may still be pending ([`Integrator::close_step`]).
+    pub fn global_error(&self) -> Option<&GlobalError<M::N, M::P>> {
+        self.sys.global.as_ref()
+    }
+
     /// The run's global error estimate (`None` when `Options::global_error` is off).
     pub fn global_error_mut(&mut self) -> Option<&mut GlobalError<M::N, M::P>> {
         self.sys.global.as_mut()

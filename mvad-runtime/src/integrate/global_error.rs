@@ -84,11 +84,36 @@ fn for_each_entry(n: usize, pattern: &[(usize, usize)], mut f: impl FnMut(usize,
     }
 }
 
-/// out += J v over the entries (i, j) of `pattern`.
-#[inline]
-fn sparse_product<N: Dim>(
+/// m = ⌈2|h|‖J‖∞⌉ (at least 1): the explicit Euler substeps that carry a step of length h
+/// stably (|h/m|‖J‖∞ ≤ 1/2). ‖J‖∞ from the row sums of |J_ij| over the structural non-zeros
+/// `pattern` of f_x (every entry when it is empty); with `transposed` the matrix holds −f_xᵀ
+/// (the adjoint's J), whose non-zeros are the pattern's (j, i). `sums` is n-long scratch.
+pub(super) fn substeps<N: Dim>(
     jac: &OMatrix<f64, N, N>,
     pattern: &[(usize, usize)],
+    transposed: bool,
+    h: f64,
+    sums: &mut OVector<f64, N>,
+) -> f64
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<N, N> + nalgebra::allocator::Allocator<N>,
+{
+    let (n, entries) = (jac.nrows(), jac.as_slice());
+    sums.fill(0.0);
+    for_each_entry(n, pattern, |i, j| {
+        let (i, j) = if transposed { (j, i) } else { (i, j) };
+        sums[i] += entries[i + j * n].abs();
+    });
+    (2.0 * h.abs() * sums.amax()).ceil().max(1.0)
+}
+
+/// out += J v over the entries (i, j) of `pattern`, or with `transposed` over their mirror
+/// images (j, i) (J = −f_xᵀ stored, `pattern` f_x's).
+#[inline]
+pub(super) fn sparse_product<N: Dim>(
+    jac: &OMatrix<f64, N, N>,
+    pattern: &[(usize, usize)],
+    transposed: bool,
     v: &[f64],
     out: &mut [f64],
 ) where
@@ -97,6 +122,7 @@ fn sparse_product<N: Dim>(
     let n = jac.nrows();
     let j_entries = jac.as_slice();
     for &(i, j) in pattern {
+        let (i, j) = if transposed { (j, i) } else { (i, j) };
         out[i] += j_entries[i + j * n] * v[j];
     }
 }
@@ -123,6 +149,11 @@ where
     /// Nothing has been carried yet: every part is exactly zero, and so is its image under
     /// any jump (a run whose steps are all exact, which make no error, never leaves it).
     zero: bool,
+    /// The last jump's displacement: the recorded jump (t̃, x̃⁻, x̃⁺) is the exact one moved
+    /// by (δt, d⁻, d⁺), d⁻ = e_x⁻ + f⁻ δt, d⁺ = e_x⁺ + f⁺ δt (see [`GlobalError::jump_shift`]).
+    d_minus: OVector<f64, N>,
+    d_plus: OVector<f64, N>,
+    shift_dt: f64,
     /// Scratch: two n-vectors, n×p and p.
     xs: OVector<f64, N>,
     w: OVector<f64, N>,
@@ -169,6 +200,9 @@ where
             events_cost: 0.0,
             events_grad: OVector::zeros_generic(p, Const::<1>),
             zero: true,
+            d_minus: OVector::zeros_generic(n, Const::<1>),
+            d_plus: OVector::zeros_generic(n, Const::<1>),
+            shift_dt: 0.0,
             xs: OVector::zeros_generic(n, Const::<1>),
             w: OVector::zeros_generic(n, Const::<1>),
             ss: OMatrix::zeros_generic(n, p),
@@ -218,11 +252,7 @@ where
             r.s += &le.s;
             r.qp += &le.qp;
         }
-        // ‖J‖∞ from the row sums of |J_ij| over the non-zeros.
-        let (n, jac) = (w.jac.nrows(), w.jac.as_slice());
-        self.w.fill(0.0);
-        for_each_entry(n, pattern, |i, j| self.w[i] += jac[i + j * n].abs());
-        let m = (2.0 * h.abs() * self.w.amax()).ceil().max(1.0);
+        let m = substeps(&w.jac, pattern, false, h, &mut self.w);
         if m <= EXPLICIT_SUBSTEPS {
             let dt = h / m;
             // The quadratures by the trapezoidal rule (r_x is linear across a substep).
@@ -265,13 +295,19 @@ where
         } else {
             let n = self.r.x.len();
             self.xs.fill(0.0);
-            sparse_product(jac, pattern, self.r.x.as_slice(), self.xs.as_mut_slice());
+            sparse_product(
+                jac,
+                pattern,
+                false,
+                self.r.x.as_slice(),
+                self.xs.as_mut_slice(),
+            );
             if sens {
                 self.ss.fill(0.0);
                 let src = self.r.s.as_slice().chunks_exact(n);
                 let dst = self.ss.as_mut_slice().chunks_exact_mut(n);
                 for (v, out) in src.zip(dst) {
-                    sparse_product(jac, pattern, v, out);
+                    sparse_product(jac, pattern, false, v, out);
                 }
             }
         }
@@ -371,12 +407,17 @@ where
         let dl = s.l_minus - s.l_plus;
         // x: δt = −∇g·e_x/ġ, e_x⁺ = R_x e_x + w δt.
         let dt = inv_rate * s.gx.dot(&self.r.x);
+        self.d_minus.copy_from(&self.r.x);
+        self.d_minus.axpy(dt, s.f_minus, 1.0);
         match s.rx {
             Some(rx) => self.xs.gemv(1.0, rx, &self.r.x, 0.0),
             None => self.xs.copy_from(&self.r.x),
         }
         self.xs.axpy(dt, &self.w, 1.0);
         self.r.x.copy_from(&self.xs);
+        self.d_plus.copy_from(&self.r.x);
+        self.d_plus.axpy(dt, s.f_plus, 1.0);
+        self.shift_dt = dt;
         self.r.q += dl * dt;
         if let Some((phi_x, phi_t)) = s.cost {
             self.events_cost += phi_x.dot(&self.r.x) + (phi_x.dot(s.f_plus) + phi_t) * dt;
@@ -398,6 +439,19 @@ where
             self.events_grad
                 .axpy(phi_x.dot(s.f_plus) + phi_t, &self.dts, 1.0);
         }
+    }
+
+    /// The estimated error of x now: (r_x, α), e_x = r_x + α f(t, x).
+    pub fn state_error(&self) -> (&OVector<f64, N>, f64) {
+        (&self.r.x, self.alpha)
+    }
+
+    /// The last jump's displacement (d⁻, d⁺, δt): the jump the run applied, at t̃ = t + δt
+    /// from x̃⁻ = x⁻ + d⁻ to x̃⁺ = x⁺ + d⁺, is the exact one (t, x⁻, x⁺) moved by the state
+    /// error e_x⁻ it arrived with: δt = −∇g·e_x⁻/ġ, d⁻ = e_x⁻ + f⁻ δt and d⁺ = e_x⁺ + f⁺ δt =
+    /// R_x d⁻ + R_t δt (the adjoint sweep's transposes are evaluated there).
+    pub fn jump_shift(&self) -> (&OVector<f64, N>, &OVector<f64, N>, f64) {
+        (&self.d_minus, &self.d_plus, self.shift_dt)
     }
 
     /// The estimated errors at T, given f(T), ℓ(T) and, with a final cost, Φ_x(T): returns the

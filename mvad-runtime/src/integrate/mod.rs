@@ -54,6 +54,7 @@
 //! mode switch or switch flip, so the first stage after a jump is always F at the new state.
 
 mod adjoint;
+mod adjoint_error;
 mod aug;
 mod control;
 mod dense;
@@ -67,11 +68,12 @@ mod tsit5;
 mod verner;
 
 pub use adjoint::Backward;
+pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
 pub use global_error::{GlobalError, Saltation};
-pub use system::{ImplicitSystem, OdeSystem, StageVector};
+pub use system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 
 use crate::solution::{Method, Options, Stats};
 use control::Controller;

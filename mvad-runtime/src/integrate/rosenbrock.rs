@@ -270,6 +270,20 @@ pub(super) fn quadrature_weights(theta: f64) -> ([f64; NSTAGES], f64) {
             *zs = theta * *zs + t1 * (H[0][s] + theta * (H[1][s] + theta * H[2][s]));
         }
     }
+    update_weights(z)
+}
+
+/// The weights (ω, ω_t) of the Rosenbrock error estimate K₈ of a quadrature (its Q-block;
+/// see `quadrature.rs`): the update's with v = e₈.
+pub(super) fn quadrature_error_weights() -> ([f64; NSTAGES], f64) {
+    let mut v = [0.0; NSTAGES];
+    v[NSTAGES - 1] = 1.0;
+    update_weights(v)
+}
+
+/// (ω, ω_t) for the stage weights v of an update vᵀK_Q: (I − γC)ᵀ z = v by back
+/// substitution, ω = γz, ω_t = Σ_s ω_s d_s.
+fn update_weights(mut z: [f64; NSTAGES]) -> ([f64; NSTAGES], f64) {
     for s in (0..NSTAGES).rev() {
         for j in s + 1..NSTAGES {
             z[s] += GAMMA * CC[j][s] * z[j];

@@ -135,6 +135,16 @@ where
     }
 }
 
+/// Which sum a quadrature term goes to: the quadrature Q itself, or the estimate of its
+/// local error over the closed step (see [`OdeSystem::estimates_quadrature_error`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QuadratureSum {
+    /// Q.
+    Value,
+    /// The system's estimate of Q's error.
+    Error,
+}
+
 /// A system Ẏ = F(t, Y) the explicit methods can integrate, in either time direction.
 pub trait OdeSystem {
     /// The integrated vector Y.
@@ -169,8 +179,15 @@ pub trait OdeSystem {
     fn has_quadrature(&self) -> bool {
         false
     }
-    /// Q += a·G(t, y) (a stage value of a closed step times its weight h·bᵢ).
-    fn quadrature_add(&mut self, _t: f64, _y: &Self::Vector, _a: f64) {}
+    /// Whether the system estimates the quadrature's local error (the difference of the
+    /// scheme's embedded weights on the same stage values, summed into
+    /// [`QuadratureSum::Error`]). The default, `false`, does not: no error term is formed.
+    fn estimates_quadrature_error(&self) -> bool {
+        false
+    }
+    /// `sum` += a·G(t, y) (a stage value of a closed step times its weight h·bᵢ, or its error
+    /// weight h·(bᵢ − b̂ᵢ)).
+    fn quadrature_add(&mut self, _t: f64, _y: &Self::Vector, _a: f64, _sum: QuadratureSum) {}
     /// The weighted RMS norm of the local error `e` of a step from `y0` to `y1`,
     /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over the controlled
     /// entries with the system's weights w_i. Also the norm of Hairer's initial-step heuristic
@@ -229,11 +246,11 @@ pub trait ImplicitSystem: OdeSystem {
         _le: &Self::Vector,
     ) {
     }
-    /// Q += a·(∂G/∂Y)·v at the step start t0 (the quadrature's block of J, for the Rosenbrock
-    /// update of Q; see `quadrature.rs`).
-    fn quadrature_jac_add(&mut self, _t0: f64, _v: &Self::Vector, _a: f64) {}
-    /// Q += a·∂G/∂t at the step start (t0, y0) (the quadrature's part of F_t).
-    fn quadrature_dt_add(&mut self, _t0: f64, _y0: &Self::Vector, _a: f64) {}
+    /// `sum` += a·(∂G/∂Y)·v at the step start t0 (the quadrature's block of J, for the
+    /// Rosenbrock update of Q or its error; see `quadrature.rs`).
+    fn quadrature_jac_add(&mut self, _t0: f64, _v: &Self::Vector, _a: f64, _sum: QuadratureSum) {}
+    /// `sum` += a·∂G/∂t at the step start (t0, y0) (the quadrature's part of F_t).
+    fn quadrature_dt_add(&mut self, _t0: f64, _y0: &Self::Vector, _a: f64, _sum: QuadratureSum) {}
     /// Forgets J, F_t and the factors (new step start, restart, truncation).
     fn invalidate(&mut self);
     /// Evaluates the Jacobian of the primary flow at (t, y) and returns an estimate of its

@@ -3,9 +3,14 @@
 //! estimated errors of C and dC/dθ, with an `ill_conditioned` diagnostic when either exceeds
 //! [`ILL_CONDITIONED_FACTOR`] times the tolerance atol + rtol·|value|.
 //!
-//! The parameters are weighed as the sensitivities' error control weighs them (column j by
-//! w_j = |θ_j|, 1 for θ_j = 0), so the gradient's error is measured as the change of C it
-//! predicts for relative changes of θ: max_j w_j |e_j| against max_j w_j |dC/dθ_j|.
+//! The gradient's error is measured two ways, and the larger ratio is judged: with the
+//! parameters weighed as the sensitivities' error control weighs them (column j by
+//! w_j = |θ_j|, 1 for θ_j = 0), as the change of C it predicts for relative changes of θ
+//! (max_j w_j |e_j| against max_j w_j |dC/dθ_j|), and unweighted, as the suite measures a
+//! gradient's error (max_j |e_j| against max_j |dC/dθ_j|). The second catches an entry for a
+//! tiny parameter that is wrong by orders of magnitude (dC/dτ of the stiff relay, τ = 1e-8,
+//! from a sweep at rtol 1e-3), which the first scales away; forward mode's error control
+//! weighs S by |θ_j|, adjoint mode's quadrature g is controlled unweighted.
 
 use super::Driver;
 use crate::integrate::{sens_weight, Saltation};
@@ -112,7 +117,8 @@ where
 
     /// The estimated errors at T of the run's C and dC/dθ (`grad`, meaningful with
     /// sensitivities), with x(T) and f(T); pushes the `ill_conditioned` diagnostic when they
-    /// exceed what the tolerances ask for. `None` when no estimate was carried.
+    /// exceed what the tolerances ask for ([`judge`]), except in the adjoint's primal run.
+    /// `None` when no estimate was carried.
     pub(super) fn error_at_end(
         &mut self,
         cost: f64,
@@ -138,50 +144,80 @@ where
             .integ
             .global_error_mut()?
             .at_end(f_end, l_end, phi_x, sens, &mut e_grad);
-        let (atol, rtol) = (self.opts.atol, self.opts.rtol);
-        let cost_ratio = e_cost.abs() / (atol + rtol * cost.abs());
-        let weighted_max = |v: &OVector<f64, M::P>| {
-            v.iter()
-                .zip(p.iter())
-                .map(|(g, th)| (g * sens_weight(*th)).abs())
-                .fold(0.0, f64::max)
-        };
-        let (g_err, g_size) = if sens {
-            (weighted_max(&e_grad), weighted_max(grad))
-        } else {
-            (0.0, 0.0)
-        };
-        let gradient_ratio = g_err / (atol + rtol * g_size);
-        let mut parts = Vec::new();
-        if cost_ratio > ILL_CONDITIONED_FACTOR {
-            parts.push(describe("C", e_cost.abs(), cost.abs(), cost_ratio));
+        let e_grad = sens.then(|| (e_grad.as_slice(), grad.as_slice()));
+        let (estimate, diagnostic) = judge(
+            (e_cost, cost),
+            e_grad,
+            p.as_slice(),
+            (self.opts.atol, self.opts.rtol),
+            t_end,
+        );
+        // The adjoint's primal run (at a fraction of the tolerances) is judged by the
+        // adjoint, with the sweep's estimate, at the tolerances asked for.
+        if !self.tape {
+            self.diagnostics.extend(diagnostic);
         }
-        if gradient_ratio > ILL_CONDITIONED_FACTOR {
-            parts.push(describe("dC/dθ", g_err, g_size, gradient_ratio));
-        }
-        if !parts.is_empty() {
-            self.diagnostics.push(Diagnostic {
-                kind: DiagnosticKind::IllConditioned,
-                t: t_end,
-                message: format!(
-                    "global error estimate of {} (rtol {rtol:e}, atol {atol:e}): the steps' \
-                     local errors reach T amplified, or not damped, by the flow, so local error \
-                     control does not bound the result; tighten rtol and compare",
-                    parts.join(" and of ")
-                ),
-            });
-        }
-        Some(ErrorEstimate {
-            cost: e_cost,
-            gradient: if sens {
-                e_grad.iter().copied().collect()
-            } else {
-                Vec::new()
-            },
-            cost_ratio,
-            gradient_ratio,
-        })
+        Some(estimate)
     }
+}
+
+/// The estimate of a result and its judgement: `(e_cost, cost)` the estimated error of C and
+/// C, `grad` (the estimated error of the gradient and the gradient, `None` when only C was
+/// judged), θ and the tolerances asked for; the `ill_conditioned` diagnostic (at `t_end`) when
+/// either error exceeds [`ILL_CONDITIONED_FACTOR`] times atol + rtol·|value| (the gradient's
+/// weighed by |θ_j|, see the module doc). Forward mode and adjoint mode both judge here.
+pub(crate) fn judge(
+    (e_cost, cost): (f64, f64),
+    grad: Option<(&[f64], &[f64])>,
+    p: &[f64],
+    (atol, rtol): (f64, f64),
+    t_end: f64,
+) -> (ErrorEstimate, Option<Diagnostic>) {
+    let cost_ratio = e_cost.abs() / (atol + rtol * cost.abs());
+    let weighted_max = |v: &[f64], weighted: bool| {
+        v.iter()
+            .zip(p)
+            .map(|(g, th)| (g * if weighted { sens_weight(*th) } else { 1.0 }).abs())
+            .fold(0.0, f64::max)
+    };
+    // (error, size, ratio) of the gradient, weighted and not; the larger ratio is judged.
+    let measure = |weighted: bool| match grad {
+        Some((e, g)) => {
+            let (err, size) = (weighted_max(e, weighted), weighted_max(g, weighted));
+            (err, size, err / (atol + rtol * size))
+        }
+        None => (0.0, 0.0, 0.0),
+    };
+    let (weighted, plain) = (measure(true), measure(false));
+    let (g_err, g_size, gradient_ratio) = if plain.2 > weighted.2 {
+        plain
+    } else {
+        weighted
+    };
+    let mut parts = Vec::new();
+    if cost_ratio > ILL_CONDITIONED_FACTOR {
+        parts.push(describe("C", e_cost.abs(), cost.abs(), cost_ratio));
+    }
+    if gradient_ratio > ILL_CONDITIONED_FACTOR {
+        parts.push(describe("dC/dθ", g_err, g_size, gradient_ratio));
+    }
+    let diagnostic = (!parts.is_empty()).then(|| Diagnostic {
+        kind: DiagnosticKind::IllConditioned,
+        t: t_end,
+        message: format!(
+            "global error estimate of {} (rtol {rtol:e}, atol {atol:e}): the steps' \
+             local errors reach T amplified, or not damped, by the flow, so local error \
+             control does not bound the result; tighten rtol and compare",
+            parts.join(" and of ")
+        ),
+    });
+    let estimate = ErrorEstimate {
+        cost: e_cost,
+        gradient: grad.map(|(e, _)| e.to_vec()).unwrap_or_default(),
+        cost_ratio,
+        gradient_ratio,
+    };
+    (estimate, diagnostic)
 }
 
 /// "dC/dθ: 3.9e-3 relative, 2.6e5 × the tolerance".

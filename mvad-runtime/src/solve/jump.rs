@@ -83,6 +83,7 @@ where
                 modes,
                 &self.sw,
                 &self.sw_next,
+                self.integ.global_error(),
             );
         }
         // The new state.
@@ -410,7 +411,17 @@ where
         self.error_through_switch(j, t);
         if let Some(rec) = &mut self.rec {
             let (x, modes) = (&self.y.x, (self.mode, self.mode));
-            rec.jump(JumpKind::Switch(j), t, x, x, modes, &self.sw, &self.sw_next);
+            let ge = self.integ.global_error();
+            rec.jump(
+                JumpKind::Switch(j),
+                t,
+                x,
+                x,
+                modes,
+                &self.sw,
+                &self.sw_next,
+                ge,
+            );
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.switch_crossings += 1;

@@ -32,6 +32,8 @@ mod record;
 mod schedule;
 mod zeno;
 
+pub(crate) use conditioning::judge;
+
 use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
 use crate::event::{Crossing, Scanner, Watch};
@@ -294,6 +296,8 @@ where
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
     stuck: Option<usize>,
     rec: Option<Recorder>,
+    /// The run keeps the adjoint's tape: it is the adjoint's primal run.
+    tape: bool,
     /// The coefficients of one step's dense polynomial, for the adjoint's tape (empty
     /// without it).
     poly: Vec<OVector<f64, M::N>>,
@@ -373,6 +377,7 @@ where
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),
+            tape,
             poly: if tape {
                 (0..MAX_COEFS).map(|_| vn()).collect()
             } else {

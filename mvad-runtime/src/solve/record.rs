@@ -5,7 +5,7 @@
 //! jumps with the states, modes and switch bits on both sides; see [`crate::adjoint::record`]).
 
 use crate::adjoint::record::{JumpKind, Tape};
-use crate::integrate::{AugState, Forward, Integrator};
+use crate::integrate::{AugState, Forward, GlobalError, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Switches};
 use crate::solution::{Segment, Trajectory, TRAJ_NODES};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
@@ -66,9 +66,16 @@ impl Recorder {
             let deg = integ.dense_poly(poly);
             let step = (integ.t_prev(), integ.last_step_size());
             let cut = (t1 != integ.t()).then_some(t1);
-            tape.record_step(step, cut, deg, |m, out| {
-                out.copy_from_slice(poly[m].as_slice());
-            });
+            let err = integ
+                .global_error()
+                .map(|ge| (ge.state_error().0.as_slice(), ge.state_error().1));
+            tape.record_step(
+                step,
+                cut,
+                deg,
+                |m, out| out.copy_from_slice(poly[m].as_slice()),
+                err,
+            );
         }
         let Some(traj) = &mut self.traj else {
             return;
@@ -108,9 +115,11 @@ impl Recorder {
     }
 
     /// A jump the event loop applied at t: what fired, x⁻ and x⁺, the modes (before, after)
-    /// and the switch bits on both sides (for the tape; the trajectory has its event table).
+    /// and the switch bits on both sides (for the tape; the trajectory has its event table);
+    /// `ge` the run's global error estimate, which has just been carried through the jump
+    /// (its displacement goes on the tape).
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn jump<N: Dim>(
+    pub(super) fn jump<N: Dim, P: Dim>(
         &mut self,
         kind: JumpKind,
         t: f64,
@@ -119,12 +128,17 @@ impl Recorder {
         modes: (usize, usize),
         sw_before: &Switches,
         sw_after: &Switches,
+        ge: Option<&GlobalError<N, P>>,
     ) where
-        DefaultAllocator: nalgebra::allocator::Allocator<N>,
+        DefaultAllocator: ModelAlloc<N, P>,
     {
         if let Some(tape) = &mut self.tape {
             let (a, b) = (x_before.as_slice(), x_after.as_slice());
-            tape.jump(kind, t, a, b, modes, sw_before, sw_after);
+            let shift = ge.map(|ge| {
+                let (dm, dp, dt) = ge.jump_shift();
+                (dm.as_slice(), dp.as_slice(), dt)
+            });
+            tape.jump(kind, t, a, b, modes, sw_before, sw_after, shift);
         }
     }
 

@@ -222,6 +222,7 @@ fn skipped_row(method: Method, rtol: f64, r: &Reference) -> SweepRow {
             diagnostics: Vec::new(),
             error: None,
             seconds: f64::NAN,
+            estimate: None,
         },
         fd: None,
         skipped: true,
