@@ -42,9 +42,7 @@ mod tests {
         // The tail is summed, not stepped through: a few dozen bounces, not thousands.
         assert!(sol.events.len() < 100, "{} events", sol.events.len());
         let zeno = sol
-            .diagnostics
-            .iter()
-            .find(|d| d.kind == DiagnosticKind::Zeno)
+            .diagnostic(DiagnosticKind::Zeno)
             .expect("a zeno diagnostic");
         assert_relative_eq!(
             zeno.t,

@@ -643,24 +643,43 @@ impl Qp {
     }
 }
 
+/// What a model declares by name, in declaration order: the part of a [`Program`] that
+/// its kernels ([`crate::schedule::ModelKernels`]) carry over unchanged.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelNames {
+    /// Model name.
+    pub name: String,
+    /// State names (the order of x).
+    pub states: Vec<String>,
+    /// Parameter names (the order of θ).
+    pub params: Vec<String>,
+    /// Data tables: (name, file as written in the model).
+    pub tables: Vec<(String, String)>,
+    /// The table columns the model reads: (index into `tables`, column name); column c is
+    /// [`Node::Column`]`(c)`, `row[c]` in the kernels.
+    pub columns: Vec<(usize, String)>,
+    /// Declared parameter values (consts folded).
+    pub param_defaults: Vec<f64>,
+}
+
+impl ModelNames {
+    /// Number of states n.
+    pub fn nstates(&self) -> usize {
+        self.states.len()
+    }
+    /// Number of parameters p.
+    pub fn nparams(&self) -> usize {
+        self.params.len()
+    }
+}
+
 /// A checked model with all names resolved.
 #[derive(Clone, Debug)]
 pub struct Program {
     /// The shared expression arena.
     pub arena: ExprArena,
-    /// Model name.
-    pub name: String,
-    /// State names.
-    pub states: Vec<String>,
-    /// Parameter names.
-    pub params: Vec<String>,
-    /// Data tables: (name, file as written in the model).
-    pub tables: Vec<(String, String)>,
-    /// The table columns the model reads: (index into `tables`, column name); column c is
-    /// [`Node::Column`]`(c)`.
-    pub columns: Vec<(usize, String)>,
-    /// Declared parameter values (consts folded).
-    pub param_defaults: Vec<f64>,
+    /// Its names: model, states, parameters, tables and columns, parameter defaults.
+    pub names: ModelNames,
     /// x₀(θ), one expression per state.
     pub x0: Vec<ExprId>,
     /// Modes with their flows.
@@ -687,11 +706,11 @@ pub struct Program {
 impl Program {
     /// Number of states.
     pub fn nstates(&self) -> usize {
-        self.states.len()
+        self.names.nstates()
     }
     /// Number of parameters.
     pub fn nparams(&self) -> usize {
-        self.params.len()
+        self.names.nparams()
     }
     /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
     pub fn nswitches(&self) -> usize {

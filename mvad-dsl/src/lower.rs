@@ -31,7 +31,9 @@ use std::collections::HashMap;
 
 use crate::ast::{self, BinOp, CmpOp, CostKind, ExprKind};
 use crate::diag::Diagnostic;
-use crate::ir::{Cmp, Direction, Event, ExprArena, ExprId, Func, Mode, Node, Program, Schedule};
+use crate::ir::{
+    Cmp, Direction, Event, ExprArena, ExprId, Func, Mode, ModelNames, Node, Program, Schedule,
+};
 use crate::span::Span;
 
 /// Deepest nesting of expressions, observables included, that lowering accepts.
@@ -365,15 +367,17 @@ impl<'a> Lowerer<'a> {
 
         Program {
             arena: std::mem::take(&mut self.ar),
-            name: model.name.name.clone(),
-            states,
-            params,
-            tables: model
-                .tables()
-                .map(|t| (t.name.name.clone(), t.file.clone()))
-                .collect(),
-            columns: std::mem::take(&mut self.columns),
-            param_defaults,
+            names: ModelNames {
+                name: model.name.name.clone(),
+                states,
+                params,
+                tables: model
+                    .tables()
+                    .map(|t| (t.name.name.clone(), t.file.clone()))
+                    .collect(),
+                columns: std::mem::take(&mut self.columns),
+                param_defaults,
+            },
             x0,
             modes,
             initial_mode,

@@ -14,7 +14,7 @@
 //! method's ∂ₓ(G_x S + G_θ)·v and ∂ₜ(G_x S + G_θ)), all taken in the same arena.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, Node, Program, QpKind, Schedule, Wrt};
+use crate::ir::{Direction, ExprArena, ExprId, ModelNames, Node, Program, QpKind, Schedule, Wrt};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -259,18 +259,8 @@ pub struct QpKernels {
 pub struct ModelKernels {
     /// The arena holding every expression and derivative.
     pub arena: ExprArena,
-    /// Model name.
-    pub name: String,
-    /// State names.
-    pub states: Vec<String>,
-    /// Parameter names.
-    pub params: Vec<String>,
-    /// Data tables: (name, file as written).
-    pub tables: Vec<(String, String)>,
-    /// The columns read: (table index, column name); column c is `row[c]` in the kernels.
-    pub columns: Vec<(usize, String)>,
-    /// Declared parameter values.
-    pub param_defaults: Vec<f64>,
+    /// The program's names, as they were.
+    pub names: ModelNames,
     /// Mode names.
     pub mode_names: Vec<String>,
     /// Initial mode.
@@ -308,11 +298,11 @@ pub struct ModelKernels {
 impl ModelKernels {
     /// Number of states n.
     pub fn nstates(&self) -> usize {
-        self.states.len()
+        self.names.nstates()
     }
     /// Number of parameters p.
     pub fn nparams(&self) -> usize {
-        self.params.len()
+        self.names.nparams()
     }
     /// The `at each` events whose times are a bare column `TABLE.COL` (so the column itself
     /// must not decrease, which can be checked where the table is read): (column, event).
@@ -648,12 +638,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
         .collect();
 
     ModelKernels {
-        name: program.name.clone(),
-        states: program.states.clone(),
-        params: program.params.clone(),
-        tables: program.tables.clone(),
-        columns: program.columns.clone(),
-        param_defaults: program.param_defaults.clone(),
+        names: program.names.clone(),
         mode_names: program.modes.iter().map(|m| m.name.clone()).collect(),
         initial_mode: program.initial_mode,
         event_meta: (program.events.iter().zip(affine_guards))

@@ -102,10 +102,7 @@ where
         nodes,
         atoms,
     };
-    let zeno = solution
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::Zeno);
+    let zeno = solution.diagnostic(DiagnosticKind::Zeno);
     if let Some(d) = zeno {
         mu.add_zeno_tail_atom(d.t);
     }
@@ -170,13 +167,7 @@ impl Measure {
     }
 
     fn step_density(&self, k: usize, t: f64, out: &mut [f64]) {
-        let (a, b) = (self.t0[k], self.t1[k]);
-        let theta = if b > a {
-            ((t - a) / (b - a)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let w = Trajectory::weights(theta);
+        let w = Trajectory::weights_on(self.t0[k], self.t1[k], t);
         let p = self.nparams;
         out.fill(0.0);
         for (i, wi) in w.iter().enumerate() {

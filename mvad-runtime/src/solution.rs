@@ -353,6 +353,13 @@ pub struct Segment {
     pub end_step: usize,
 }
 
+impl Solution {
+    /// The first diagnostic of `kind` the run raised, if any.
+    pub fn diagnostic(&self, kind: DiagnosticKind) -> Option<&Diagnostic> {
+        self.diagnostics.iter().find(|d| d.kind == kind)
+    }
+}
+
 /// The recorded trajectory: x(t) and S(t) = ∂x/∂θ on every accepted step.
 ///
 /// Each step [t₀, t₁] keeps x and S at [`TRAJ_NODES`] equispaced nodes, filled from the
@@ -434,19 +441,24 @@ impl Trajectory {
         w
     }
 
+    /// The [`Trajectory::weights`] at t on the step [a, b]: θ = (t − a)/(b − a) clamped to
+    /// [0, 1], and θ = 0 on a step of zero length.
+    pub fn weights_on(a: f64, b: f64, t: f64) -> [f64; TRAJ_NODES] {
+        let theta = if b > a {
+            ((t - a) / (b - a)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        Self::weights(theta)
+    }
+
     /// x(t) and S(t) into `x` (length n) and `s` (length n·p, column-major); see the type's
     /// doc for which side of an event is returned. Returns false when nothing was recorded.
     pub fn sample_into(&self, t: f64, x: &mut [f64], s: &mut [f64]) -> bool {
         let Some(k) = self.step_at(t) else {
             return false;
         };
-        let (a, b) = (self.t0[k], self.t1[k]);
-        let theta = if b > a {
-            ((t - a) / (b - a)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let w = Self::weights(theta);
+        let w = Self::weights_on(self.t0[k], self.t1[k], t);
         let len = self.node_len();
         let base = k * TRAJ_NODES * len;
         x.fill(0.0);

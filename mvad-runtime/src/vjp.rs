@@ -85,6 +85,7 @@ where
         check_times(cot.times, t_end)?;
     }
     let mode = opts.gradient_mode.resolve(model.nparams().value());
+    let mut fallback = None;
     if mode == GradientMode::Adjoint {
         let mut events = Vec::new();
         match adjoint::pull_back(model, params, opts, &mut events, cot)? {
@@ -97,35 +98,36 @@ where
                     solution,
                 });
             }
-            Err(reason) => {
-                let mut out = forward_vjp(model, params, opts, cot)?;
-                adjoint::note_fallback(&mut out.solution, reason);
-                out.solution.stats.wall_seconds = start.elapsed().as_secs_f64();
-                return Ok(out);
-            }
+            Err(reason) => fallback = Some(reason),
         }
     }
-    forward_vjp(model, params, opts, cot)
-}
-
-/// The product in forward mode: dC/dθ from the run, and dy(t_s)/dθ = h_x S(t_s) + h_θ read
-/// from its record ([`crate::sample::sample`]).
-fn forward_vjp<M: HybridModel>(
-    model: &M,
-    params: &OVector<f64, M::P>,
-    opts: &Options,
-    cot: &Cotangents<'_>,
-) -> Result<Vjp, SolveError>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
     let fwd = Options {
         sensitivities: true,
         record: !cot.times.is_empty(),
         gradient_mode: GradientMode::Forward,
         ..opts.clone()
     };
-    let mut solution = solve(model, params, &fwd)?;
+    let solution = solve(model, params, &fwd)?;
+    let mut out = forward_products(model, params, solution, cot)?;
+    if let Some(reason) = fallback {
+        adjoint::note_fallback(&mut out.solution, reason);
+        out.solution.stats.wall_seconds = start.elapsed().as_secs_f64();
+    }
+    Ok(out)
+}
+
+/// The product from a forward-mode run `solution` (with sensitivities, recorded when there
+/// are sample times): w_C dC/dθ from the run, plus w_sᵀ dy(t_s)/dθ with
+/// dy(t_s)/dθ = h_x S(t_s) + h_θ read from its record ([`crate::sample::sample`]).
+fn forward_products<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    mut solution: Solution,
+    cot: &Cotangents<'_>,
+) -> Result<Vjp, SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
     let mut gradient: Vec<f64> = solution.gradient.iter().map(|g| cot.cost * g).collect();
     if let Some(left) = solution.gradient_left.as_mut() {
         left.iter_mut().for_each(|g| *g *= cot.cost);

@@ -343,11 +343,7 @@ fn zeno_ball_e08_long_horizon_and_its_measure() {
     let (c, t_star) = common::ball::zeno_series(d(0), d(1), d(2), d(3));
     let opts = recorded();
     let sol = solve(&m, &p, &opts).unwrap();
-    let z = sol
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::Zeno)
-        .expect("zeno");
+    let z = sol.diagnostic(DiagnosticKind::Zeno).expect("zeno");
     assert!((z.t - t_star.v).abs() < 1e-6, "{} vs {}", z.t, t_star.v);
     assert!((sol.cost - c.v).abs() < 1e-6, "{} vs {}", sol.cost, c.v);
     for i in 0..4 {
@@ -360,9 +356,7 @@ fn zeno_ball_e08_long_horizon_and_its_measure() {
     }
     // No grazing noise: the accumulation explains it.
     assert!(
-        !sol.diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::Grazing),
+        sol.diagnostic(DiagnosticKind::Grazing).is_none(),
         "{:?}",
         sol.diagnostics
     );

@@ -115,10 +115,10 @@ impl InterpretedModel {
             grad: tape(&g.grad),
         };
         let info = ModelInfo {
-            name: k.name.clone(),
-            states: k.states.clone(),
-            params: k.params.clone(),
-            param_defaults: k.param_defaults.clone(),
+            name: k.names.name.clone(),
+            states: k.names.states.clone(),
+            params: k.names.params.clone(),
+            param_defaults: k.names.param_defaults.clone(),
             modes: k.mode_names.clone(),
             initial_mode: k.initial_mode,
             events: k

@@ -45,9 +45,7 @@ fn try_run(
 }
 
 fn ill_conditioned(sol: &Solution) -> bool {
-    sol.diagnostics
-        .iter()
-        .any(|d| d.kind == DiagnosticKind::IllConditioned)
+    sol.diagnostic(DiagnosticKind::IllConditioned).is_some()
 }
 
 /// max_i |a_i − r_i| / max_i |r_i|, the suite's error of a gradient.
@@ -178,9 +176,7 @@ fn the_fold_is_reported(opts: &Options) -> (mvad::interp::InterpretedModel, DVec
     let sol = solve(&m, &p, opts).expect("the run succeeds");
     assert_eq!(sol.stats.mode, opts.gradient_mode);
     let d = sol
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::IllConditioned)
+        .diagnostic(DiagnosticKind::IllConditioned)
         .expect("ill_conditioned raised");
     assert!(d.message.contains("dC/dθ"), "{}", d.message);
     let est = sol.error_estimate.expect("an estimate");

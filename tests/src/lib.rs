@@ -81,6 +81,7 @@ type Pv<M> = OVector<f64, <M as ModelDims>::P>;
 type Nn<M> = OMatrix<f64, <M as ModelDims>::N, <M as ModelDims>::N>;
 type Np<M> = OMatrix<f64, <M as ModelDims>::N, <M as ModelDims>::P>;
 type Pt<'a, M> = mvad::Point<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
+type AtM<'a, M> = At<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
 
 impl<M: ModelDims> ModelDims for Defaults<M> {
     type N = M::N;
@@ -91,129 +92,51 @@ impl<M: HybridModel> ModelSens for Defaults<M> where DefaultAllocator: ModelAllo
 impl<M: HybridModel> ModelAdjoint for Defaults<M> where DefaultAllocator: ModelAlloc<M::N, M::P> {}
 impl<M: HybridModel> ModelSecondOrder for Defaults<M> where DefaultAllocator: ModelAlloc<M::N, M::P> {}
 
+/// For each signature `fn NAME(&self, ARG: TYPE, ..) -> RET;`, the method that answers as the
+/// wrapped model does: `self.0.NAME(ARG, ..)`.
+macro_rules! delegate_to_inner {
+    ($(fn $name:ident(&self $(, $arg:ident: $ty:ty)* $(,)?) $(-> $ret:ty)?;)*) => {
+        $(fn $name(&self $(, $arg: $ty)*) $(-> $ret)? { self.0.$name($($arg),*) })*
+    };
+}
+
 impl<M: HybridModel> HybridModel for Defaults<M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    fn info(&self) -> &mvad::ModelInfo {
-        self.0.info()
-    }
-    fn nstates(&self) -> M::N {
-        self.0.nstates()
-    }
-    fn nparams(&self) -> M::P {
-        self.0.nparams()
-    }
-    fn initial_state(&self, p: &Pv<M>, x0: &mut Xv<M>) {
-        self.0.initial_state(p, x0)
-    }
-    fn initial_state_jac(&self, p: &Pv<M>, dx0: &mut Np<M>) {
-        self.0.initial_state_jac(p, dx0)
-    }
-    fn horizon(&self, p: &Pv<M>) -> Option<f64> {
-        self.0.horizon(p)
-    }
-    fn horizon_grad(&self, p: &Pv<M>, dt: &mut Pv<M>) {
-        self.0.horizon_grad(p, dt)
-    }
-    fn rhs(&self, pt: Pt<'_, M>, f: &mut Xv<M>) {
-        self.0.rhs(pt, f)
-    }
-    fn rhs_jac_x(&self, pt: Pt<'_, M>, fx: &mut Nn<M>) {
-        self.0.rhs_jac_x(pt, fx)
-    }
-    fn rhs_jac_p(&self, pt: Pt<'_, M>, fp: &mut Np<M>) {
-        self.0.rhs_jac_p(pt, fp)
-    }
-    fn rhs_dt(&self, pt: Pt<'_, M>, ft: &mut Xv<M>) {
-        self.0.rhs_dt(pt, ft)
-    }
-    fn rhs_depends_on_t(&self, mode: usize) -> bool {
-        self.0.rhs_depends_on_t(mode)
-    }
-    fn flow_is_constant(&self, mode: usize) -> bool {
-        self.0.flow_is_constant(mode)
-    }
-    fn guard(&self, k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
-        self.0.guard(k, at)
-    }
-    fn guard_is_affine(&self, k: usize) -> bool {
-        self.0.guard_is_affine(k)
-    }
-    fn guard_grad(
-        &self,
-        k: usize,
-        at: At<'_, Self::N, Self::P>,
-        gx: &mut Xv<M>,
-        gp: &mut Pv<M>,
-    ) -> f64 {
-        self.0.guard_grad(k, at, gx, gp)
-    }
-    fn reset(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>, xplus: &mut Xv<M>) {
-        self.0.reset(occ, at, xplus)
-    }
-    fn reset_jac(
-        &self,
-        occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
-        rx: &mut Nn<M>,
-        rp: &mut Np<M>,
-        rt: &mut Xv<M>,
-    ) {
-        self.0.reset_jac(occ, at, rx, rp, rt)
-    }
-    fn event_time(&self, occ: Occurrence, p: &Pv<M>) -> f64 {
-        self.0.event_time(occ, p)
-    }
-    fn event_time_grad(&self, occ: Occurrence, p: &Pv<M>, dtau: &mut Pv<M>) {
-        self.0.event_time_grad(occ, p, dtau)
-    }
-    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64 {
-        self.0.switch_value(j, at)
-    }
-    fn switch_grad(
-        &self,
-        j: usize,
-        at: At<'_, Self::N, Self::P>,
-        gx: &mut Xv<M>,
-        gp: &mut Pv<M>,
-    ) -> f64 {
-        self.0.switch_grad(j, at, gx, gp)
-    }
-    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
-        self.0.observe(at, y)
-    }
-    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
-        self.0.observe_jac(at, yx, yp)
-    }
-    fn running_cost(&self, sw: &mvad::Switches, at: At<'_, Self::N, Self::P>) -> f64 {
-        self.0.running_cost(sw, at)
-    }
-    fn running_cost_value_grad(
-        &self,
-        sw: &mvad::Switches,
-        at: At<'_, Self::N, Self::P>,
-        lx: &mut Xv<M>,
-        lp: &mut Pv<M>,
-    ) -> f64 {
-        self.0.running_cost_value_grad(sw, at, lx, lp)
-    }
-    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64 {
-        self.0.event_cost(occ, at)
-    }
-    fn event_cost_grad(
-        &self,
-        occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
-        cx: &mut Xv<M>,
-        cp: &mut Pv<M>,
-    ) -> f64 {
-        self.0.event_cost_grad(occ, at, cx, cp)
-    }
-    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64 {
-        self.0.final_cost(at)
-    }
-    fn final_cost_grad(&self, at: At<'_, Self::N, Self::P>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64 {
-        self.0.final_cost_grad(at, cx, cp)
+    delegate_to_inner! {
+        fn info(&self) -> &mvad::ModelInfo;
+        fn nstates(&self) -> M::N;
+        fn nparams(&self) -> M::P;
+        fn initial_state(&self, p: &Pv<M>, x0: &mut Xv<M>);
+        fn initial_state_jac(&self, p: &Pv<M>, dx0: &mut Np<M>);
+        fn horizon(&self, p: &Pv<M>) -> Option<f64>;
+        fn horizon_grad(&self, p: &Pv<M>, dt: &mut Pv<M>);
+        fn rhs(&self, pt: Pt<'_, M>, f: &mut Xv<M>);
+        fn rhs_jac_x(&self, pt: Pt<'_, M>, fx: &mut Nn<M>);
+        fn rhs_jac_p(&self, pt: Pt<'_, M>, fp: &mut Np<M>);
+        fn rhs_dt(&self, pt: Pt<'_, M>, ft: &mut Xv<M>);
+        fn rhs_depends_on_t(&self, mode: usize) -> bool;
+        fn flow_is_constant(&self, mode: usize) -> bool;
+        fn guard(&self, k: usize, at: AtM<'_, M>) -> f64;
+        fn guard_is_affine(&self, k: usize) -> bool;
+        fn guard_grad(&self, k: usize, at: AtM<'_, M>, gx: &mut Xv<M>, gp: &mut Pv<M>) -> f64;
+        fn reset(&self, occ: Occurrence, at: AtM<'_, M>, xplus: &mut Xv<M>);
+        fn reset_jac(&self, occ: Occurrence, at: AtM<'_, M>,
+            rx: &mut Nn<M>, rp: &mut Np<M>, rt: &mut Xv<M>);
+        fn event_time(&self, occ: Occurrence, p: &Pv<M>) -> f64;
+        fn event_time_grad(&self, occ: Occurrence, p: &Pv<M>, dtau: &mut Pv<M>);
+        fn switch_value(&self, j: usize, at: AtM<'_, M>) -> f64;
+        fn switch_grad(&self, j: usize, at: AtM<'_, M>, gx: &mut Xv<M>, gp: &mut Pv<M>) -> f64;
+        fn observe(&self, at: AtM<'_, M>, y: &mut [f64]);
+        fn observe_jac(&self, at: AtM<'_, M>, yx: &mut [f64], yp: &mut [f64]);
+        fn running_cost(&self, sw: &mvad::Switches, at: AtM<'_, M>) -> f64;
+        fn running_cost_value_grad(&self, sw: &mvad::Switches, at: AtM<'_, M>,
+            lx: &mut Xv<M>, lp: &mut Pv<M>) -> f64;
+        fn event_cost(&self, occ: Occurrence, at: AtM<'_, M>) -> f64;
+        fn event_cost_grad(&self, occ: Occurrence, at: AtM<'_, M>,
+            cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64;
+        fn final_cost(&self, at: AtM<'_, M>) -> f64;
+        fn final_cost_grad(&self, at: AtM<'_, M>, cx: &mut Xv<M>, cp: &mut Pv<M>) -> f64;
     }
 }

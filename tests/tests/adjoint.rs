@@ -55,10 +55,7 @@ where
     assert_eq!(a.events.len(), f.events.len(), "{what}: events");
     let ran = a.stats.mode == GradientMode::Adjoint;
     if !ran {
-        let z = a
-            .diagnostics
-            .iter()
-            .find(|d| d.kind == DiagnosticKind::Zeno);
+        let z = a.diagnostic(DiagnosticKind::Zeno);
         assert!(
             z.is_some_and(|d| d.message.contains("forward mode")),
             "{what}: fell back without saying so: {:?}",
@@ -109,28 +106,33 @@ fn bundled_models_loaded_adjoint_matches_forward() {
     assert_eq!(swept, 8 * 4 + 2);
 }
 
+/// [`compare`] on each compiled model `models::MODULE::TYPE` at its defaults under `method`,
+/// named "MODULE (compiled)".
+macro_rules! compare_compiled {
+    ($method:expr; $($module:ident::$ty:ident),* $(,)?) => {
+        $(
+            let m = models::$module::$ty::new();
+            let what = concat!(stringify!($module), " (compiled)");
+            compare(&m, &m.default_params(), $method, what);
+        )*
+    };
+}
+
 #[test]
 fn bundled_models_compiled_adjoint_matches_forward() {
-    use models::*;
     for method in Method::ALL {
-        let m = bouncing_ball::BouncingBall::new();
-        compare(&m, &m.default_params(), method, "bouncing_ball (compiled)");
-        let m = ceiling::Ceiling::new();
-        compare(&m, &m.default_params(), method, "ceiling (compiled)");
-        let m = e2_sweep::E2Sweep::new();
-        compare(&m, &m.default_params(), method, "e2_sweep (compiled)");
-        let m = thermostat::Thermostat::new();
-        compare(&m, &m.default_params(), method, "thermostat (compiled)");
-        let m = zeno_ball::ZenoBall::new();
-        compare(&m, &m.default_params(), method, "zeno_ball (compiled)");
-        let m = qp_cart::QpCart::new();
-        compare(&m, &m.default_params(), method, "qp_cart (compiled)");
-        let m = qp_kink::QpKink::new();
-        compare(&m, &m.default_params(), method, "qp_kink (compiled)");
+        compare_compiled!(method;
+            bouncing_ball::BouncingBall,
+            ceiling::Ceiling,
+            e2_sweep::E2Sweep,
+            thermostat::Thermostat,
+            zeno_ball::ZenoBall,
+            qp_cart::QpCart,
+            qp_kink::QpKink,
+        );
     }
     for method in [Method::Auto, Method::Rosenbrock] {
-        let m = stiff_relay::StiffRelay::new();
-        compare(&m, &m.default_params(), method, "stiff_relay (compiled)");
+        compare_compiled!(method; stiff_relay::StiffRelay);
     }
 }
 
@@ -232,7 +234,7 @@ fn qp_kink_at_t_gives_both_one_sided_gradients_in_adjoint_mode() {
         let f = solve(&m, &p, &fine(Method::Auto, GradientMode::Forward)).expect("forward");
         let s = solve(&m, &p, &fine(Method::Auto, GradientMode::Adjoint)).expect("adjoint");
         assert_eq!(s.stats.mode, GradientMode::Adjoint);
-        let kink = s.diagnostics.iter().any(|d| d.kind == DiagnosticKind::Kink);
+        let kink = s.diagnostic(DiagnosticKind::Kink).is_some();
         assert_eq!(kink, theta == 0.0, "{:?}", s.diagnostics);
         let right = 2.0 * theta * (1.0 - (-2.0 * a * t).exp()) / (2.0 * a) + (-a * t).exp();
         println!(

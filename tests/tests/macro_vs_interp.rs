@@ -81,12 +81,12 @@ where
     }
     for k in 0..info.events.len() {
         let occ = Occurrence::new(k, 0);
-        put(format!("g{k}"), &[m.guard(k, at)]);
-        let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.guard_grad(k, at, &mut gx, &mut gp);
-        put(format!("gx{k}"), gx.as_slice());
-        put(format!("gp{k}"), gp.as_slice());
-        put(format!("gt{k}"), &[gt]);
+        let guard = m.guard(k, at);
+        for (key, v) in scalar_grad(m, &format!("g{k}"), guard, |gx, gp| {
+            m.guard_grad(k, at, gx, gp)
+        }) {
+            put(key, &v);
+        }
         let mut xp = zn();
         m.reset(occ, at, &mut xp);
         put(format!("R{k}"), xp.as_slice());
@@ -95,20 +95,20 @@ where
         put(format!("Rx{k}"), rx.as_slice());
         put(format!("Rp{k}"), rp.as_slice());
         put(format!("Rt{k}"), rt.as_slice());
-        put(format!("phi{k}"), &[m.event_cost(occ, at)]);
-        let (mut cx, mut cp) = (zn(), zp());
-        let ct = m.event_cost_grad(occ, at, &mut cx, &mut cp);
-        put(format!("phix{k}"), cx.as_slice());
-        put(format!("phip{k}"), cp.as_slice());
-        put(format!("phit{k}"), &[ct]);
+        let phi = m.event_cost(occ, at);
+        for (key, v) in scalar_grad(m, &format!("phi{k}"), phi, |cx, cp| {
+            m.event_cost_grad(occ, at, cx, cp)
+        }) {
+            put(key, &v);
+        }
     }
     for j in 0..info.switches {
-        put(format!("sigma{j}"), &[m.switch_value(j, at)]);
-        let (mut gx, mut gp) = (zn(), zp());
-        let gt = m.switch_grad(j, at, &mut gx, &mut gp);
-        put(format!("sigmax{j}"), gx.as_slice());
-        put(format!("sigmap{j}"), gp.as_slice());
-        put(format!("sigmat{j}"), &[gt]);
+        let sigma = m.switch_value(j, at);
+        for (key, v) in scalar_grad(m, &format!("sigma{j}"), sigma, |gx, gp| {
+            m.switch_grad(j, at, gx, gp)
+        }) {
+            put(key, &v);
+        }
     }
     let nobs = info.observables.len();
     let mut y = vec![0.0; nobs];
@@ -118,19 +118,39 @@ where
     m.observe_jac(at, &mut yx, &mut yp);
     put("yx".into(), &yx);
     put("yp".into(), &yp);
-    put("l".into(), &[m.running_cost(sw, at)]);
-    let (mut lx, mut lp) = (zn(), zp());
-    let l2 = m.running_cost_value_grad(sw, at, &mut lx, &mut lp);
-    put("lx".into(), lx.as_slice());
-    put("lp".into(), lp.as_slice());
-    put("l2".into(), &[l2]);
-    put("Phi".into(), &[m.final_cost(at)]);
-    let (mut cx, mut cp) = (zn(), zp());
-    let ct = m.final_cost_grad(at, &mut cx, &mut cp);
-    put("Phix".into(), cx.as_slice());
-    put("Phip".into(), cp.as_slice());
-    put("Phit".into(), &[ct]);
+    // ℓ's value-and-gradient method returns ℓ again (stored as `lt`).
+    let l = m.running_cost(sw, at);
+    let lg = scalar_grad(m, "l", l, |lx, lp| {
+        m.running_cost_value_grad(sw, at, lx, lp)
+    });
+    let phi = m.final_cost(at);
+    let phig = scalar_grad(m, "Phi", phi, |cx, cp| m.final_cost_grad(at, cx, cp));
+    for (key, v) in lg.into_iter().chain(phig) {
+        put(key, &v);
+    }
     out
+}
+
+/// A scalar `value` of `m` and its gradient from `grad` (which fills the x and θ parts and
+/// returns the t part), labelled NAME, NAMEx, NAMEp and NAMEt.
+fn scalar_grad<M: HybridModel>(
+    m: &M,
+    name: &str,
+    value: f64,
+    grad: impl FnOnce(&mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64,
+) -> [(String, Vec<f64>); 4]
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut gx = OVector::<f64, M::N>::zeros_generic(m.nstates(), Const::<1>);
+    let mut gp = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    let gt = grad(&mut gx, &mut gp);
+    [
+        (name.to_string(), vec![value]),
+        (format!("{name}x"), gx.as_slice().to_vec()),
+        (format!("{name}p"), gp.as_slice().to_vec()),
+        (format!("{name}t"), vec![gt]),
+    ]
 }
 
 /// Every capability product of `m` at one point, labelled: λᵀf_x, λᵀf_θ, ∂ₓ(f_x S + f_θ)·v

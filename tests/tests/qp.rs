@@ -30,10 +30,7 @@ where
         assert_eq!(u, qp_kink::solution(theta));
         assert_eq!(sol.cost, 0.5 * u * u);
         err += (sol.gradient[0] - qp_kink::gradient(theta)).abs();
-        let kink = sol
-            .diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::Kink);
+        let kink = sol.diagnostic(DiagnosticKind::Kink).is_some();
         match sol.qp[0].status[0] {
             ConstraintStatus::Active => counts.0 += 1,
             ConstraintStatus::WeaklyActive => {

@@ -23,10 +23,7 @@ fn zeno_velocity_measure_pairs_to_the_height_change() {
         ..Options::default()
     };
     let sol = solve(&model, &p, &opts).expect("the run succeeds");
-    assert!(sol
-        .diagnostics
-        .iter()
-        .any(|d| d.kind == DiagnosticKind::Zeno));
+    assert!(sol.diagnostic(DiagnosticKind::Zeno).is_some());
     let info = model.info();
     let height = measure(&model, &p, &sol, info.observable_index("height").unwrap()).unwrap();
     let velocity = measure(&model, &p, &sol, info.observable_index("velocity").unwrap()).unwrap();
@@ -55,12 +52,7 @@ fn zeno_velocity_measure_pairs_to_the_height_change() {
         );
     }
     // Without the effective atom at t*, d/de would be off by about 2e-2: the atom matters.
-    let t_star = sol
-        .diagnostics
-        .iter()
-        .find(|d| d.kind == DiagnosticKind::Zeno)
-        .unwrap()
-        .t;
+    let t_star = sol.diagnostic(DiagnosticKind::Zeno).unwrap().t;
     let tail = velocity
         .atoms
         .iter()

@@ -17,6 +17,7 @@
 //! conditions are comparisons, each state has exactly one `der` per mode, observables do
 //! not depend on themselves and stay within [`crate::ast::MAX_DEPTH`] once substituted.
 
+use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 
 use crate::ast::{Condition, CostKind, Event, Expr, ExprKind, Ident, Item, Model, Trigger};
@@ -460,40 +461,22 @@ pub fn check_ders(model: &Model) -> Vec<Diagnostic> {
         let mut given: HashMap<&str, Span> = HashMap::new();
         for d in ders {
             let name = d.state.name.as_str();
-            match syms.get(name) {
-                Some((Kind::State, _)) => {}
-                Some((k, decl)) => {
-                    out.push(
-                        Diagnostic::new(
-                            d.state.span,
-                            format!("`der` of {} `{name}`, which is not a state", k.noun()),
-                        )
-                        .with_label(*decl, "declared here"),
-                    );
-                    continue;
-                }
-                None => {
-                    let mut diag = Diagnostic::new(
-                        d.state.span,
-                        format!("`der` of `{name}`, which is not a declared state"),
-                    );
-                    if let Some(s) = suggest(name, states.iter().map(|s| s.name.as_str())) {
-                        diag = diag.with_help(format!("did you mean `{s}`?"));
-                    }
-                    out.push(diag);
-                    continue;
-                }
-            }
-            if let Some(&first) = given.get(name) {
-                out.push(
+            match assign_state(&syms, &d.state, "`der`", &mut given) {
+                Ok(()) => {}
+                Err(Misassigned::NotAState(diag)) => out.push(diag),
+                Err(Misassigned::Undeclared(diag)) => out.push(
+                    match suggest(name, states.iter().map(|s| s.name.as_str())) {
+                        Some(s) => diag.with_help(format!("did you mean `{s}`?")),
+                        None => diag,
+                    },
+                ),
+                Err(Misassigned::Again(first)) => out.push(
                     Diagnostic::new(
                         d.state.span,
                         format!("`der({name})` is given twice in {where_}"),
                     )
                     .with_label(first, "first given here"),
-                );
-            } else {
-                given.insert(name, d.state.span);
+                ),
             }
         }
         let mut seen = HashSet::new();
@@ -513,6 +496,47 @@ pub fn check_ders(model: &Model) -> Vec<Diagnostic> {
     out
 }
 
+/// Why a `der` or a reset may not assign the name it targets.
+enum Misassigned {
+    /// The name is declared, but not as a state: "WHAT of KIND `x`, which is not a state",
+    /// labelled at the declaration.
+    NotAState(Diagnostic),
+    /// The name is not declared: "WHAT of `x`, which is not a declared state".
+    Undeclared(Diagnostic),
+    /// The state was assigned before in the same block or event, at this span.
+    Again(Span),
+}
+
+/// Checks that `target`, assigned by `what` (`der` or a reset), is a state not yet in
+/// `assigned` (a block's or an event's assignments so far), and records it there.
+fn assign_state<'m>(
+    syms: &HashMap<&str, (Kind, Span)>,
+    target: &'m Ident,
+    what: &str,
+    assigned: &mut HashMap<&'m str, Span>,
+) -> Result<(), Misassigned> {
+    let name = target.name.as_str();
+    match syms.get(name) {
+        Some((Kind::State, _)) => {}
+        Some((k, decl)) => {
+            let msg = format!("{what} of {} `{name}`, which is not a state", k.noun());
+            let diag = Diagnostic::new(target.span, msg).with_label(*decl, "declared here");
+            return Err(Misassigned::NotAState(diag));
+        }
+        None => {
+            let msg = format!("{what} of `{name}`, which is not a declared state");
+            return Err(Misassigned::Undeclared(Diagnostic::new(target.span, msg)));
+        }
+    }
+    match assigned.entry(name) {
+        Entry::Occupied(first) => Err(Misassigned::Again(*first.get())),
+        Entry::Vacant(slot) => {
+            slot.insert(target.span);
+            Ok(())
+        }
+    }
+}
+
 /// Resets assign only states, each at most once per event.
 pub fn check_resets(model: &Model) -> Vec<Diagnostic> {
     let syms = symbols(model);
@@ -521,37 +545,19 @@ pub fn check_resets(model: &Model) -> Vec<Diagnostic> {
         let mut assigned: HashMap<&str, Span> = HashMap::new();
         for r in e.resets.iter().flatten() {
             let name = r.state.name.as_str();
-            match syms.get(name) {
-                Some((Kind::State, _)) => {}
-                Some((k, decl)) => {
-                    out.push(
-                        Diagnostic::new(
-                            r.state.span,
-                            format!("reset of {} `{name}`, which is not a state", k.noun()),
-                        )
-                        .with_label(*decl, "declared here")
-                        .with_help("a reset block may assign only states"),
-                    );
-                    continue;
+            match assign_state(&syms, &r.state, "reset", &mut assigned) {
+                Ok(()) => {}
+                Err(Misassigned::NotAState(diag)) => {
+                    out.push(diag.with_help("a reset block may assign only states"))
                 }
-                None => {
-                    out.push(Diagnostic::new(
-                        r.state.span,
-                        format!("reset of `{name}`, which is not a declared state"),
-                    ));
-                    continue;
-                }
-            }
-            if let Some(&first) = assigned.get(name) {
-                out.push(
+                Err(Misassigned::Undeclared(diag)) => out.push(diag),
+                Err(Misassigned::Again(first)) => out.push(
                     Diagnostic::new(
                         r.state.span,
                         format!("state `{name}` is reset twice in {}", event_label(e)),
                     )
                     .with_label(first, "first assigned here"),
-                );
-            } else {
-                assigned.insert(name, r.state.span);
+                ),
             }
         }
     }

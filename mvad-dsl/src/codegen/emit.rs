@@ -144,6 +144,11 @@ impl Gen<'_> {
             tokens,
             prec: Prec::Atom,
         };
+        // `slice[i]`, an atom: a state, parameter, column or qp value the method has bound.
+        let element = |slice: TokenStream, i: usize| {
+            let i = usize_lit(i);
+            atom(quote!(#slice[#i]))
+        };
         match node {
             Node::Const(bits) => {
                 let v = f64::from_bits(bits);
@@ -158,29 +163,17 @@ impl Gen<'_> {
                 }
             }
             Node::Time => atom(quote!(t)),
-            Node::State(i) => {
-                let i = usize_lit(i as usize);
-                atom(quote!(x[#i]))
-            }
-            Node::Param(i) => {
-                let i = usize_lit(i as usize);
-                atom(quote!(p[#i]))
-            }
+            Node::State(i) => element(quote!(x), i as usize),
+            Node::Param(i) => element(quote!(p), i as usize),
             // The event method binds `row`, the current row's values of the model's columns.
-            Node::Column(c) => {
-                let c = usize_lit(c as usize);
-                atom(quote!(row[#c]))
-            }
+            Node::Column(c) => element(quote!(row), c as usize),
             // qp solutions and their derivatives: slices the method binds first (see
             // `methods::qp_prelude`).
-            Node::QpSol(k) => {
-                let k = usize_lit(k as usize);
-                atom(quote!(qu[#k]))
-            }
-            Node::QpDeriv(k, w) => {
-                let i = usize_lit(k as usize * (self.n + self.p + 1) + w.column(self.n, self.p));
-                atom(quote!(qd[#i]))
-            }
+            Node::QpSol(k) => element(quote!(qu), k as usize),
+            Node::QpDeriv(k, w) => element(
+                quote!(qd),
+                k as usize * (self.n + self.p + 1) + w.column(self.n, self.p),
+            ),
             Node::Add(a, b) => {
                 // a + (−c) is printed a − c (the same IEEE operation).
                 let (l, r, minus) = match (self.ar.node(b), self.ar.node(a)) {
@@ -334,6 +327,22 @@ impl Gen<'_> {
             quote!(#i => { #b })
         });
         quote!(match #index { #(#arms)* _ => { #default } })
+    }
+
+    /// The value and gradient bodies of a cost term (ℓ or Φ): its value, and the body that
+    /// fills `gx`, `gp` and returns its t partial; `0.0` and zeros for a model without it.
+    pub(super) fn cost_bodies(
+        &self,
+        cost: Option<&GradKernels>,
+        n: usize,
+        p: usize,
+        gx: TokenStream,
+        gp: TokenStream,
+    ) -> (TokenStream, TokenStream) {
+        match cost {
+            Some(c) => (self.scalar(&c.value), self.grad_body(c, n, p, gx, gp)),
+            None => (quote!(0.0), quote!(#gx.fill(0.0); #gp.fill(0.0); 0.0)),
+        }
     }
 
     /// A gradient kernel written to `gx`, `gp`; returns the last slot (∂ₜ or the value).

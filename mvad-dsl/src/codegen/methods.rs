@@ -14,10 +14,10 @@ impl Gen<'_> {
     pub(super) fn info(&self, k: &ModelKernels) -> TokenStream {
         let pr = quote!(::mvad::__private);
         let strs = |v: &[String]| quote!(#pr::names(&[#(#v),*]));
-        let name = &k.name;
-        let states = strs(&k.states);
-        let params = strs(&k.params);
-        let defaults: Vec<TokenStream> = k.param_defaults.iter().map(|&v| lit(v)).collect();
+        let name = &k.names.name;
+        let states = strs(&k.names.states);
+        let params = strs(&k.names.params);
+        let defaults: Vec<TokenStream> = k.names.param_defaults.iter().map(|&v| lit(v)).collect();
         let modes = strs(&k.mode_names);
         let init = usize_lit(k.initial_mode);
         let opt = |o: Option<usize>| match o {
@@ -351,21 +351,9 @@ impl Gen<'_> {
 
         // Cost (ℓ reads qps under the frozen bits, as the flow does).
         self.frozen.set(true);
-        let (rc, rcg) = match &k.running_cost {
-            Some(c) => (
-                self.scalar(&c.value),
-                self.grad_body(c, n, p, quote!(lx), quote!(lp)),
-            ),
-            None => (quote!(0.0), quote!(lx.fill(0.0); lp.fill(0.0); 0.0)),
-        };
+        let (rc, rcg) = self.cost_bodies(k.running_cost.as_ref(), n, p, quote!(lx), quote!(lp));
         self.frozen.set(false);
-        let (fc, fcg) = match &k.final_cost {
-            Some(c) => (
-                self.scalar(&c.value),
-                self.grad_body(c, n, p, quote!(cx), quote!(cp)),
-            ),
-            None => (quote!(0.0), quote!(cx.fill(0.0); cp.fill(0.0); 0.0)),
-        };
+        let (fc, fcg) = self.cost_bodies(k.final_cost.as_ref(), n, p, quote!(cx), quote!(cp));
 
         let sens_methods = quote! {
             #[inline]
@@ -499,7 +487,7 @@ impl Gen<'_> {
 /// `let row = self.row(j);` in the event methods of a model that reads table columns: the
 /// values of row j (the occurrence) that [`Node::Column`](crate::ir::Node::Column) leaves read.
 pub(super) fn row_binding(k: &ModelKernels) -> TokenStream {
-    if k.columns.is_empty() {
+    if k.names.columns.is_empty() {
         quote!()
     } else {
         quote!(let row = self.row(j);)

@@ -123,7 +123,7 @@ fn observables_are_inlined_and_consts_folded() {
            flow { der(x) = o1 * c; }
            observe o1 = x + a; }",
     );
-    assert_eq!(p.param_defaults, vec![7.0]);
+    assert_eq!(p.names.param_defaults, vec![7.0]);
     let mut ar = p.arena.clone();
     let (x, a) = (ar.state(0), ar.param(0));
     let s = ar.add(x, a);

@@ -426,10 +426,7 @@ fn zeno_balls() -> Vec<Case> {
             })
         } else {
             Box::new(move |sol, tol, wall, r| {
-                let z = sol
-                    .diagnostics
-                    .iter()
-                    .find(|d| d.kind == DiagnosticKind::Zeno);
+                let z = sol.diagnostic(DiagnosticKind::Zeno);
                 r.check(z.is_some(), || "no zeno diagnostic".into());
                 if let Some(z) = z {
                     r.close("t*", z.t, t_star.v, 1e-9 * tol.t, 0.0);

@@ -36,7 +36,7 @@ pub fn close(a: f64, b: f64, rel: f64, abs: f64) -> bool {
 
 /// Whether `sol` has a diagnostic of kind `kind`.
 pub fn has(sol: &Solution, kind: DiagnosticKind) -> bool {
-    sol.diagnostics.iter().any(|d| d.kind == kind)
+    sol.diagnostic(kind).is_some()
 }
 
 /// The failures found so far, one line each.

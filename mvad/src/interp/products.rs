@@ -15,7 +15,7 @@ use mvad_dsl::schedule::SecondOrderKernels;
 use mvad_runtime::model::differences;
 use mvad_runtime::{At, ModelAdjoint, ModelSecondOrder, Occurrence, Point, Switches};
 
-use super::{at_pt, at_sw, pt0, pt_theta, InterpretedModel, Scratch, TapeAt, M, X};
+use super::{at_pt, at_sw, pt0, pt_theta, InterpretedModel, ModeTapes, Scratch, TapeAt, M, X};
 
 /// The tapes of [`SecondOrderKernels`], with their entry tables.
 #[derive(Clone, Debug)]
@@ -160,6 +160,21 @@ impl InterpretedModel {
         true
     }
 
+    /// The tapes of mode `mode`, once the one `tape` picks has run at `at` into `regs`;
+    /// `None` when the mode does not exist, the caller's `sizes` do not hold, or the tape
+    /// cannot run (the caller then fills its outputs with NaN).
+    fn run_mode_tape(
+        &self,
+        mode: usize,
+        sizes: bool,
+        tape: impl Fn(&ModeTapes) -> &Tape,
+        at: &TapeAt<'_>,
+        regs: &mut [f64],
+    ) -> Option<&ModeTapes> {
+        let m = self.mode(mode).filter(|_| sizes)?;
+        self.run(tape(m), at, regs).then_some(m)
+    }
+
     /// Whether `s` is n×p and `out` n×p (or, for ℓ, `out` has p entries).
     fn sens_shapes(&self, s: &M, out_len: usize, rows: usize) -> bool {
         s.nrows() == self.n && s.ncols() == self.p && out_len == rows * self.p
@@ -168,13 +183,11 @@ impl InterpretedModel {
 
 impl ModelAdjoint for InterpretedModel {
     fn rhs_vjp(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, vx: &mut X, vp: &mut X) {
-        let mode = pt.mode;
         let (n, np) = (self.n, self.p);
         let sizes = lambda.len() == n && vx.len() == n && vp.len() == np;
         let mut sc = self.scratch.borrow_mut();
         let at = at_pt(pt);
-        let m = self.mode(mode).filter(|_| sizes);
-        let Some(m) = m.filter(|m| self.run(&m.jac, &at, &mut sc.regs)) else {
+        let Some(m) = self.run_mode_tape(pt.mode, sizes, |m| &m.jac, &at, &mut sc.regs) else {
             vx.fill(f64::NAN);
             vp.fill(f64::NAN);
             return;
@@ -203,14 +216,11 @@ impl ModelAdjoint for InterpretedModel {
     /// −(λᵀf_x + w ℓ_x): the flow's f_x tape (its non-zero entries only), then ℓ's gradient
     /// tape over its x slots (when w ≠ 0); nothing of size p is touched.
     fn adjoint_rate(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, w: f64, out: &mut X) {
-        let mode = pt.mode;
         let n = self.n;
+        let sizes = lambda.len() == n && out.len() == n;
         let mut sc = self.scratch.borrow_mut();
         let at = at_pt(pt);
-        let m = self
-            .mode(mode)
-            .filter(|_| lambda.len() == n && out.len() == n);
-        let Some(m) = m.filter(|m| self.run(&m.jac_x, &at, &mut sc.regs)) else {
+        let Some(m) = self.run_mode_tape(pt.mode, sizes, |m| &m.jac_x, &at, &mut sc.regs) else {
             out.fill(f64::NAN);
             return;
         };
@@ -234,14 +244,11 @@ impl ModelAdjoint for InterpretedModel {
         a: f64,
         g: &mut X,
     ) {
-        let mode = pt.mode;
         let (n, np) = (self.n, self.p);
+        let sizes = lambda.len() == n && g.len() == np;
         let mut sc = self.scratch.borrow_mut();
         let at = at_pt(pt);
-        let m = self
-            .mode(mode)
-            .filter(|_| lambda.len() == n && g.len() == np);
-        let Some(m) = m.filter(|m| self.run(&m.jac_p, &at, &mut sc.regs)) else {
+        let Some(m) = self.run_mode_tape(pt.mode, sizes, |m| &m.jac_p, &at, &mut sc.regs) else {
             g.fill(f64::NAN);
             return;
         };

@@ -37,8 +37,8 @@ pub(super) struct Tables {
 impl Tables {
     pub(super) fn new(k: &ModelKernels) -> Tables {
         Tables {
-            decls: k.tables.clone(),
-            names: k.columns.clone(),
+            decls: k.names.tables.clone(),
+            names: k.names.columns.clone(),
             times: k
                 .bare_time_columns()
                 .into_iter()
@@ -53,7 +53,7 @@ impl Tables {
                 })
                 .collect(),
             values: Vec::new(),
-            row: RefCell::new(vec![f64::NAN; k.columns.len()]),
+            row: RefCell::new(vec![f64::NAN; k.names.columns.len()]),
             filled: Cell::new(None),
         }
     }

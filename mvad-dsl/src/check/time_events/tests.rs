@@ -113,7 +113,10 @@ fn dotted_names_resolve_to_a_table_column_or_a_qp_variable() {
               flow { der(x) = -q.u; } event e at each arr.t { x = x + arr.s * q.u; } }";
     assert_eq!(errors(ok), vec![], "{ok}");
     let m = crate::compile(ok).expect("compiles");
-    assert_eq!(m.columns, vec![(0, "t".to_string()), (0, "s".to_string())]);
+    assert_eq!(
+        m.names.columns,
+        vec![(0, "t".to_string()), (0, "s".to_string())]
+    );
     assert_eq!(m.qps.len(), 1);
     let cases: &[(&str, (usize, usize, &str))] = &[
         // A name that is neither: the message names both kinds the model declares.
