@@ -180,6 +180,9 @@ pub struct Scanner {
     pub nevents: usize,
     /// Whether function w is watched in the current mode (switches: always).
     pub active: Vec<bool>,
+    /// The watched functions, in the order they were restarted (ascending w): every loop of
+    /// a scan walks this list, never all functions (see [`Scanner::begin_restart`]).
+    watched: Vec<usize>,
     /// Armed flags (switches: always true).
     pub armed: Vec<bool>,
     /// A disarmed function re-arms once v < `rearm_below[w]`: min(v_f, 0) for the event
@@ -208,6 +211,7 @@ impl Scanner {
         Scanner {
             nevents,
             active: vec![false; nw],
+            watched: Vec::with_capacity(nw),
             armed: vec![false; nw],
             rearm_below: vec![0.0; nw],
             start_val: vec![0.0; nw],
@@ -244,11 +248,20 @@ impl Scanner {
         w >= self.nevents
     }
 
-    /// Function w is not watched from this restart on (its other fields are set again by
-    /// [`Scanner::restart_one`] when it is).
+    /// Starts a restart: nothing is watched until [`Scanner::restart_one`] activates it
+    /// (the other fields of an unwatched function are set again when it is). O(number
+    /// watched before), not O(number of functions).
     #[inline]
-    pub fn deactivate(&mut self, w: usize) {
-        self.active[w] = false;
+    pub fn begin_restart(&mut self) {
+        for &w in &self.watched {
+            self.active[w] = false;
+        }
+        self.watched.clear();
+    }
+
+    /// The functions watched since the last restart.
+    pub fn watched(&self) -> &[usize] {
+        &self.watched
     }
 
     /// (Re)activates function w at a restart with its signed value `v` at the new state:
@@ -258,13 +271,17 @@ impl Scanner {
     /// (armed at once if v⁺ already is); switches are always armed.
     #[inline]
     pub fn restart_one(&mut self, w: usize, v: f64, fired: Option<f64>) {
-        self.active[w] = true;
+        if !self.active[w] {
+            self.active[w] = true;
+            self.watched.push(w);
+        }
         self.start_val[w] = v;
         self.rising[w] = false;
-        self.fresh[w] = fired.is_some() && !self.strict(w);
+        let strict = self.strict(w);
+        self.fresh[w] = fired.is_some() && !strict;
         let below = fired.map_or(0.0, |vf| vf.min(0.0));
         self.rearm_below[w] = below;
-        self.armed[w] = if self.strict(w) {
+        self.armed[w] = if strict {
             true
         } else if fired.is_some() {
             v < below
@@ -278,8 +295,9 @@ impl Scanner {
     /// only the values at t0 and t1 are evaluated: the interior samples are interpolated
     /// (exact for a line), and there are no dips to search.
     ///
-    /// `sample(t, is_end, active, vals)` must write the signed value v_w(t) of every active w into
-    /// `vals[w]` (using the dense output inside the step and the exact end state at t1).
+    /// `sample(t, is_end, watched, vals)` must write the signed value v_w(t) of every watched w
+    /// (the list [`Scanner::watched`]) into `vals[w]` (using the dense output inside the step
+    /// and the exact end state at t1).
     /// `eval(w, t)` evaluates one function at an interior time (for root finding and dip
     /// search). Crossings no later than `earliest + sim_tol` land in `self.found`, sorted by
     /// index w (declaration order, events before switches). Returns `Err((w, t))` when a
@@ -298,12 +316,11 @@ impl Scanner {
         sim_tol: f64,
     ) -> Result<(), (usize, f64)>
     where
-        S: FnMut(f64, bool, &[bool], &mut [f64]),
+        S: FnMut(f64, bool, &[usize], &mut [f64]),
         E: FnMut(usize, f64) -> f64,
     {
         self.found.clear();
-        let nw = self.len();
-        if nw == 0 || !self.active.iter().any(|&a| a) {
+        if self.watched.is_empty() {
             return Ok(());
         }
         let first_right = if linear {
@@ -313,10 +330,8 @@ impl Scanner {
         };
         if first_right.is_infinite() {
             // Commit the step.
-            for w in 0..nw {
-                if !self.active[w] {
-                    continue;
-                }
+            for i in 0..self.watched.len() {
+                let w = self.watched[i];
                 if linear {
                     // The line from v₀ to v₁: negative somewhere iff at an end; its last
                     // interior sample as `bracket_curve` would have interpolated it.
@@ -341,7 +356,8 @@ impl Scanner {
         }
         // Roots for brackets that can compete with the earliest.
         let mut earliest = f64::INFINITY;
-        for w in 0..nw {
+        for i in 0..self.watched.len() {
+            let w = self.watched[i];
             if let Some((a, fa, b, fb)) = self.brackets[w] {
                 if a > first_right {
                     continue;
@@ -371,15 +387,13 @@ impl Scanner {
     /// v(t₁) stays in `tmp` for the commit.
     fn bracket_line<S>(&mut self, t0: f64, t1: f64, mut sample: S) -> Result<f64, (usize, f64)>
     where
-        S: FnMut(f64, bool, &[bool], &mut [f64]),
+        S: FnMut(f64, bool, &[usize], &mut [f64]),
     {
-        sample(t1, true, &self.active, &mut self.tmp);
+        sample(t1, true, &self.watched, &mut self.tmp);
         let mut first_right = f64::INFINITY;
-        for w in 0..self.len() {
+        for i in 0..self.watched.len() {
+            let w = self.watched[i];
             self.brackets[w] = None;
-            if !self.active[w] {
-                continue;
-            }
             let (a, b) = (self.start_val[w], self.tmp[w]);
             if a.is_nan() || b.is_nan() {
                 // Where the interpolated samples would first have been NaN.
@@ -424,24 +438,22 @@ impl Scanner {
         eval: &mut E,
     ) -> Result<f64, (usize, f64)>
     where
-        S: FnMut(f64, bool, &[bool], &mut [f64]),
+        S: FnMut(f64, bool, &[usize], &mut [f64]),
         E: FnMut(usize, f64) -> f64,
     {
-        for (v, &s) in self.vals.iter_mut().zip(&self.start_val) {
-            v[0] = s;
+        for &w in &self.watched {
+            self.vals[w][0] = self.start_val[w];
         }
         for (i, &t) in times.iter().enumerate().skip(1) {
-            sample(t, i == NSAMP - 1, &self.active, &mut self.tmp);
-            for (v, &s) in self.vals.iter_mut().zip(&self.tmp) {
-                v[i] = s;
+            sample(t, i == NSAMP - 1, &self.watched, &mut self.tmp);
+            for &w in &self.watched {
+                self.vals[w][i] = self.tmp[w];
             }
         }
         let mut first_right = f64::INFINITY;
-        for w in 0..self.len() {
+        for wi in 0..self.watched.len() {
+            let w = self.watched[wi];
             self.brackets[w] = None;
-            if !self.active[w] {
-                continue;
-            }
             let v = self.vals[w];
             if let Some(i) = v.iter().position(|x| x.is_nan()) {
                 return Err((w, times[i]));

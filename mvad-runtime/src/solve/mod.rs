@@ -194,8 +194,8 @@ fn time_resolution(t: f64) -> f64 {
 /// there (time events are not watched: the loop steps onto their times), and whether all of
 /// them are affine guards (a mode with a switching function is not).
 struct ModeWatch {
-    /// Watched function w is active in the mode.
-    active: Vec<bool>,
+    /// The functions active in the mode, ascending.
+    list: Vec<usize>,
     /// Some function is active.
     any: bool,
     /// Every active function is an affine guard.
@@ -222,10 +222,10 @@ impl ModeWatch {
                     .iter()
                     .enumerate()
                     .all(|(w, &a)| !a || (w < nev && model.guard_is_affine(w)));
-                let any = active.iter().any(|&a| a);
+                let list: Vec<usize> = (0..active.len()).filter(|&w| active[w]).collect();
                 ModeWatch {
-                    active,
-                    any,
+                    any: !list.is_empty(),
+                    list,
                     affine,
                 }
             })
@@ -484,11 +484,8 @@ where
         let nev = self.scanner.nevents;
         let watch = &self.watch[self.mode];
         self.affine_watch = watch.affine;
-        for (w, &active) in watch.active.iter().enumerate() {
-            if !active {
-                self.scanner.deactivate(w);
-                continue;
-            }
+        self.scanner.begin_restart();
+        for &w in &watch.list {
             let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x);
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
@@ -559,16 +556,15 @@ where
                 let integ = &self.integ;
                 let xs = &mut self.xs;
                 let xe = &mut self.xe;
-                let sample = |t: f64, is_end: bool, active: &[bool], out: &mut [f64]| {
-                    if is_end {
-                        xs.copy_from(&integ.y().x);
+                let sample = |t: f64, is_end: bool, watched: &[usize], out: &mut [f64]| {
+                    let x = if is_end {
+                        &integ.y().x
                     } else {
                         integ.dense_x(t, xs);
-                    }
-                    for (w, o) in out.iter_mut().enumerate() {
-                        if active[w] {
-                            *o = Self::signed(model, p, nev, sw, w, t, xs);
-                        }
+                        &*xs
+                    };
+                    for &w in watched {
+                        out[w] = Self::signed(model, p, nev, sw, w, t, x);
                     }
                 };
                 let eval = |w: usize, t: f64| {
