@@ -329,21 +329,12 @@ impl Scanner {
             self.bracket_curve(&sample_times(t0, t1), sample, &mut eval)?
         };
         if first_right.is_infinite() {
-            // Commit the step.
+            // Commit the step (`bracket_line` has committed every line already).
+            if linear {
+                return Ok(());
+            }
             for i in 0..self.watched.len() {
                 let w = self.watched[i];
-                if linear {
-                    // The line from v₀ to v₁: negative somewhere iff at an end; its last
-                    // interior sample as `bracket_curve` would have interpolated it.
-                    let (a, b) = (self.start_val[w], self.tmp[w]);
-                    let below = self.rearm_below[w];
-                    if !self.armed[w] && (a < below || b < below) {
-                        self.armed[w] = true;
-                    }
-                    self.start_val[w] = b;
-                    self.rising[w] = b > line_sample(a, b, NSAMP - 2);
-                    continue;
-                }
                 let v = &self.vals[w];
                 let below = self.rearm_below[w];
                 if !self.armed[w] && v.iter().any(|&x| x < below) {
@@ -383,8 +374,9 @@ impl Scanner {
     /// [`Scanner::scan`]): only v at t₁ is evaluated. A line that is armed at t₀ (or fired there
     /// and starts below zero) crosses on the step iff v(t₁) has triggered, and its bracket is
     /// the one the equispaced samples would give, [s_{i−1}, s_i] around the first interpolated
-    /// sample that has triggered. Returns the earliest right end of a bracket (∞ if none);
-    /// v(t₁) stays in `tmp` for the commit.
+    /// sample that has triggered. Returns the earliest right end of a bracket (∞ if none).
+    /// A line without a bracket is committed for the next step at once (a bracket means an
+    /// event and a restart of every function).
     fn bracket_line<S>(&mut self, t0: f64, t1: f64, mut sample: S) -> Result<f64, (usize, f64)>
     where
         S: FnMut(f64, bool, &[usize], &mut [f64]),
@@ -406,6 +398,14 @@ impl Scanner {
             // its minimum at an end).
             self.fresh[w] = false;
             if !(self.armed[w] && triggered(b, strict)) {
+                // The line from v₀ to v₁: negative somewhere iff at an end; its last
+                // interior sample as `bracket_curve` would have interpolated it.
+                let below = self.rearm_below[w];
+                if !self.armed[w] && (a < below || b < below) {
+                    self.armed[w] = true;
+                }
+                self.start_val[w] = b;
+                self.rising[w] = b > line_sample(a, b, NSAMP - 2);
                 continue;
             }
             let times = sample_times(t0, t1);

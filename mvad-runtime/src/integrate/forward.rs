@@ -41,7 +41,7 @@ use super::aug::{weighted_rms, AugState};
 use super::global_error::GlobalError;
 use super::rosenbrock::WMatrix;
 use super::system::{ImplicitSystem, OdeSystem};
-use super::Integrator;
+use super::{Integrator, Scheme};
 #[cfg(doc)]
 use crate::model::ModelSecondOrder;
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
@@ -66,6 +66,22 @@ where
     global: Option<GlobalError<M::N, M::P>>,
     atol: f64,
     rtol: f64,
+    /// Per mode: the constant F of a constant-rate mode ([`OdeSystem::constant_rate`]) once
+    /// evaluated, `None` for the other modes (see [`Integrator::restart`]).
+    rates: Vec<Option<ConstantRate<M::N, M::P>>>,
+}
+
+/// The F of a constant-rate mode, a function of θ, the mode and the switch bits alone
+/// (F = (f(θ), f_θ(θ), 0, 0)): evaluated at the first restart into the mode under given
+/// bits, reused at every later one under the same bits (buffers allocated once per run).
+struct ConstantRate<N: Dim, P: Dim>
+where
+    DefaultAllocator: ModelAlloc<N, P>,
+{
+    /// `f` holds F under the bits `sw`.
+    valid: bool,
+    sw: Switches,
+    f: AugState<N, P>,
 }
 
 /// Everything F needs, apart from the Rosenbrock buffers so both can be borrowed at once.
@@ -175,6 +191,17 @@ where
             global: opts.global_error.then(|| GlobalError::new(n, sp)),
             atol: opts.atol,
             rtol: opts.rtol,
+            rates: (0..model.info().modes.len())
+                .map(|mode| {
+                    (!model.info().has_running_cost && model.flow_is_constant(mode)).then(|| {
+                        ConstantRate {
+                            valid: false,
+                            sw: Switches::new(model.info().switches),
+                            f: AugState::zeros(n, sp),
+                        }
+                    })
+                })
+                .collect(),
         }
     }
 
@@ -497,10 +524,36 @@ where
     /// Must be called at the start and after every event, mode switch or switch flip. Under
     /// `auto` the method in use (explicit or implicit) is kept: stiffness is a property of the
     /// model that usually survives an event, and the switch-back test runs on every step.
+    ///
+    /// In a constant-rate mode the first step's k₀ = F is the mode's F as first evaluated
+    /// under the same switch bits (F does not depend on t or Y there), not a new evaluation.
     pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: &Switches) {
         self.sys.rhs.mode = mode;
         self.sys.rhs.sw.clone_from(sw);
         self.restart_at(t, y);
+        if self.scheme == Scheme::Exact {
+            self.reuse_constant_rate();
+        }
+    }
+
+    /// k₀ = the mode's constant F, evaluated here on the first restart into the mode under
+    /// these bits. A non-finite F is not kept: the first step evaluates it again and reports it.
+    fn reuse_constant_rate(&mut self) {
+        let sys = &mut self.sys;
+        let Some(Some(c)) = sys.rates.get_mut(sys.rhs.mode) else {
+            return;
+        };
+        if !c.valid || c.sw != sys.rhs.sw {
+            sys.rhs.eval(self.t, &self.y, &mut c.f);
+            if c.f.nonfinite_part(sys.rhs.sens).is_some() {
+                c.valid = false;
+                return;
+            }
+            c.sw.clone_from(&sys.rhs.sw);
+            c.valid = true;
+        }
+        self.k[0].copy_from(&c.f);
+        self.k0_valid = true;
     }
 
     /// Current mode.

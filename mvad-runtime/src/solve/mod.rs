@@ -370,7 +370,7 @@ where
             c_ev: CompensatedSum::default(),
             g_ev: vp(),
             fired: vec![None; nev],
-            schedule: Schedule::new(nev),
+            schedule: Schedule::new(model),
             nevents: 0,
             table_events: 0,
             diagnostics: Vec::new(),
@@ -611,16 +611,18 @@ where
     /// no user event fires. Then checks the event budget and restarts. Returns true when the
     /// run must stop (an accumulation).
     fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<bool, SolveError> {
-        let info = self.model.info();
         // A time event joins this instant only if it is due within the resolution of t (a
         // step to it would be too short to take); one a little later fires at its own time.
         let due = t + time_resolution(t);
-        for (k, ev) in info.events.iter().enumerate() {
-            if ev.is_time_event() && ev.armed_in(self.mode) && self.schedule.time(k) <= due {
+        let schedule = &self.schedule;
+        for &k in schedule.armed_in(self.mode) {
+            if schedule.time(k) <= due {
                 self.scanner.found.push(Crossing { w: k, t });
             }
         }
-        self.scanner.found.sort_unstable_by_key(|c| c.w);
+        if self.scanner.found.len() > 1 {
+            self.scanner.found.sort_unstable_by_key(|c| c.w);
+        }
         let nfound = self.scanner.found.len();
         let mut user = 0;
         let mut stop = false;

@@ -19,15 +19,44 @@ pub(super) struct Schedule {
     next: Vec<usize>,
     /// τ of that occurrence (time events; ∞ when none is left, and for state events).
     time: Vec<f64>,
+    /// Per mode: the time events armed there, in declaration order.
+    armed: Vec<Vec<usize>>,
+    /// Per mode: the time events not armed there.
+    unarmed: Vec<Vec<usize>>,
+    /// (mode, the earliest time of the events armed there), as last computed; cleared
+    /// whenever a time changes.
+    earliest: Option<(usize, f64)>,
 }
 
 impl Schedule {
-    /// The schedule of `nevents` events, before [`Schedule::start`].
-    pub(super) fn new(nevents: usize) -> Self {
+    /// The schedule of the events of `model`, before [`Schedule::start`] (which time events
+    /// each mode arms is decided here, once per run).
+    pub(super) fn new<M: HybridModel>(model: &M) -> Self
+    where
+        DefaultAllocator: ModelAlloc<M::N, M::P>,
+    {
+        let info = model.info();
+        let nevents = info.events.len();
+        let timed = |mode: usize, armed: bool| -> Vec<usize> {
+            (0..nevents)
+                .filter(|&k| {
+                    let ev = &info.events[k];
+                    ev.is_time_event() && ev.armed_in(mode) == armed
+                })
+                .collect()
+        };
         Schedule {
             next: vec![0; nevents],
             time: vec![f64::INFINITY; nevents],
+            armed: (0..info.modes.len()).map(|m| timed(m, true)).collect(),
+            unarmed: (0..info.modes.len()).map(|m| timed(m, false)).collect(),
+            earliest: None,
         }
+    }
+
+    /// The time events armed in `mode`, in declaration order.
+    pub(super) fn armed_in(&self, mode: usize) -> &[usize] {
+        &self.armed[mode]
     }
 
     /// Occurrence index of the next firing of event k.
@@ -51,6 +80,7 @@ impl Schedule {
         DefaultAllocator: ModelAlloc<M::N, M::P>,
     {
         let info = model.info();
+        self.earliest = None;
         for (k, ev) in info.events.iter().enumerate() {
             self.next[k] = 0;
             self.time[k] = f64::INFINITY;
@@ -72,10 +102,12 @@ impl Schedule {
             self.time[k] = self.time_of(model, p, k, 0)?;
             self.skip_before(model, p, k, 0.0)?;
         }
+        self.earliest = None;
         Ok(())
     }
 
     /// τ_kj, ∞ past the end of the schedule.
+    #[inline]
     fn time_of<M: HybridModel>(
         &self,
         model: &M,
@@ -100,10 +132,7 @@ impl Schedule {
         if tau.is_finite() {
             Ok(tau)
         } else {
-            Err(SolveError::NonFinite {
-                t: tau,
-                what: format!("time of occurrence {j} of event `{}`", ev.name),
-            })
+            Err(nonfinite_time(tau, j, &ev.name))
         }
     }
 
@@ -123,17 +152,15 @@ impl Schedule {
         if !model.info().events[k].is_time_event() {
             return Ok(());
         }
+        self.earliest = None;
         let tau = self.time_of(model, p, k, j)?;
         if tau < self.time[k] {
-            let ev = &model.info().events[k];
-            return Err(SolveError::BadSchedule {
-                event: ev.name.clone(),
-                what: format!(
-                    "its times decrease at occurrence {j} (row {j} of its table for `at each`): \
-                     {} then {tau}",
-                    self.time[k]
-                ),
-            });
+            return Err(decreasing_times(
+                &model.info().events[k].name,
+                j,
+                self.time[k],
+                tau,
+            ));
         }
         self.time[k] = tau;
         Ok(())
@@ -160,6 +187,7 @@ impl Schedule {
             if target.is_finite() && target > self.next[k] as f64 + 1.0 && target < 1e15 {
                 let j = target as usize - 1;
                 self.next[k] = j;
+                self.earliest = None;
                 self.time[k] = self.time_of(model, p, k, j)?;
             }
         }
@@ -170,7 +198,9 @@ impl Schedule {
     }
 
     /// The earliest next time of the time events armed in `mode` (∞ if none), after skipping
-    /// the occurrences before `t` of every time event that is not armed there.
+    /// the occurrences before `t` of every time event that is not armed there. O(1) when
+    /// every time event is armed in `mode` and no time has changed since the last call.
+    #[inline]
     pub(super) fn next_in_mode<M: HybridModel>(
         &mut self,
         model: &M,
@@ -181,18 +211,61 @@ impl Schedule {
     where
         DefaultAllocator: ModelAlloc<M::N, M::P>,
     {
-        let mut next = f64::INFINITY;
-        for (k, ev) in model.info().events.iter().enumerate() {
-            if !ev.is_time_event() {
-                continue;
-            }
-            if ev.armed_in(mode) {
-                next = next.min(self.time[k]);
-            } else {
-                self.skip_before(model, p, k, t)?;
+        match self.earliest {
+            Some((m, next)) if m == mode && self.unarmed[mode].is_empty() => Ok(next),
+            _ => self.skip_and_find_next(model, p, mode, t),
+        }
+    }
+
+    /// [`Schedule::next_in_mode`] the long way.
+    #[inline(never)]
+    fn skip_and_find_next<M: HybridModel>(
+        &mut self,
+        model: &M,
+        p: &OVector<f64, M::P>,
+        mode: usize,
+        t: f64,
+    ) -> Result<f64, SolveError>
+    where
+        DefaultAllocator: ModelAlloc<M::N, M::P>,
+    {
+        for i in 0..self.unarmed[mode].len() {
+            let k = self.unarmed[mode][i];
+            self.skip_before(model, p, k, t)?;
+        }
+        if let Some((m, next)) = self.earliest {
+            if m == mode {
+                return Ok(next);
             }
         }
+        let next = self.armed[mode]
+            .iter()
+            .fold(f64::INFINITY, |next, &k| next.min(self.time[k]));
+        self.earliest = Some((mode, next));
         Ok(next)
+    }
+}
+
+/// The error of a time that is not finite: τ of occurrence j of the event `name`.
+#[cold]
+#[inline(never)]
+fn nonfinite_time(tau: f64, j: usize, name: &str) -> SolveError {
+    SolveError::NonFinite {
+        t: tau,
+        what: format!("time of occurrence {j} of event `{name}`"),
+    }
+}
+
+/// The error of a schedule whose occurrence j comes before occurrence j − 1.
+#[cold]
+#[inline(never)]
+fn decreasing_times(name: &str, j: usize, before: f64, tau: f64) -> SolveError {
+    SolveError::BadSchedule {
+        event: name.to_string(),
+        what: format!(
+            "its times decrease at occurrence {j} (row {j} of its table for `at each`): \
+             {before} then {tau}"
+        ),
     }
 }
 
