@@ -183,6 +183,13 @@ where
     Ok(())
 }
 
+/// The `NonFinite` error at t; its text is built only when it happens (off the hot path).
+#[cold]
+#[inline(never)]
+fn nonfinite(t: f64, what: impl FnOnce() -> String) -> SolveError {
+    SolveError::NonFinite { t, what: what() }
+}
+
 /// The resolution of the time t in the event loop, 16 ulp: a located crossing is that close
 /// to the true one, a state event's state is snapped onto its guard only that far, and a time
 /// event due that soon after an instant joins it (no step that short can be taken).
@@ -401,7 +408,7 @@ where
         if x.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
-            Err(SolveError::NonFinite { t, what: what() })
+            Err(nonfinite(t, what))
         }
     }
 
@@ -501,6 +508,8 @@ where
         Ok(())
     }
 
+    #[cold]
+    #[inline(never)]
     fn guard_nonfinite(&self, w: usize, t: f64) -> SolveError {
         let what = match self.scanner.watch(w) {
             Watch::Event(k) => format!("guard of event `{}`", self.event_name(k)),
@@ -668,6 +677,8 @@ where
 
     /// The `simultaneous_events` diagnostic for the user events among the crossings found
     /// at t (applied in declaration order).
+    #[cold]
+    #[inline(never)]
     fn report_simultaneous(&mut self, t: f64) {
         let names: Vec<String> = self
             .scanner
