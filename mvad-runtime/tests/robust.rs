@@ -285,7 +285,11 @@ fn a_blow_up_is_not_called_stiffness() {
         let explicit = matches!(method, Method::Tsit5 | Method::Verner9);
         assert_eq!(*not_stiff, !explicit, "{method:?}");
         let msg = err.to_string();
-        assert_eq!(msg.contains("probably stiff"), explicit, "{method:?}: {msg}");
+        assert_eq!(
+            msg.contains("probably stiff"),
+            explicit,
+            "{method:?}: {msg}"
+        );
         assert!(msg.contains("largest |state|"), "{msg}");
         if !explicit {
             assert!(msg.contains("blow up"), "{method:?}: {msg}");
