@@ -211,24 +211,6 @@ impl Schedule {
     where
         DefaultAllocator: ModelAlloc<M::N, M::P>,
     {
-        match self.earliest {
-            Some((m, next)) if m == mode && self.unarmed[mode].is_empty() => Ok(next),
-            _ => self.skip_and_find_next(model, p, mode, t),
-        }
-    }
-
-    /// [`Schedule::next_in_mode`] the long way.
-    #[inline(never)]
-    fn skip_and_find_next<M: HybridModel>(
-        &mut self,
-        model: &M,
-        p: &OVector<f64, M::P>,
-        mode: usize,
-        t: f64,
-    ) -> Result<f64, SolveError>
-    where
-        DefaultAllocator: ModelAlloc<M::N, M::P>,
-    {
         for i in 0..self.unarmed[mode].len() {
             let k = self.unarmed[mode][i];
             self.skip_before(model, p, k, t)?;
