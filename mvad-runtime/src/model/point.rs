@@ -21,7 +21,7 @@ use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OVector};
 /// [`Switches::low_word`] with a constant mask); bits 64.. live in words allocated once, by
 /// [`Switches::new`], for the run. Copy one into another with `clone_from`, which reuses the
 /// destination's words, so no step or event allocates.
-#[derive(Clone, Debug, Default, Eq, Hash)]
+#[derive(Clone, Debug, Default, Eq)]
 pub struct Switches {
     lo: u64,
     hi: Vec<u64>,
@@ -37,6 +37,14 @@ impl PartialEq for Switches {
         self.lo == other.lo
             && self.hi.len() == other.hi.len()
             && self.hi.iter().zip(&other.hi).all(|(a, b)| a == b)
+    }
+}
+
+/// What the derived `Hash` would do (consistent with the equality above).
+impl std::hash::Hash for Switches {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.lo.hash(state);
+        self.hi.hash(state);
     }
 }
 
