@@ -1,28 +1,6 @@
 //! The qp and stateless-model rules, each error at its place.
 
-use crate::check::check;
-use crate::span::line_col;
-
-/// The errors of `src` as (line, column, message).
-fn errors(src: &str) -> Vec<(usize, usize, String)> {
-    let model = crate::parse::parse(src).unwrap_or_else(|e| panic!("{src}: {e:?}"));
-    check(&model)
-        .into_iter()
-        .map(|d| {
-            let (l, c) = line_col(src, d.span.start);
-            (l, c, d.message)
-        })
-        .collect()
-}
-
-#[track_caller]
-fn expect(src: &str, want: &[(usize, usize, &str)]) {
-    let want: Vec<(usize, usize, String)> = want
-        .iter()
-        .map(|&(l, c, m)| (l, c, m.to_string()))
-        .collect();
-    assert_eq!(errors(src), want, "{src}");
-}
+use crate::testing::expect_check;
 
 const KINK: &str = "model QpKink { param theta = 0.5;
  qp u_star(u) { minimize 0.5 * u^2 - theta * u; subject to u >= 0; }
@@ -30,10 +8,10 @@ const KINK: &str = "model QpKink { param theta = 0.5;
 
 #[test]
 fn the_spec_example_and_its_variants_are_clean() {
-    expect(KINK, &[]);
+    expect_check(KINK, &[]);
     // `subject to` may be repeated; several variables; equalities; a dynamic qp in a flow,
     // an observable and a final cost; a static qp in a static term next to a state's terms.
-    expect(
+    expect_check(
         "model M { param a = 1; state x = 1;
          qp q(u, v) { minimize u^2 + v^2 - x*u; subject to u + v == a; subject to u <= 1; v >= -1; }
          qp s(w) { minimize w^2 - a*w; }
@@ -47,19 +25,19 @@ fn the_spec_example_and_its_variants_are_clean() {
 
 #[test]
 fn qp_declarations() {
-    expect(
+    expect_check(
         "model M { param a = 1;\n qp q(u, u) { minimize u^2; } cost = q.u; }",
         &[(2, 10, "variable `u` is declared twice in qp `q`")],
     );
-    expect(
+    expect_check(
         "model M { param a = 1;\n qp q(u) { minimize u^2; subject to u < a; } cost = q.u; }",
         &[(2, 39, "strict inequality `<` in a constraint of qp `q`")],
     );
-    expect(
+    expect_check(
         "model M { param a = 1;\n qp q(sin) { minimize sin^2; } cost = a; }",
         &[(2, 7, "reserved name `sin` used as an identifier")],
     );
-    expect(
+    expect_check(
         "model M { param q = 1;\n qp q(u) { minimize u^2; } cost = q; }",
         &[(2, 5, "duplicate declaration of `q`")],
     );
@@ -67,7 +45,7 @@ fn qp_declarations() {
 
 #[test]
 fn references_to_solutions() {
-    expect(
+    expect_check(
         "model M { param a = 1; qp q(u) { minimize u^2 - a*u; }\n cost = p.u + q.w + a.u; }",
         &[
             (2, 9, "unknown qp `p`"),
@@ -75,15 +53,15 @@ fn references_to_solutions() {
             (2, 21, "param `a` is not a qp: `a.u` names nothing"),
         ],
     );
-    expect(
+    expect_check(
         "model M { param a = 1; qp q(u) { minimize u^2 - a*u; }\n cost = q; }",
         &[(2, 9, "qp `q` is not a value")],
     );
-    expect(
+    expect_check(
         "model M { param a = 1; qp q(u) { minimize u^2 - a*u; }\n observe y = u; }",
         &[(2, 14, "undefined name `u`")],
     );
-    expect(
+    expect_check(
         "model M { param a = 1; qp q(u) { minimize u^2 - a*u; }\n const c = q.u; param b = q.u; cost = a; }",
         &[
             (2, 12, "const `c` cannot depend on the solution of qp `q`"),
@@ -94,7 +72,7 @@ fn references_to_solutions() {
 
 #[test]
 fn qp_data_scope() {
-    expect(
+    expect_check(
         "model M { param a = 1; state x = 1; flow { der(x) = 0; } observe o = x;
          qp p(w) { minimize w^2; }\n qp q(u) { minimize u^2 - o*u - p.w*u; } cost = final(q.u); horizon 1; }",
         &[
@@ -107,11 +85,11 @@ fn qp_data_scope() {
 #[test]
 fn static_cost_terms_read_only_params_and_static_qps() {
     // `cost = h;` used to be a syntax error; it is a static term now, refused here.
-    expect(
+    expect_check(
         "model M { state h = 0; flow { der(h) = 1; } cost = h; }",
         &[(1, 52, "a static cost term cannot depend on state `h`")],
     );
-    expect(
+    expect_check(
         "model M { cost = h; }",
         &[
             (1, 7, "model `M` has no states"),
@@ -119,7 +97,7 @@ fn static_cost_terms_read_only_params_and_static_qps() {
             (1, 18, "undefined name `h`"),
         ],
     );
-    expect(
+    expect_check(
         "model M { state x = 1; flow { der(x) = -x; }
          qp q(u) { minimize u^2 - x*u; }\n cost = 2 * q.u + t; horizon 1; }",
         &[
@@ -131,7 +109,7 @@ fn static_cost_terms_read_only_params_and_static_qps() {
 
 #[test]
 fn stateless_models_have_no_time() {
-    expect(
+    expect_check(
         "model M { param a = 1; qp q(u) { minimize u^2 - a*u; }
  flow { }\n event e when a >= 0;\n horizon 1;\n observe y = q.u * t;\n cost = integral(a) + final(q.u) + q.u; }",
         &[
