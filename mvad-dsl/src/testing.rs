@@ -47,3 +47,11 @@ pub fn assert_errors(src: &str, got: Vec<Located>, want: &[Expected]) {
 pub fn expect_check(src: &str, want: &[Expected]) {
     assert_errors(src, located(src, check_errors(src)), want);
 }
+
+/// [`expect_check`] for each (model, expected errors) case of a table.
+#[track_caller]
+pub fn expect_check_each(cases: &[(&str, &[Expected])]) {
+    for (src, want) in cases {
+        expect_check(src, want);
+    }
+}
