@@ -495,6 +495,28 @@ where
         mu.dot(&rt)
     }
 
+    /// [`ModelAdjoint::reset_vjp`] for two cotangents at one point: μ₁ᵀR_x, μ₁ᵀR_θ into
+    /// `out1` and μ₂ᵀR_x, μ₂ᵀR_θ into `out2`, returning (μ₁ᵀ∂R/∂t, μ₂ᵀ∂R/∂t). The adjoint
+    /// sweep transposes each jump for λ and, with a global error estimate, for the estimate's
+    /// remainder at the same point; a model whose Jacobian evaluation dominates (a loaded
+    /// model's tape, O(p) for a reset with p parameters) evaluates it once for both. The
+    /// default is two calls of `reset_vjp`, the same numbers bit for bit.
+    fn reset_vjp_pair(
+        &self,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
+        (mu1, mu2): (&OVector<f64, Self::N>, &OVector<f64, Self::N>),
+        out1: (&mut OVector<f64, Self::N>, &mut OVector<f64, Self::P>),
+        out2: (&mut OVector<f64, Self::N>, &mut OVector<f64, Self::P>),
+    ) -> (f64, f64)
+    where
+        Self: HybridModel,
+    {
+        let r1 = self.reset_vjp(occ, at, mu1, out1.0, out1.1);
+        let r2 = self.reset_vjp(occ, at, mu2, out2.0, out2.1);
+        (r1, r2)
+    }
+
     /// The derivative of [`ModelAdjoint::rhs_vjp`] along the direction (1, v) of (t, x) at
     /// fixed λ: vx = d/dε λᵀf_x(t + ε, x + εv), vp = d/dε λᵀf_θ(t + ε, x + εv) at ε = 0. With
     /// v = f it is the time derivative of the adjoint's right-hand side along the trajectory,
