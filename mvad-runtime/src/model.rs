@@ -411,6 +411,12 @@ where
     }
 }
 
+/// Two cotangents μ₁, μ₂ ∈ Rⁿ for one product ([`ModelAdjoint::reset_vjp_pair`]).
+pub type CotangentPair<'a, N> = (&'a OVector<f64, N>, &'a OVector<f64, N>);
+
+/// The (x, θ) outputs of a vector–Jacobian product: μᵀ∂/∂x (n) and μᵀ∂/∂θ (p).
+pub type VjpOutput<'a, N, P> = (&'a mut OVector<f64, N>, &'a mut OVector<f64, P>);
+
 /// Capability: vector–Jacobian products of the flow, for an adjoint (backward) pass.
 ///
 /// The default forms the dense Jacobians f_x, f_θ and multiplies (it allocates both for
@@ -505,9 +511,9 @@ where
         &self,
         occ: Occurrence,
         at: At<'_, Self::N, Self::P>,
-        (mu1, mu2): (&OVector<f64, Self::N>, &OVector<f64, Self::N>),
-        out1: (&mut OVector<f64, Self::N>, &mut OVector<f64, Self::P>),
-        out2: (&mut OVector<f64, Self::N>, &mut OVector<f64, Self::P>),
+        (mu1, mu2): CotangentPair<'_, Self::N>,
+        out1: VjpOutput<'_, Self::N, Self::P>,
+        out2: VjpOutput<'_, Self::N, Self::P>,
     ) -> (f64, f64)
     where
         Self: HybridModel,
