@@ -13,42 +13,29 @@
 
 use criterion::{criterion_group, Criterion};
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
-use models::median_us;
+use models::{median_us, BothDoors};
 use mvad::solution::Options;
 use mvad::solve::solve;
 use std::hint::black_box;
 
-/// E1 through both doors: the compiled model with its θ, and `bouncing_ball.hyb` loaded at
-/// run time with the same θ.
-/// and the options: rtol 1e-10, atol 1e-12, with and without sensitivities.
+/// E1 through both doors (the compiled model and `bouncing_ball.hyb` loaded at run time,
+/// the same θ) and the options: rtol 1e-10, atol 1e-12, with and without sensitivities.
 struct E1 {
-    compiled: BouncingBall,
-    p: nalgebra::SVector<f64, 4>,
-    loaded: mvad::interp::InterpretedModel,
-    pl: nalgebra::DVector<f64>,
+    doors: BothDoors<BouncingBall, 4>,
     grad: Options,
     primal: Options,
 }
 
 fn setup() -> E1 {
-    let compiled = BouncingBall::new();
     let p = BouncingBallParams::default().to_vector();
-    let loaded = mvad::load::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/bouncing_ball.hyb"
-    )))
-    .expect("bouncing_ball.hyb loads");
-    let pl = nalgebra::DVector::from_column_slice(p.as_slice());
+    let doors = BothDoors::new(BouncingBall::new(), p, "bouncing_ball.hyb");
     let grad = models::tolerances(1e-10, 1e-12);
     let primal = Options {
         sensitivities: false,
         ..grad.clone()
     };
     E1 {
-        compiled,
-        p,
-        loaded,
-        pl,
+        doors,
         grad,
         primal,
     }
@@ -56,10 +43,13 @@ fn setup() -> E1 {
 
 fn e1(c: &mut Criterion) {
     let E1 {
-        compiled,
-        p,
-        loaded,
-        pl,
+        doors:
+            BothDoors {
+                compiled,
+                p,
+                loaded,
+                pl,
+            },
         grad,
         primal,
     } = setup();
@@ -100,9 +90,9 @@ fn main() {
         let mut acc = 0.0;
         for i in 0..1000 {
             let sol = match which.as_str() {
-                "grad" => solve(&e.compiled, black_box(&e.p), &e.grad),
-                "primal" => solve(&e.compiled, black_box(&e.p), &e.primal),
-                _ => solve(&e.loaded, black_box(&e.pl), &e.grad),
+                "grad" => solve(&e.doors.compiled, black_box(&e.doors.p), &e.grad),
+                "primal" => solve(&e.doors.compiled, black_box(&e.doors.p), &e.primal),
+                _ => solve(&e.doors.loaded, black_box(&e.doors.pl), &e.grad),
             }
             .unwrap();
             if i == 0 {

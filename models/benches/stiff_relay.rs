@@ -10,31 +10,21 @@
 
 use criterion::{criterion_group, Criterion};
 use models::stiff_relay::{StiffRelay, StiffRelayParams};
+use models::BothDoors;
 use mvad::solution::Options;
 use mvad::solve::solve;
 use std::hint::black_box;
 
-/// The compiled relay, the loaded one, their parameters and the options.
+/// The relay through both doors (compiled and loaded, the same θ) and the options.
 struct Relay {
-    compiled: StiffRelay,
-    p: nalgebra::SVector<f64, 4>,
-    loaded: mvad::interp::InterpretedModel,
-    pl: nalgebra::DVector<f64>,
+    doors: BothDoors<StiffRelay, 4>,
     opts: Options,
 }
 
 fn setup() -> Relay {
     let p = StiffRelayParams::default().to_vector();
-    let loaded = mvad::load::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/stiff_relay.hyb"
-    )))
-    .expect("stiff_relay.hyb loads");
     Relay {
-        compiled: StiffRelay::new(),
-        pl: nalgebra::DVector::from_column_slice(p.as_slice()),
-        p,
-        loaded,
+        doors: BothDoors::new(StiffRelay::new(), p, "stiff_relay.hyb"),
         opts: Options {
             rtol: 1e-8,
             ..Options::default()
@@ -46,14 +36,14 @@ fn relay(c: &mut Criterion) {
     let r = setup();
     c.bench_function("relay_compiled_gradient", |b| {
         b.iter(|| {
-            solve(&r.compiled, black_box(&r.p), &r.opts)
+            solve(&r.doors.compiled, black_box(&r.doors.p), &r.opts)
                 .unwrap()
                 .gradient[0]
         })
     });
     c.bench_function("relay_loaded_gradient", |b| {
         b.iter(|| {
-            solve(&r.loaded, black_box(&r.pl), &r.opts)
+            solve(&r.doors.loaded, black_box(&r.doors.pl), &r.opts)
                 .unwrap()
                 .gradient[0]
         })
@@ -68,9 +58,9 @@ fn main() {
         let mut acc = 0.0;
         for i in 0..200 {
             let sol = if which == "compiled" {
-                solve(&r.compiled, black_box(&r.p), &r.opts)
+                solve(&r.doors.compiled, black_box(&r.doors.p), &r.opts)
             } else {
-                solve(&r.loaded, black_box(&r.pl), &r.opts)
+                solve(&r.doors.loaded, black_box(&r.doors.pl), &r.opts)
             }
             .unwrap();
             if i == 0 {

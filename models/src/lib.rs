@@ -152,6 +152,34 @@ pub fn derivative(f: impl Fn(f64) -> f64, x: f64, h0: f64) -> f64 {
     best
 }
 
+/// A model through both doors with the same θ: compiled by `hybrid!` (static sizes) and its
+/// `.hyb` file loaded at run time (interpreted, `Dyn` sizes), as the benches time them.
+pub struct BothDoors<M, const P: usize> {
+    /// The compiled model.
+    pub compiled: M,
+    /// θ for the compiled model.
+    pub p: nalgebra::SVector<f64, P>,
+    /// The same model loaded from its file.
+    pub loaded: mvad::interp::InterpretedModel,
+    /// θ for the loaded model (the same values).
+    pub pl: nalgebra::DVector<f64>,
+}
+
+impl<M, const P: usize> BothDoors<M, P> {
+    /// `compiled` at θ = `p`, and `models/FILE` loaded (panics, naming the file, when it
+    /// does not load: a bench cannot run without it).
+    pub fn new(compiled: M, p: nalgebra::SVector<f64, P>, file: &str) -> Self {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+        let loaded = mvad::load::load(&path).unwrap_or_else(|e| panic!("{file}: {e:?}"));
+        BothDoors {
+            compiled,
+            pl: nalgebra::DVector::from_column_slice(p.as_slice()),
+            p,
+            loaded,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

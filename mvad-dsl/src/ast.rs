@@ -516,61 +516,48 @@ pub enum ExprKind {
     },
 }
 
+/// Accessors of [`Model`] that pick the items of one kind: `filter_map` ones iterate over
+/// all of them in source order, `find_map` ones return the first (if several were written).
+macro_rules! item_accessors {
+    ($($(#[$doc:meta])* $name:ident: $pick:ident $kind:ident;)*) => {
+        $(
+            $(#[$doc])*
+            pub fn $name(&self) -> item_accessors!(@returns $pick $kind) {
+                self.items.iter().$pick(|i| match i {
+                    Item::$kind(x) => Some(x),
+                    _ => None,
+                })
+            }
+        )*
+    };
+    (@returns filter_map $kind:ident) => { impl Iterator<Item = &$kind> };
+    (@returns find_map $kind:ident) => { Option<&$kind> };
+}
+
 impl Model {
-    /// The `param` declarations, in source order.
-    pub fn params(&self) -> impl Iterator<Item = &Param> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Param(p) => Some(p),
-            _ => None,
-        })
-    }
-
-    /// The `const` declarations, in source order.
-    pub fn consts(&self) -> impl Iterator<Item = &Const> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Const(c) => Some(c),
-            _ => None,
-        })
-    }
-
-    /// The `state` declarations, in source order.
-    pub fn states(&self) -> impl Iterator<Item = &State> {
-        self.items.iter().filter_map(|i| match i {
-            Item::State(s) => Some(s),
-            _ => None,
-        })
-    }
-
-    /// The `table` declarations, in source order.
-    pub fn tables(&self) -> impl Iterator<Item = &Table> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Table(t) => Some(t),
-            _ => None,
-        })
-    }
-
-    /// The `flow` block, if any (the first one if several were written).
-    pub fn flow(&self) -> Option<&Flow> {
-        self.items.iter().find_map(|i| match i {
-            Item::Flow(f) => Some(f),
-            _ => None,
-        })
-    }
-
-    /// The `mode` blocks, in source order.
-    pub fn modes(&self) -> impl Iterator<Item = &Mode> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Mode(m) => Some(m),
-            _ => None,
-        })
-    }
-
-    /// The `initial mode` declaration, if any (the first one if several were written).
-    pub fn initial_mode(&self) -> Option<&InitialMode> {
-        self.items.iter().find_map(|i| match i {
-            Item::InitialMode(m) => Some(m),
-            _ => None,
-        })
+    item_accessors! {
+        /// The `param` declarations, in source order.
+        params: filter_map Param;
+        /// The `const` declarations, in source order.
+        consts: filter_map Const;
+        /// The `state` declarations, in source order.
+        states: filter_map State;
+        /// The `table` declarations, in source order.
+        tables: filter_map Table;
+        /// The `flow` block, if any (the first one if several were written).
+        flow: find_map Flow;
+        /// The `mode` blocks, in source order.
+        modes: filter_map Mode;
+        /// The `initial mode` declaration, if any (the first one if several were written).
+        initial_mode: find_map InitialMode;
+        /// The `observe` declarations, in source order.
+        observes: filter_map Observe;
+        /// The `cost` declaration, if any (the first one if several were written).
+        cost: find_map Cost;
+        /// The `qp` declarations, in source order.
+        qps: filter_map Qp;
+        /// The `horizon` declaration, if any (the first one if several were written).
+        horizon: find_map Horizon;
     }
 
     /// Every event with the mode it belongs to (`None`: top level), in source order
@@ -585,37 +572,5 @@ impl Model {
             }
         }
         out
-    }
-
-    /// The `observe` declarations, in source order.
-    pub fn observes(&self) -> impl Iterator<Item = &Observe> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Observe(o) => Some(o),
-            _ => None,
-        })
-    }
-
-    /// The `cost` declaration, if any (the first one if several were written).
-    pub fn cost(&self) -> Option<&Cost> {
-        self.items.iter().find_map(|i| match i {
-            Item::Cost(c) => Some(c),
-            _ => None,
-        })
-    }
-
-    /// The `qp` declarations, in source order.
-    pub fn qps(&self) -> impl Iterator<Item = &Qp> {
-        self.items.iter().filter_map(|i| match i {
-            Item::Qp(q) => Some(q),
-            _ => None,
-        })
-    }
-
-    /// The `horizon` declaration, if any (the first one if several were written).
-    pub fn horizon(&self) -> Option<&Horizon> {
-        self.items.iter().find_map(|i| match i {
-            Item::Horizon(h) => Some(h),
-            _ => None,
-        })
     }
 }

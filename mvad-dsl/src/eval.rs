@@ -1,40 +1,22 @@
 //! A compact tape evaluator for [`Kernel`]s: the back end of models loaded at run time.
 //!
 //! A [`Tape`] is a register machine: one instruction per live node of the kernel, in
-//! topological order, instruction i writing register i from earlier registers. Evaluation
-//! reads `&[f64]` slices (no nalgebra) and writes into caller-provided scratch, so a call
-//! allocates nothing. Every instruction computes exactly what [`crate::ir::apply_node`]
-//! and the generated code compute, operation for operation; qp solutions, their
-//! derivatives and table columns are read from the [`Inputs`] of the run.
+//! topological order, instruction i writing register i from earlier registers. An
+//! instruction is the kernel's [`Node`] with its children renamed to registers, evaluated by
+//! [`crate::ir::apply_node_in`], the one definition of a node's value that
+//! [`crate::ir::apply_node`] and the generated code also follow. Evaluation reads `&[f64]`
+//! slices (no nalgebra) and writes into caller-provided scratch, so a call allocates
+//! nothing; qp solutions, their derivatives and table columns are read from the [`Inputs`]
+//! of the run.
 
-use crate::ir::{Cmp, ExprArena, Func, Inputs, Node, Point, Wrt};
+use crate::ir::{apply_node_in, ExprArena, ExprId, Inputs, Node, Point};
 use crate::schedule::Kernel;
-
-/// One tape instruction; operands are register indices.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Op {
-    Const(f64),
-    Time,
-    X(u32),
-    P(u32),
-    Col(u32),
-    Add(u32, u32),
-    Mul(u32, u32),
-    Neg(u32),
-    Div(u32, u32),
-    Powi(u32, i32),
-    Pow(u32, u32),
-    Call(Func, u32),
-    Select(Cmp, u32, u32, u32),
-    Switch(u32, u32, u32),
-    QpSol(u32),
-    QpDeriv(u32, Wrt),
-}
 
 /// A kernel compiled to register code.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tape {
-    ops: Vec<Op>,
+    /// Instruction i: a node whose children are register indices (as [`ExprId`]s).
+    ops: Vec<Node>,
     outputs: Vec<(u32, u32)>,
     len: usize,
     reads_qp: bool,
@@ -48,26 +30,8 @@ impl Tape {
         let mut reg = std::collections::HashMap::with_capacity(kernel.nodes.len());
         let mut ops = Vec::with_capacity(kernel.nodes.len());
         for (r, &id) in kernel.nodes.iter().enumerate() {
-            let g = |c: crate::ir::ExprId| -> u32 { reg.get(&c).copied().unwrap_or(0) };
-            let op = match ar.node(id) {
-                Node::Const(bits) => Op::Const(f64::from_bits(bits)),
-                Node::Time => Op::Time,
-                Node::State(i) => Op::X(i),
-                Node::Param(i) => Op::P(i),
-                Node::Column(c) => Op::Col(c),
-                Node::Add(a, b) => Op::Add(g(a), g(b)),
-                Node::Mul(a, b) => Op::Mul(g(a), g(b)),
-                Node::Neg(a) => Op::Neg(g(a)),
-                Node::Div(a, b) => Op::Div(g(a), g(b)),
-                Node::Powi(a, k) => Op::Powi(g(a), k),
-                Node::Pow(a, b) => Op::Pow(g(a), g(b)),
-                Node::Call(f, a) => Op::Call(f, g(a)),
-                Node::Select(c, x, a, b) => Op::Select(c, g(x), g(a), g(b)),
-                Node::Switch(j, a, b) => Op::Switch(j, g(a), g(b)),
-                Node::QpSol(k) => Op::QpSol(k),
-                Node::QpDeriv(k, w) => Op::QpDeriv(k, w),
-            };
-            ops.push(op);
+            let g = |c: ExprId| ExprId(reg.get(&c).copied().unwrap_or(0));
+            ops.push(ar.node(id).map_children(g));
             reg.insert(id, r as u32);
         }
         let outputs = kernel
@@ -75,10 +39,8 @@ impl Tape {
             .iter()
             .map(|&(s, e)| (s as u32, reg.get(&e).copied().unwrap_or(0)))
             .collect();
-        let reads_qp = ops
-            .iter()
-            .any(|o| matches!(o, Op::QpSol(_) | Op::QpDeriv(..)));
-        let reads_qp_derivs = ops.iter().any(|o| matches!(o, Op::QpDeriv(..)));
+        let reads_qp = ops.iter().any(Node::is_qp);
+        let reads_qp_derivs = ops.iter().any(|o| matches!(o, Node::QpDeriv(..)));
         Tape {
             ops,
             outputs,
@@ -143,44 +105,7 @@ impl Tape {
             return false;
         }
         for i in 0..self.ops.len() {
-            let r = |k: u32| regs[k as usize];
-            let v = match self.ops[i] {
-                Op::Const(c) => c,
-                Op::Time => at.t,
-                Op::X(k) => at.x.get(k as usize).copied().unwrap_or(f64::NAN),
-                Op::P(k) => at.p.get(k as usize).copied().unwrap_or(f64::NAN),
-                Op::Add(a, b) => r(a) + r(b),
-                Op::Mul(a, b) => r(a) * r(b),
-                Op::Neg(a) => -r(a),
-                Op::Div(a, b) => r(a) / r(b),
-                Op::Powi(a, k) => r(a).powi(k),
-                Op::Pow(a, b) => r(a).powf(r(b)),
-                Op::Call(f, a) => f.apply(r(a)),
-                Op::Select(c, x, a, b) => {
-                    if c.test(r(x)) {
-                        r(a)
-                    } else {
-                        r(b)
-                    }
-                }
-                Op::Switch(j, a, b) => {
-                    let on = if j < 64 {
-                        at.sw >> j & 1 != 0
-                    } else {
-                        let k = (j - 64) as usize;
-                        hi.get(k / 64).is_some_and(|w| w >> (k % 64) & 1 != 0)
-                    };
-                    if on {
-                        r(a)
-                    } else {
-                        r(b)
-                    }
-                }
-                Op::Col(c) => inputs.row.get(c as usize).copied().unwrap_or(f64::NAN),
-                Op::QpSol(k) => inputs.qp.leaf(&Node::QpSol(k)),
-                Op::QpDeriv(k, w) => inputs.qp.leaf(&Node::QpDeriv(k, w)),
-            };
-            regs[i] = v;
+            regs[i] = apply_node_in(&self.ops[i], |r| regs[r.index()], at, hi, inputs);
         }
         true
     }
@@ -234,7 +159,7 @@ impl Tape {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ir::ExprArena;
+    use crate::ir::{Cmp, ExprArena, Func};
     use approx::assert_relative_eq;
 
     #[test]

@@ -281,16 +281,7 @@ impl Node {
     /// Whether the node is a leaf (constant, time, state, parameter, table column, qp
     /// solution or its derivative).
     pub fn is_leaf(&self) -> bool {
-        matches!(
-            self,
-            Node::Const(_)
-                | Node::Time
-                | Node::State(_)
-                | Node::Param(_)
-                | Node::Column(_)
-                | Node::QpSol(_)
-                | Node::QpDeriv(..)
-        )
+        self.children().next().is_none()
     }
 
     /// Whether the node reads a qp solution or its derivative.
@@ -376,10 +367,26 @@ impl Inputs<'_> {
 }
 
 /// Evaluates one node given the values of its children (`v` indexed by node id).
-/// The single definition of every node's value: folding, the tape and codegen agree with it.
-/// The reference evaluator has no [`Inputs`]: qp leaves and columns are NaN here.
+/// The reference evaluator has no [`Inputs`] and sees switch bits 0..64 only: qp leaves and
+/// columns are NaN here, and a bit j ≥ 64 is off.
 pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
-    let g = |id: ExprId| v[id.index()];
+    apply_node_in(node, |id| v[id.index()], at, &[], &Inputs::NONE)
+}
+
+/// Evaluates one node given its children's values through `child`: the single definition
+/// of every node's value, which folding, the tape ([`crate::eval::Tape`]) and codegen agree
+/// with. Switch bit j is bit j of `at.sw` for j < 64 and bit (j − 64) % 64 of
+/// `hi[(j − 64) / 64]` beyond (off when absent); qp solutions, their derivatives and table
+/// columns are read from `inputs`.
+#[inline(always)]
+pub fn apply_node_in(
+    node: &Node,
+    child: impl Fn(ExprId) -> f64,
+    at: &Point<'_>,
+    hi: &[u64],
+    inputs: &Inputs<'_>,
+) -> f64 {
+    let g = child;
     match *node {
         Node::Const(bits) => f64::from_bits(bits),
         Node::Time => at.t,
@@ -400,13 +407,25 @@ pub fn apply_node(node: &Node, v: &[f64], at: &Point<'_>) -> f64 {
             }
         }
         Node::Switch(j, a, b) => {
-            if j < 64 && at.sw & (1u64 << j) != 0 {
+            if switch_bit(at.sw, hi, j) {
                 g(a)
             } else {
                 g(b)
             }
         }
-        Node::Column(_) | Node::QpSol(_) | Node::QpDeriv(..) => Inputs::NONE.leaf(node),
+        Node::Column(_) | Node::QpSol(_) | Node::QpDeriv(..) => inputs.leaf(node),
+    }
+}
+
+/// Switch bit j of the frozen branches: bit j of `sw` for j < 64, else bit (j − 64) % 64 of
+/// `hi[(j − 64) / 64]` (off when absent).
+#[inline(always)]
+fn switch_bit(sw: u64, hi: &[u64], j: u32) -> bool {
+    if j < 64 {
+        sw >> j & 1 != 0
+    } else {
+        let k = (j - 64) as usize;
+        hi.get(k / 64).is_some_and(|w| w >> (k % 64) & 1 != 0)
     }
 }
 

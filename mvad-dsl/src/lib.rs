@@ -26,6 +26,8 @@ pub mod ir;
 pub mod lower;
 pub mod schedule;
 pub mod simplify;
+#[cfg(test)]
+mod testing;
 
 use proc_macro2::{Span as TokenSpan, TokenStream, TokenTree};
 

@@ -379,12 +379,7 @@ proptest! {
 fn kink_sides_differ_in_two_dimensions() {
     // min ½‖u − (θ, 1)‖² s.t. u₁ ≤ 0: u = (min(θ, 0), 1); at θ = 0 the constraint is weakly
     // active, du/dθ = (0, 0) from the right and (1, 0) from the left.
-    let data = QpData {
-        h: DMatrix::identity(2, 2),
-        c: DVector::from_vec(vec![0.0, -1.0]),
-        a: DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
-        b: DVector::zeros(1),
-    };
+    let data = unit_qp(&[0.0, -1.0], &[1.0, 0.0], &[0.0]);
     let mut d = QpData::zeros(2, 1);
     d.c[0] = -1.0;
     let mut s = solved(&[ConstraintKind::Le], &data);
@@ -397,6 +392,17 @@ fn kink_sides_differ_in_two_dimensions() {
     assert_eq!((dm_right[0], dm_left[0]), (1.0, 0.0));
 }
 
+/// min ½‖u‖² + cᵀu s.t. rows aᵢᵀu (op) bᵢ: H = I (n = `c.len()`), A row-major (m = `b.len()`).
+fn unit_qp(c: &[f64], a: &[f64], b: &[f64]) -> QpData {
+    let (n, m) = (c.len(), b.len());
+    QpData {
+        h: DMatrix::identity(n, n),
+        c: DVector::from_row_slice(c),
+        a: DMatrix::from_row_slice(m, n, a),
+        b: DVector::from_row_slice(b),
+    }
+}
+
 fn expect_err(kinds: &[ConstraintKind], data: &QpData) -> QpError {
     let mut s = QpSolver::new(data.c.len(), kinds, QpOptions::default());
     let e = s.solve(data).expect_err("the solve must fail");
@@ -407,24 +413,14 @@ fn expect_err(kinds: &[ConstraintKind], data: &QpData) -> QpError {
 #[test]
 fn infeasible_constraints_are_an_error() {
     // u ≤ −1 and u ≥ 1.
-    let data = QpData {
-        h: DMatrix::identity(1, 1),
-        c: DVector::zeros(1),
-        a: DMatrix::from_column_slice(2, 1, &[1.0, -1.0]),
-        b: DVector::from_vec(vec![-1.0, -1.0]),
-    };
+    let data = unit_qp(&[0.0], &[1.0, -1.0], &[-1.0, -1.0]);
     let kinds = [ConstraintKind::Le; 2];
     assert!(matches!(
         expect_err(&kinds, &data),
         QpError::Infeasible { .. }
     ));
     // Inconsistent equalities: u₁ + u₂ = 1 and 2u₁ + 2u₂ = 3.
-    let data = QpData {
-        h: DMatrix::identity(2, 2),
-        c: DVector::zeros(2),
-        a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 2.0, 2.0]),
-        b: DVector::from_vec(vec![1.0, 3.0]),
-    };
+    let data = unit_qp(&[0.0, 0.0], &[1.0, 1.0, 2.0, 2.0], &[1.0, 3.0]);
     let kinds = [ConstraintKind::Eq; 2];
     assert_eq!(
         expect_err(&kinds, &data),
@@ -450,42 +446,25 @@ fn nonconvex_or_unbounded_objective_is_an_error() {
 
 #[test]
 fn dependent_active_constraints_are_degenerate() {
-    // min ½‖u − (1, 1)‖² s.t. u₁ ≤ 0, u₂ ≤ 0, u₁ + u₂ ≤ 0: all three active at the origin.
-    let data = QpData {
-        h: DMatrix::identity(2, 2),
-        c: DVector::from_vec(vec![-1.0, -1.0]),
-        a: DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0]),
-        b: DVector::zeros(3),
-    };
-    let kinds = [ConstraintKind::Le; 3];
-    assert!(matches!(
-        expect_err(&kinds, &data),
-        QpError::Degenerate { .. }
-    ));
-    // A duplicated active constraint.
-    let data = QpData {
-        h: DMatrix::identity(1, 1),
-        c: DVector::from_element(1, -1.0),
-        a: DMatrix::from_column_slice(2, 1, &[1.0, 2.0]),
-        b: DVector::zeros(2),
-    };
-    let kinds = [ConstraintKind::Le; 2];
-    assert!(matches!(
-        expect_err(&kinds, &data),
-        QpError::Degenerate { .. }
-    ));
-    // A redundant equality (consistent but dependent).
-    let data = QpData {
-        h: DMatrix::identity(2, 2),
-        c: DVector::zeros(2),
-        a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 2.0, 2.0]),
-        b: DVector::from_vec(vec![1.0, 2.0]),
-    };
-    let kinds = [ConstraintKind::Eq; 2];
-    assert!(matches!(
-        expect_err(&kinds, &data),
-        QpError::Degenerate { .. }
-    ));
+    use ConstraintKind::{Eq, Le};
+    let cases: [(&[ConstraintKind], QpData); 3] = [
+        // min ½‖u − (1, 1)‖² s.t. u₁ ≤ 0, u₂ ≤ 0, u₁ + u₂ ≤ 0: all three active at the origin.
+        (
+            &[Le; 3],
+            unit_qp(&[-1.0, -1.0], &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0], &[0.0; 3]),
+        ),
+        // A duplicated active constraint.
+        (&[Le; 2], unit_qp(&[-1.0], &[1.0, 2.0], &[0.0, 0.0])),
+        // A redundant equality (consistent but dependent).
+        (
+            &[Eq; 2],
+            unit_qp(&[0.0, 0.0], &[1.0, 1.0, 2.0, 2.0], &[1.0, 2.0]),
+        ),
+    ];
+    for (kinds, data) in &cases {
+        let e = expect_err(kinds, data);
+        assert!(matches!(e, QpError::Degenerate { .. }), "{e:?}");
+    }
 }
 
 #[test]

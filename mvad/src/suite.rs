@@ -36,7 +36,7 @@ use serde_json::Value;
 
 use crate::interp::InterpretedModel;
 use crate::runtime::error::SolveError;
-use crate::runtime::fd::fd_step;
+use crate::runtime::fd::fd_gradient;
 use crate::runtime::solution::{GradientMode, Method, Options, Solution};
 use crate::runtime::solve::solve;
 use crate::HybridModel;
@@ -409,17 +409,11 @@ impl Case {
                     ..self.options(*run)
                 };
                 let cost = solve(model, params, &primal).map_err(fail)?.cost;
-                let mut gradient = Vec::with_capacity(wrt.len());
-                for &k in &wrt {
-                    let h = fd_step(params[k], *rel);
-                    let mut p = params.clone();
-                    p[k] = params[k] + h;
-                    let up = solve(model, &p, &primal).map_err(fail)?.cost;
-                    let hi = p[k];
-                    p[k] = params[k] - h;
-                    let down = solve(model, &p, &primal).map_err(fail)?.cost;
-                    gradient.push((up - down) / (hi - p[k]));
-                }
+                let gradient = wrt
+                    .iter()
+                    .map(|&k| fd_gradient(model, params, &primal, k, *rel))
+                    .collect::<Result<Vec<f64>, SolveError>>()
+                    .map_err(fail)?;
                 Ok(Reference {
                     cost,
                     wrt,

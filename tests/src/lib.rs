@@ -38,6 +38,16 @@ pub fn tight() -> mvad::Options {
     }
 }
 
+/// Asserts |got − want| ≤ rel · max(|want|, 1) (relative above 1, absolute below; false
+/// for NaN); `what` names the value in the message.
+#[track_caller]
+pub fn assert_near(got: f64, want: f64, rel: f64, what: impl std::fmt::Display) {
+    assert!(
+        (got - want).abs() <= rel * want.abs().max(1.0),
+        "{what}: {got:e} vs {want:e} (rel {rel:e})"
+    );
+}
+
 /// The source of `models/FILE`.
 pub fn model_source(file: &str) -> String {
     std::fs::read_to_string(format!("{}/../models/{file}", env!("CARGO_MANIFEST_DIR"))).expect(file)

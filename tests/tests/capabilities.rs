@@ -6,7 +6,7 @@
 
 use mvad::interp::InterpretedModel;
 use mvad::{At, HybridModel, ModelAlloc, Occurrence, Switches};
-use mvad_tests::Defaults;
+use mvad_tests::{assert_near, Defaults};
 use nalgebra::{Const, DefaultAllocator, Matrix2x1, OMatrix, OVector, Vector1, Vector2, U1, U2};
 
 mvad::hybrid! {
@@ -185,10 +185,7 @@ where
 fn close(what: &str, got: &[f64], want: &[f64], tol: f64) {
     assert_eq!(got.len(), want.len(), "{what}");
     for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(
-            (g - w).abs() <= tol * w.abs().max(1.0),
-            "{what}[{i}]: {g:e} vs {w:e}"
-        );
+        assert_near(*g, *w, tol, format_args!("{what}[{i}]"));
     }
 }
 

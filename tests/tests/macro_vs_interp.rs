@@ -10,7 +10,7 @@
 use models::bouncing_ball::{BouncingBall, BouncingBallParams};
 use mvad::interp::InterpretedModel;
 use mvad::{At, HybridModel, ModelAlloc, Occurrence};
-use mvad_tests::{model_source, Rng, Sink, SINK};
+use mvad_tests::{assert_near, model_source, Rng, Sink, SINK};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
 /// The smallest model: no params, no events, no observables, no cost, no horizon.
@@ -373,9 +373,11 @@ fn loaded_gradient_within_5x_of_compiled() {
         let (tc, gc) = compiled_grad;
         let (tl, gl) = loaded;
         for (a, b) in gc.iter().zip(&gl) {
-            assert!(
-                (a - b).abs() <= 1e-9 * a.abs().max(1.0),
-                "{file}: gradients differ {a} vs {b}"
+            assert_near(
+                *b,
+                *a,
+                1e-9,
+                format_args!("{file}: loaded vs compiled gradient"),
             );
         }
         let ratio = tl / tc;

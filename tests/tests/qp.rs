@@ -7,7 +7,7 @@ use models::qp_kink::{self, QpKink};
 use mvad::interp::InterpretedModel;
 use mvad::qp::ConstraintStatus;
 use mvad::{solve, DiagnosticKind, HybridModel, ModelAlloc, Options};
-use mvad_tests::{model_source, tight};
+use mvad_tests::{assert_near, model_source, tight};
 use nalgebra::{DefaultAllocator, OVector};
 
 /// θ_i = (i − 50)/50, i = 0..=100: θ = 0 exactly at i = 50.
@@ -123,7 +123,7 @@ fn pointwise_qps_of_the_state_against_finite_differences() {
         .all(|d| d.kind != DiagnosticKind::Kink));
     assert!((sc.cost - sl.cost).abs() <= 1e-13 * sc.cost.abs());
     for (a, b) in sc.gradient.iter().zip(&sl.gradient) {
-        assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} vs {b}");
+        assert_near(*b, *a, 1e-12, "loaded vs compiled gradient");
     }
     assert_eq!(sc.qp[0].status, sl.qp[0].status);
     // Central differences at three steps: the best agrees to 1e-7.

@@ -10,7 +10,7 @@
 use models::qp_cart::{QpCart, MINMAX_SOURCE};
 use mvad::interp::InterpretedModel;
 use mvad::{fd_gradient, solve, HybridModel, ModelAlloc, Options, Solution};
-use mvad_tests::{model_source, tight};
+use mvad_tests::{assert_near, model_source, tight};
 use nalgebra::DefaultAllocator;
 
 /// Two controls sharing a budget, one pinned by an equality: u₁ + u₂ ≤ b, u₁ − u₂ = d·x.
@@ -54,14 +54,8 @@ fn cart_with_a_saturating_qp_matches_min_max_and_fd() {
     assert!((sc.cost - sq.cost).abs() <= 1e-13 * sq.cost.abs());
     for i in 0..p.len() {
         let (a, b, c) = (sq.gradient[i], sm.gradient[i], sc.gradient[i]);
-        assert!(
-            (a - b).abs() <= 1e-10 * b.abs().max(1.0),
-            "param {i}: {a} vs min/max {b}"
-        );
-        assert!(
-            (c - a).abs() <= 1e-12 * a.abs().max(1.0),
-            "param {i}: compiled {c} vs {a}"
-        );
+        assert_near(a, b, 1e-10, format_args!("param {i}: qp vs min/max"));
+        assert_near(c, a, 1e-12, format_args!("param {i}: compiled vs loaded"));
         let err = fd_error(&qp, &p, &sq.gradient, i);
         eprintln!(
             "cart param {i}: qp {a:.15e}, |qp − min/max| {:.1e}, |compiled − loaded| {:.1e}, FD rel err {err:.1e}",
@@ -95,14 +89,8 @@ fn cart_under_the_implicit_method_matches_min_max() {
             (a - b).abs(),
             (c - a).abs()
         );
-        assert!(
-            (a - b).abs() <= 1e-8 * b.abs().max(1.0),
-            "param {i}: {a} vs {b}"
-        );
-        assert!(
-            (c - a).abs() <= 1e-10 * a.abs().max(1.0),
-            "param {i}: {c} vs {a}"
-        );
+        assert_near(a, b, 1e-8, format_args!("param {i}: qp vs min/max"));
+        assert_near(c, a, 1e-10, format_args!("param {i}: compiled vs loaded"));
     }
 }
 

@@ -10,6 +10,7 @@ use mvad::runtime::solution::{GradientMode, Options, Solution};
 use mvad::runtime::solve::{solve, solve_with};
 use mvad::table::Table;
 use mvad::{fd_gradient, HybridModel, ModelAlloc, Trigger};
+use mvad_tests::assert_near;
 use nalgebra::{DefaultAllocator, OVector};
 
 mvad::hybrid!(include "tests/dose.hyb");
@@ -169,23 +170,36 @@ fn rel(x: f64, y: f64) -> f64 {
     ((x - y) / y).abs()
 }
 
-#[test]
-fn the_queue_matches_the_exact_lindley_recursion_through_both_doors() {
-    let a = Arrivals::generate(1000, 11);
+/// `n` customers (generated from `seed`) served at μ = 1.25, and the exact C and dC/dμ of
+/// the Lindley recursion.
+fn lindley_queue(n: usize, seed: u64) -> (Arrivals, f64, f64, f64) {
+    let a = Arrivals::generate(n, seed);
     let mu = 1.25;
     let (c, dmu, _) = queue::exact(&a.t, &a.s, mu, 1.0);
+    (a, mu, c, dmu)
+}
+
+/// A run's C and dC/dμ against the exact ones, to 1e-12 relative.
+#[track_caller]
+fn assert_exact(door: &str, sol: &Solution, c: f64, dmu: f64) {
+    assert!(rel(sol.cost, c) < 1e-12, "{door}: C = {} vs {c}", sol.cost);
+    assert!(
+        rel(sol.gradient[0], dmu) < 1e-12,
+        "{door}: {} vs {dmu}",
+        sol.gradient[0]
+    );
+}
+
+#[test]
+fn the_queue_matches_the_exact_lindley_recursion_through_both_doors() {
+    let (a, mu, c, dmu) = lindley_queue(1000, 11);
     let opts = Options::default();
     let p = [mu];
     for (door, sol) in [
         ("compiled", run(&compiled_queue(&a), &p, &opts)),
         ("loaded", run(&loaded_queue("queue.hyb", &a), &p, &opts)),
     ] {
-        assert!(rel(sol.cost, c) < 1e-12, "{door}: C = {} vs {c}", sol.cost);
-        assert!(
-            rel(sol.gradient[0], dmu) < 1e-12,
-            "{door}: {} vs {dmu}",
-            sol.gradient[0]
-        );
+        assert_exact(door, &sol, c, dmu);
         let arrivals = sol.events.iter().filter(|e| e.event == 1).count();
         assert_eq!(arrivals, 1000, "{door}");
     }
@@ -195,9 +209,7 @@ fn the_queue_matches_the_exact_lindley_recursion_through_both_doors() {
 fn the_queue_at_1e6_customers_streams_and_matches_the_exact_recursion_through_both_doors() {
     // No event table (the `()` sink); about 4 s in the test profile. 10⁷ customers and the
     // command line are run by the release example `queue_scale`, which checks the same bound.
-    let a = Arrivals::generate(1_000_000, 3);
-    let mu = 1.25;
-    let (c, dmu, _) = queue::exact(&a.t, &a.s, mu, 1.0);
+    let (a, mu, c, dmu) = lindley_queue(1_000_000, 3);
     let opts = Options::default();
     let compiled = solve_with(
         &compiled_queue(&a),
@@ -216,12 +228,7 @@ fn the_queue_at_1e6_customers_streams_and_matches_the_exact_recursion_through_bo
     for (door, sol) in [("compiled", compiled), ("loaded", loaded)] {
         assert!(sol.events.is_empty(), "{door}");
         assert!(sol.stats.events > 1_000_000, "{door}");
-        assert!(rel(sol.cost, c) < 1e-12, "{door}: C = {} vs {c}", sol.cost);
-        assert!(
-            rel(sol.gradient[0], dmu) < 1e-12,
-            "{door}: {} vs {dmu}",
-            sol.gradient[0]
-        );
+        assert_exact(door, &sol, c, dmu);
     }
 }
 
@@ -241,12 +248,7 @@ fn the_stretched_queue_matches_the_exact_ipa_derivative_and_finite_differences()
         ("compiled", run(&compiled, &p, &opts)),
         ("loaded", run(&interp, &p, &opts)),
     ] {
-        assert!(rel(sol.cost, c) < 1e-12, "{door}: C = {} vs {c}", sol.cost);
-        assert!(
-            rel(sol.gradient[0], dmu) < 1e-12,
-            "{door}: {} vs {dmu}",
-            sol.gradient[0]
-        );
+        assert_exact(door, &sol, c, dmu);
         assert!(
             rel(sol.gradient[1], dsc) < 1e-12,
             "{door}: {} vs {dsc}",
@@ -374,11 +376,11 @@ fn time_events_in_adjoint_mode_match_forward_mode_through_both_doors() {
         assert_eq!(a.stats.mode, GradientMode::Adjoint, "{what}");
         assert_relative_eq!(a.cost, f.cost, max_relative = 1e-11);
         for (x, y) in a.gradient.iter().zip(&f.gradient) {
-            assert!(
-                (x - y).abs() <= 1e-9 * y.abs().max(1.0),
-                "{what}: adjoint {:?} forward {:?}",
-                a.gradient,
-                f.gradient
+            assert_near(
+                *x,
+                *y,
+                1e-9,
+                format_args!("{what}: adjoint vs forward gradient"),
             );
         }
     };

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use mvad::load::load;
 use mvad::{measure, solve, DiagnosticKind, HybridModel, Options};
+use mvad_tests::assert_near;
 
 #[test]
 fn zeno_velocity_measure_pairs_to_the_height_change() {
@@ -31,10 +32,7 @@ fn zeno_velocity_measure_pairs_to_the_height_change() {
     // ⟨μ_h, 1⟩ is the cost gradient (C = ∫h dt), tail included.
     let h_total = height.pair(|_| 1.0);
     for (j, (&a, &b)) in h_total.iter().zip(&sol.gradient).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-7 * b.abs().max(1.0),
-            "height θ{j}: {a} vs {b}"
-        );
+        assert_near(a, b, 1e-7, format_args!("height θ{j}"));
     }
 
     // ⟨μ_v, 1⟩ = d/dθ (h(T) − h0). The tail of S extrapolated from the last five bounces

@@ -1,36 +1,10 @@
-use super::*;
 use crate::ast::MAX_DEPTH;
-use crate::span::line_col;
-
-fn errors(src: &str) -> Vec<Diagnostic> {
-    let model = crate::parse::parse(src).unwrap_or_else(|e| panic!("{src}: {e:?}"));
-    check(&model)
-}
-
-/// An expected error: (line, column, message).
-type Expected = (usize, usize, &'static str);
-
-/// Each case: a model, then the expected errors.
-#[track_caller]
-fn expect(src: &str, want: &[Expected]) {
-    let got: Vec<(usize, usize, String)> = errors(src)
-        .into_iter()
-        .map(|d| {
-            let (l, c) = line_col(src, d.span.start);
-            (l, c, d.message)
-        })
-        .collect();
-    let want: Vec<(usize, usize, String)> = want
-        .iter()
-        .map(|&(l, c, m)| (l, c, m.to_string()))
-        .collect();
-    assert_eq!(got, want, "{src}");
-}
+use crate::testing::{check_errors, expect_check, Expected};
 
 #[test]
 fn spec_models_are_clean() {
-    assert!(errors(crate::parse::tests::BALL).is_empty());
-    assert!(errors(crate::parse::tests::THERMOSTAT).is_empty());
+    assert!(check_errors(crate::parse::tests::BALL).is_empty());
+    assert!(check_errors(crate::parse::tests::THERMOSTAT).is_empty());
 }
 
 #[test]
@@ -194,7 +168,7 @@ fn one_error_per_rule() {
     ];
     let mut bad = Vec::new();
     for (src, want) in cases {
-        if std::panic::catch_unwind(|| expect(src, want)).is_err() {
+        if std::panic::catch_unwind(|| expect_check(src, want)).is_err() {
             bad.push(*src);
         }
     }
@@ -204,7 +178,7 @@ fn one_error_per_rule() {
 #[test]
 fn reports_every_error_sorted_by_position() {
     let src = "model M { state h = 0; state v = 0;\n flow { der(h) = vv; der(q) = 1; }\n event when h <= 0 -> nowhere; }";
-    let got: Vec<String> = errors(src).into_iter().map(|d| d.message).collect();
+    let got: Vec<String> = check_errors(src).into_iter().map(|d| d.message).collect();
     assert_eq!(
         got,
         vec![
@@ -223,19 +197,20 @@ fn names_in_scope_are_accepted() {
     let src = "model M { const c0 = 2; const c1 = c0 * 3; param p = c1 - 1; state h = p * c0;
                flow { der(h) = y2 + t * p; } observe y2 = 2 * y1; observe y1 = h + c1;
                event e when y1 >= p { h = y2; } cost = integral(y2) + sum(e, h) + final(t); horizon p + c0; }";
-    assert_eq!(errors(src), vec![]);
+    assert_eq!(check_errors(src), vec![]);
 }
 
 #[test]
 fn hints() {
-    let d = &errors("model M { state speed = 0; flow { der(speed) = sped; } }")[0];
+    let d = &check_errors("model M { state speed = 0; flow { der(speed) = sped; } }")[0];
     assert_eq!(d.help.as_deref(), Some("did you mean `speed`?"));
-    let d = &errors("model M { state h = 0; flow { der(h) = sin; } }")[0];
+    let d = &check_errors("model M { state h = 0; flow { der(h) = sin; } }")[0];
     assert_eq!(
         d.help.as_deref(),
         Some("`sin` is a function: call it as `sin(...)`")
     );
-    let d = &errors("model M { param a = 1; param a = 2; state h = 0; flow { der(h) = a; } }")[0];
+    let d =
+        &check_errors("model M { param a = 1; param a = 2; state h = 0; flow { der(h) = a; } }")[0];
     assert_eq!(d.labels.len(), 1);
     assert_eq!(d.labels[0].1, "first declared here");
 }
@@ -252,8 +227,8 @@ fn observable_substitution_depth_is_bounded() {
         s.push_str(&format!("; observe z = o{}; }}", n - 1));
         s
     };
-    assert!(errors(&chain(10)).is_empty());
-    let errs = errors(&chain(MAX_DEPTH + 10));
+    assert!(check_errors(&chain(10)).is_empty());
+    let errs = check_errors(&chain(MAX_DEPTH + 10));
     assert!(!errs.is_empty());
     assert!(
         errs.iter().all(|d| d.message.contains("nested too deeply")),

@@ -166,56 +166,62 @@ fn expect_error(src: &str, line: usize, col: usize, msg: &str) {
 
 #[test]
 fn syntax_errors_are_located() {
-    expect_error("", 1, 1, "unexpected end of input; expected `model`");
-    expect_error("model", 1, 6, "expected an identifier");
-    expect_error("model M {", 1, 10, "unexpected end of input");
-    expect_error("model M { param a = 1 }", 1, 23, "unexpected `}`; expected");
-    expect_error("model M { param a = 1 }", 1, 23, "`;`");
-    expect_error(
-        "model M {\n  state x = (1 + ;\n}",
-        2,
-        18,
-        "expected an expression",
-    );
-    expect_error(
-        "model M {\n  flow { der(x) = g + * v; }\n}",
-        2,
-        23,
-        "unexpected `*`",
-    );
-    expect_error(
-        "model M { foo x = 1; }",
-        1,
-        11,
-        "unexpected `foo`; expected `param`",
-    );
-    expect_error(
-        "model M { event when x == 0 { } }",
-        1,
-        24,
-        "unexpected `==`",
-    );
-    expect_error("model M { param a = 1.0f64; }", 1, 21, "");
-    expect_error(
-        "model M { param a = 1; } trailing",
-        1,
-        26,
-        "expected end of input",
-    );
-    // A bare expression is a static cost term (the `qp` extension of the spec), so
-    // `cost = h;` parses and is refused by the checker at the same place (see
-    // `check::tests::static_cost_terms_read_only_params_and_static_qps`); an empty cost and
-    // a bare sum still are syntax errors.
-    expect_error("model M { cost = ; }", 1, 18, "expected");
-    expect_error("model M { cost = h + ; }", 1, 22, "expected");
-    expect_error(
-        "model M { param a = 1e999; }",
-        1,
-        21,
-        "number `1e999` is out of range",
-    );
-    expect_error("model M { /* unterminated", 1, 11, "");
-    expect_error("\u{0}\u{1}\u{ff}garbage", 1, 1, "character U+0000");
+    // (source, line, column, a part of the one error's message)
+    let cases: &[(&str, usize, usize, &str)] = &[
+        ("", 1, 1, "unexpected end of input; expected `model`"),
+        ("model", 1, 6, "expected an identifier"),
+        ("model M {", 1, 10, "unexpected end of input"),
+        ("model M { param a = 1 }", 1, 23, "unexpected `}`; expected"),
+        ("model M { param a = 1 }", 1, 23, "`;`"),
+        (
+            "model M {\n  state x = (1 + ;\n}",
+            2,
+            18,
+            "expected an expression",
+        ),
+        (
+            "model M {\n  flow { der(x) = g + * v; }\n}",
+            2,
+            23,
+            "unexpected `*`",
+        ),
+        (
+            "model M { foo x = 1; }",
+            1,
+            11,
+            "unexpected `foo`; expected `param`",
+        ),
+        (
+            "model M { event when x == 0 { } }",
+            1,
+            24,
+            "unexpected `==`",
+        ),
+        ("model M { param a = 1.0f64; }", 1, 21, ""),
+        (
+            "model M { param a = 1; } trailing",
+            1,
+            26,
+            "expected end of input",
+        ),
+        // A bare expression is a static cost term (the `qp` extension of the spec), so
+        // `cost = h;` parses and is refused by the checker at the same place (see
+        // `check::tests::static_cost_terms_read_only_params_and_static_qps`); an empty cost and
+        // a bare sum still are syntax errors.
+        ("model M { cost = ; }", 1, 18, "expected"),
+        ("model M { cost = h + ; }", 1, 22, "expected"),
+        (
+            "model M { param a = 1e999; }",
+            1,
+            21,
+            "number `1e999` is out of range",
+        ),
+        ("model M { /* unterminated", 1, 11, ""),
+        ("\u{0}\u{1}\u{ff}garbage", 1, 1, "character U+0000"),
+    ];
+    for &(src, line, col, msg) in cases {
+        expect_error(src, line, col, msg);
+    }
 }
 
 #[test]

@@ -219,7 +219,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{json, on_ball};
+    use crate::cli::test_support::{assert_contains_all, json, on_ball};
 
     #[test]
     fn text_lists_the_declarations() {
@@ -228,11 +228,16 @@ mod tests {
             out.starts_with("ball.hyb: model `BouncingBall` is valid\n"),
             "{out}"
         );
-        assert!(out.contains("states (2):       h, v"), "{out}");
-        assert!(out.contains("e = 0.8, g = 9.81, h0 = 2, v0 = 0"), "{out}");
-        assert!(out.contains("impact"), "{out}");
-        assert!(out.contains("main: 1 of 4 non-zero: dh/dv"), "{out}");
-        assert!(out.contains("horizon:          2\n"), "{out}");
+        assert_contains_all(
+            &out,
+            &[
+                "states (2):       h, v",
+                "e = 0.8, g = 9.81, h0 = 2, v0 = 0",
+                "impact",
+                "main: 1 of 4 non-zero: dh/dv",
+                "horizon:          2\n",
+            ],
+        );
     }
 
     #[test]

@@ -184,7 +184,7 @@ pub fn grad_text(
 mod tests {
     use super::*;
     use crate::cli::spec_keys::missing_spec_keys;
-    use crate::cli::test_support::{json, on_ball, tight};
+    use crate::cli::test_support::{assert_contains_all, json, on_ball, tight};
     use approx::assert_relative_eq;
     use serde_json::Value;
 
@@ -241,11 +241,16 @@ mod tests {
     #[test]
     fn text_table() {
         let out = on_ball(run, &[]).expect("runs");
-        assert!(out.contains("cost C = 1.89051371"), "{out}");
-        assert!(out.contains("gradient by forward mode"), "{out}");
-        assert!(out.contains("events (2):"), "{out}");
-        assert!(out.contains("impact"), "{out}");
-        assert!(out.contains("velocity"), "{out}");
+        assert_contains_all(
+            &out,
+            &[
+                "cost C = 1.89051371",
+                "gradient by forward mode",
+                "events (2):",
+                "impact",
+                "velocity",
+            ],
+        );
     }
 
     #[test]

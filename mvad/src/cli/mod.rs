@@ -444,6 +444,14 @@ pub mod test_support {
     use mvad::runtime::fixtures::Ball;
     use serde_json::Value;
 
+    /// Asserts that `out` contains each of `parts` (the message shows the part and `out`).
+    #[track_caller]
+    pub fn assert_contains_all(out: &str, parts: &[&str]) {
+        for part in parts {
+            assert!(out.contains(part), "{part:?} missing from:\n{out}");
+        }
+    }
+
     /// Tolerances at which the E1 ball is accurate to about 1e-10.
     pub const TIGHT: [&str; 4] = ["--rtol", "1e-10", "--atol", "1e-12"];
 

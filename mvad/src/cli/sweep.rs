@@ -162,18 +162,11 @@ where
                 Value::Object(m)
             })
             .collect();
-        let mut m = Map::new();
-        m.insert("model".into(), Value::from(info.name.clone()));
-        m.insert("param".into(), Value::from(pname.clone()));
-        m.insert(
-            "observable".into(),
-            info.observables
-                .get(obs)
-                .map(|o| Value::from(o.clone()))
-                .unwrap_or(Value::Null),
-        );
-        m.insert("rows".into(), Value::Array(rows));
-        return Ok(json_text(&Value::Object(m)));
+        let v = serde_json::json!({
+            "model": info.name, "param": pname, "observable": info.observables.get(obs),
+            "rows": rows,
+        });
+        return Ok(json_text(&v));
     }
 
     let obs_name = info

@@ -22,9 +22,9 @@ use mvad::runtime::error::SolveError;
 use mvad::runtime::solution::{Options, Solution};
 use mvad::runtime::solve::solve;
 use mvad::suite::{grad_error, rel_error};
-use mvad::{HybridModel, ModelAlloc};
+use mvad::{fd_gradient, HybridModel, ModelAlloc};
 use nalgebra::{DefaultAllocator, OVector};
-use serde_json::{Map, Value};
+use serde_json::Value;
 
 use super::output::{g, json_text, num, Table};
 use super::plot::{format_of, workprec as plot_workprec, Curve};
@@ -267,15 +267,12 @@ where
                 })
             })
             .collect();
-        let mut m = Map::new();
-        m.insert("model".into(), Value::from(info.name.clone()));
-        m.insert("wrt".into(), Value::from(names.clone()));
-        m.insert(
-            "reference".into(),
-            serde_json::json!({"cost": num(reference.cost), "gradient": named(&reference.grad), "source": source}),
-        );
-        m.insert("rows".into(), Value::Array(rows_json));
-        return Ok(json_text(&Value::Object(m)));
+        let v = serde_json::json!({
+            "model": info.name, "wrt": names,
+            "reference": {"cost": num(reference.cost), "gradient": named(&reference.grad), "source": source},
+            "rows": rows_json,
+        });
+        return Ok(json_text(&v));
     }
 
     let mut out = format!(
@@ -349,17 +346,10 @@ where
     };
     let (seconds, (cost, grad)) = timed(|| {
         let cost = solve(model, params, &primal)?.cost;
-        let mut grad = Vec::with_capacity(wrt.len());
-        for &k in wrt {
-            let h = mvad_runtime::fd::fd_step(params[k], rel_step);
-            let mut p = params.clone();
-            p[k] += h;
-            let cp = solve(model, &p, &primal)?.cost;
-            let up = p[k];
-            p[k] = params[k] - h;
-            let cm = solve(model, &p, &primal)?.cost;
-            grad.push((cp - cm) / (up - p[k]));
-        }
+        let grad = wrt
+            .iter()
+            .map(|&k| fd_gradient(model, params, opts, k, rel_step))
+            .collect::<Result<Vec<f64>, SolveError>>()?;
         Ok((cost, grad))
     })?;
     Ok(Point::scored(seconds, cost, grad, rel_step, reference))

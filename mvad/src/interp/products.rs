@@ -14,6 +14,7 @@ use mvad_dsl::ir::ExprArena;
 use mvad_dsl::schedule::SecondOrderKernels;
 use mvad_runtime::model::differences;
 use mvad_runtime::{At, ModelAdjoint, ModelSecondOrder, Occurrence, Point, Switches};
+use nalgebra::Dyn;
 
 use super::{at_pt, at_sw, pt0, pt_theta, InterpretedModel, ModeTapes, Scratch, TapeAt, M, X};
 
@@ -220,19 +221,23 @@ impl InterpretedModel {
         true
     }
 
-    /// The tapes of mode `mode`, once the one `tape` picks has run at `at` into `regs`;
-    /// `None` when the mode does not exist, the caller's `sizes` do not hold, or the tape
-    /// cannot run (the caller then fills its outputs with NaN).
-    fn run_mode_tape(
+    /// Runs the tape that `tape` picks of the point's mode at `pt` into the scratch
+    /// registers, then `body` with the mode's tapes, the registers and the tape point;
+    /// `body` says whether it could finish. False when the mode does not exist, the caller's
+    /// `sizes` do not hold, or a tape cannot run: the caller then fills its outputs with NaN.
+    fn with_mode_tape(
         &self,
-        mode: usize,
+        pt: Point<'_, Dyn, Dyn>,
         sizes: bool,
         tape: impl Fn(&ModeTapes) -> &Tape,
-        at: &TapeAt<'_>,
-        regs: &mut [f64],
-    ) -> Option<&ModeTapes> {
-        let m = self.mode(mode).filter(|_| sizes)?;
-        self.run(tape(m), at, regs).then_some(m)
+        body: impl FnOnce(&ModeTapes, &mut [f64], &TapeAt<'_>) -> bool,
+    ) -> bool {
+        let mut sc = self.scratch.borrow_mut();
+        let at = at_pt(pt);
+        match self.mode(pt.mode).filter(|_| sizes) {
+            Some(m) if self.run(tape(m), &at, &mut sc.regs) => body(m, &mut sc.regs, &at),
+            _ => false,
+        }
     }
 
     /// Whether `s` is n×p and `out` n×p (or, for ℓ, `out` has p entries).
@@ -245,32 +250,36 @@ impl ModelAdjoint for InterpretedModel {
     fn rhs_vjp(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, vx: &mut X, vp: &mut X) {
         let (n, np) = (self.n, self.p);
         let sizes = lambda.len() == n && vx.len() == n && vp.len() == np;
-        let mut sc = self.scratch.borrow_mut();
-        let at = at_pt(pt);
-        let Some(m) = self.run_mode_tape(pt.mode, sizes, |m| &m.jac, &at, &mut sc.regs) else {
+        let done = self.with_mode_tape(
+            pt,
+            sizes,
+            |m| &m.jac,
+            |m, regs, _| {
+                let (xe, pe) = (&m.second.x_entries, &m.second.p_entries);
+                let nx = xe.len();
+                let lam = lambda.as_slice();
+                let vals = || m.jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
+                transposed(
+                    lam,
+                    vals()
+                        .take_while(|&(slot, _)| slot < nx)
+                        .map(|(slot, a)| (xe[slot].0, xe[slot].1, a)),
+                    vx.as_mut_slice(),
+                );
+                transposed(
+                    lam,
+                    vals()
+                        .skip_while(|&(slot, _)| slot < nx)
+                        .map(|(slot, a)| (pe[slot - nx].0, pe[slot - nx].1, a)),
+                    vp.as_mut_slice(),
+                );
+                true
+            },
+        );
+        if !done {
             vx.fill(f64::NAN);
             vp.fill(f64::NAN);
-            return;
-        };
-        let (xe, pe) = (&m.second.x_entries, &m.second.p_entries);
-        let nx = xe.len();
-        let regs = &sc.regs;
-        let lam = lambda.as_slice();
-        let vals = || m.jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
-        transposed(
-            lam,
-            vals()
-                .take_while(|&(slot, _)| slot < nx)
-                .map(|(slot, a)| (xe[slot].0, xe[slot].1, a)),
-            vx.as_mut_slice(),
-        );
-        transposed(
-            lam,
-            vals()
-                .skip_while(|&(slot, _)| slot < nx)
-                .map(|(slot, a)| (pe[slot - nx].0, pe[slot - nx].1, a)),
-            vp.as_mut_slice(),
-        );
+        }
     }
 
     /// −(λᵀf_x + w ℓ_x): the flow's f_x tape (its non-zero entries only), then ℓ's gradient
@@ -278,18 +287,19 @@ impl ModelAdjoint for InterpretedModel {
     fn adjoint_rate(&self, pt: Point<'_, Self::N, Self::P>, lambda: &X, w: f64, out: &mut X) {
         let n = self.n;
         let sizes = lambda.len() == n && out.len() == n;
-        let mut sc = self.scratch.borrow_mut();
-        let at = at_pt(pt);
-        let Some(m) = self.run_mode_tape(pt.mode, sizes, |m| &m.jac_x, &at, &mut sc.regs) else {
-            out.fill(f64::NAN);
-            return;
-        };
-        let regs = &sc.regs;
-        let vals = m.jac_x.outputs().map(|(s, reg)| (s / n, s % n, regs[reg]));
-        transposed(lambda.as_slice(), vals, out.as_mut_slice());
-        out.neg_mut();
-        let rc = |s: usize, v: f64| out[s] -= w * v;
-        if !self.running_cost_slots(&at, &mut sc.regs, w, 0..n, rc) {
+        let done = self.with_mode_tape(
+            pt,
+            sizes,
+            |m| &m.jac_x,
+            |m, regs, at| {
+                let vals = m.jac_x.outputs().map(|(s, reg)| (s / n, s % n, regs[reg]));
+                transposed(lambda.as_slice(), vals, out.as_mut_slice());
+                out.neg_mut();
+                let rc = |s: usize, v: f64| out[s] -= w * v;
+                self.running_cost_slots(at, regs, w, 0..n, rc)
+            },
+        );
+        if !done {
             out.fill(f64::NAN);
         }
     }
@@ -306,20 +316,21 @@ impl ModelAdjoint for InterpretedModel {
     ) {
         let (n, np) = (self.n, self.p);
         let sizes = lambda.len() == n && g.len() == np;
-        let mut sc = self.scratch.borrow_mut();
-        let at = at_pt(pt);
-        let Some(m) = self.run_mode_tape(pt.mode, sizes, |m| &m.jac_p, &at, &mut sc.regs) else {
-            g.fill(f64::NAN);
-            return;
-        };
-        let regs = &sc.regs;
-        for (slot, reg) in m.jac_p.outputs() {
-            let (r, k) = (slot / np, slot % np);
-            g[k] -= a * (lambda[r] * regs[reg]);
-        }
-        let aw = a * w;
-        let rc = |s: usize, v: f64| g[s - n] -= aw * v;
-        if !self.running_cost_slots(&at, &mut sc.regs, w, n..n + np, rc) {
+        let done = self.with_mode_tape(
+            pt,
+            sizes,
+            |m| &m.jac_p,
+            |m, regs, at| {
+                for (slot, reg) in m.jac_p.outputs() {
+                    let (r, k) = (slot / np, slot % np);
+                    g[k] -= a * (lambda[r] * regs[reg]);
+                }
+                let aw = a * w;
+                let rc = |s: usize, v: f64| g[s - n] -= aw * v;
+                self.running_cost_slots(at, regs, w, n..n + np, rc)
+            },
+        );
+        if !done {
             g.fill(f64::NAN);
         }
     }

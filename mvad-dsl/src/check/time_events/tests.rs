@@ -1,21 +1,15 @@
-use crate::span::line_col;
-
-/// (line, column, message) of every error of `src`, parse and check.
-fn errors(src: &str) -> Vec<(usize, usize, String)> {
-    let diags = match crate::front(src) {
-        Ok(_) => Vec::new(),
-        Err(d) => d,
-    };
-    diags
-        .into_iter()
-        .map(|d| {
-            let (l, c) = line_col(src, d.span.start);
-            (l, c, d.message)
-        })
-        .collect()
-}
+use crate::testing::{assert_errors, front_errors as errors, Expected};
 
 const HEAD: &str = "model M { param k = 1; param p = 0.5; state x = 0; table arr = \"a.csv\";\n";
+
+/// Each case: a model body after [`HEAD`] and its one expected error.
+#[track_caller]
+fn expect_each_with_head(cases: &[(&str, Expected)]) {
+    for &(body, want) in cases {
+        let src = format!("{HEAD}{body}");
+        assert_errors(&src, errors(&src), &[want]);
+    }
+}
 
 #[test]
 fn every_trigger_parses_and_names_may_be_keywords_of_triggers() {
@@ -44,7 +38,7 @@ fn every_trigger_parses_and_names_may_be_keywords_of_triggers() {
 
 #[test]
 fn time_and_table_rules_report_located_errors() {
-    let cases: &[(&str, (usize, usize, &str))] = &[
+    let cases: &[(&str, Expected)] = &[
         (
             "flow { der(x) = 1; } event at x { x = 0; } }",
             (2, 31, "the time of an event cannot depend on state `x`"),
@@ -82,11 +76,7 @@ fn time_and_table_rules_report_located_errors() {
             (2, 7, "duplicate table `arr`"),
         ),
     ];
-    for (body, want) in cases {
-        let got = errors(&format!("{HEAD}{body}"));
-        let want = vec![(want.0, want.1, want.2.to_string())];
-        assert_eq!(got, want, "{body}");
-    }
+    expect_each_with_head(cases);
 }
 
 #[test]
@@ -118,7 +108,7 @@ fn dotted_names_resolve_to_a_table_column_or_a_qp_variable() {
         vec![(0, "t".to_string()), (0, "s".to_string())]
     );
     assert_eq!(m.qps.len(), 1);
-    let cases: &[(&str, (usize, usize, &str))] = &[
+    let cases: &[(&str, Expected)] = &[
         // A name that is neither: the message names both kinds the model declares.
         (
             "qp q(u) { minimize u^2; } flow { der(x) = 1; } event e at each arr.t { x = r.s; } }",
@@ -144,9 +134,5 @@ fn dotted_names_resolve_to_a_table_column_or_a_qp_variable() {
             ),
         ),
     ];
-    for (body, want) in cases {
-        let got = errors(&format!("{HEAD}{body}"));
-        let want = vec![(want.0, want.1, want.2.to_string())];
-        assert_eq!(got, want, "{body}");
-    }
+    expect_each_with_head(cases);
 }

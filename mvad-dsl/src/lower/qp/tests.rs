@@ -2,7 +2,7 @@
 //! checks (degree, convexity, constraints that involve the variables), each located.
 
 use crate::ir::{Point, Program, QpKind};
-use crate::span::line_col;
+use crate::testing::located;
 
 fn program(src: &str) -> Program {
     let model = crate::front(src).unwrap_or_else(|e| panic!("front: {e:?}"));
@@ -12,16 +12,7 @@ fn program(src: &str) -> Program {
 /// The lowering errors of a model the checker accepts, as (line, column, message).
 fn errors(src: &str) -> Vec<(usize, usize, String)> {
     let model = crate::front(src).unwrap_or_else(|e| panic!("front: {e:?}"));
-    match crate::lower::lower(&model) {
-        Ok(_) => Vec::new(),
-        Err(d) => d
-            .into_iter()
-            .map(|d| {
-                let (l, c) = line_col(src, d.span.start);
-                (l, c, d.message)
-            })
-            .collect(),
-    }
+    located(src, crate::lower::lower(&model).err().unwrap_or_default())
 }
 
 #[test]
