@@ -258,6 +258,10 @@ pub struct Integrator<Sys: OdeSystem> {
     /// error estimate not carried over it, its quadrature not added (see
     /// [`Integrator::close_step`]).
     carry_pending: Option<f64>,
+    /// The system's quadrature sums hold the last attempt's whole-step ΔQ and its error
+    /// (formed in [`Integrator::attempt`] under [`OdeSystem::controls_quadrature`]); once
+    /// that attempt is accepted they wait for [`Integrator::close_step`].
+    quadrature_formed: bool,
     /// k[0] = F(t, y) holds (computed or taken over from the FSAL stage).
     k0_valid: bool,
     /// The last accepted step left F(t, y) in this stage slot (Tsit5: k₇; Verner: the first
@@ -309,6 +313,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             r: zero(),
             k: (0..slots).map(|_| zero()).collect(),
             k0_valid: false,
+            quadrature_formed: false,
             carry_pending: None,
             fsal_slot: None,
             ctrl: Controller::new(),
@@ -524,6 +529,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             });
         }
         self.exact_attempt(h);
+        self.quadrature_formed = false;
         if !self.ynew.is_finite() {
             self.stats.rejected_steps += 1;
             let what = self.nonfinite_source();
@@ -557,22 +563,33 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// Closes the last accepted step, if that is still pending: carries the system's global
-    /// error estimate over it and adds its quadrature ([`OdeSystem::has_quadrature`]). A
-    /// step is closed once it is known where it ends: when the next step starts, when
-    /// [`Integrator::truncate`] cuts it (over the cut length), at a restart, or when the
-    /// caller asks before reading the estimate or the quadrature (at the end of a run or a
-    /// segment). Until then t_prev, y_prev, the stages k (k[0] = F(t_prev, y_prev)) and the
-    /// local error estimate are the step's. An exact step makes no error, and its flow (a
-    /// function of θ alone) moves none: it carries nothing, but adds its quadrature.
+    /// error estimate over it and adds its quadrature ([`OdeSystem::has_quadrature`]; ΔQ as
+    /// the accepted attempt formed it, re-formed with the weights bᵢ(θ) when the step was
+    /// cut, or formed now when the attempt did not, `quadrature.rs`). A step is closed once
+    /// it is known where it ends: when the next step starts, when [`Integrator::truncate`]
+    /// cuts it (over the cut length), at a restart, or when the caller asks before reading
+    /// the estimate or the quadrature (at the end of a run or a segment). Until then t_prev,
+    /// y_prev, the stages k (k[0] = F(t_prev, y_prev)) and the local error estimate are the
+    /// step's. An exact step makes no error, and its flow (a function of θ alone) moves none:
+    /// it carries nothing, but adds its quadrature.
     pub fn close_step(&mut self) {
         if let Some(h) = self.carry_pending.take() {
-            if self.dense_scheme != Scheme::Exact {
+            let exact = self.dense_scheme == Scheme::Exact;
+            if !exact {
                 self.sys
                     .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
             }
             if self.sys.has_quadrature() {
-                self.add_step_quadrature(h);
+                let error = self.sys.estimates_quadrature_error() && !exact;
+                let of = quadrature::QuadratureOf::Accepted(h / self.dense_h);
+                if !self.quadrature_formed {
+                    self.form_quadrature(of, error);
+                } else if h != self.dense_h {
+                    self.form_quadrature(of, false);
+                }
+                self.sys.quadrature_close(error);
             }
+            self.quadrature_formed = false;
         }
     }
 
@@ -625,6 +642,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 return self.sys.stage_source(k);
             }
         }
+        if self.quadrature_formed && self.ynew.is_finite() {
+            return format!("quadrature of the {}", self.sys.flow_name());
+        }
         let part = self
             .sys
             .nonfinite_part(&self.ynew)
@@ -633,14 +653,32 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// One attempt of the active scheme with signed step h from (t, y): fills `ynew`, the
-    /// stages and `yerr`, and returns the error norm (NaN when something overflowed).
+    /// stages and `yerr`, and returns the error norm (NaN when something overflowed). Under
+    /// [`OdeSystem::controls_quadrature`] an attempt that Y's norm accepts also forms the
+    /// quadrature's ΔQ and its error, and the norm is max(‖e_Y‖, ‖e_Q‖).
     #[inline]
     fn attempt(&mut self, h: f64) -> f64 {
-        match self.scheme {
+        let err = match self.scheme {
             Scheme::Tsit5 => self.explicit_attempt(&TSIT5, h),
             Scheme::Verner9 => self.explicit_attempt(&VERNER9, h),
             Scheme::Rodas5P => self.rosenbrock_attempt(h),
             Scheme::Exact => self.exact_attempt(h),
+        };
+        self.quadrature_formed = false;
+        let controlled = self.scheme != Scheme::Exact
+            && self.sys.has_quadrature()
+            && self.sys.controls_quadrature();
+        if !controlled || err.is_nan() || err > 1.0 {
+            return err;
+        }
+        self.form_quadrature(quadrature::QuadratureOf::Attempt(h), true);
+        self.quadrature_formed = true;
+        let eq = self.sys.quadrature_error_norm(self.atol, self.rtol);
+        // A non-finite ΔQ or error makes the attempt non-finite (`f64::max` would drop it).
+        if eq.is_nan() {
+            f64::NAN
+        } else {
+            err.max(eq)
         }
     }
 
