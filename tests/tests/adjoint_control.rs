@@ -6,13 +6,18 @@
 //! with g's local error in the step acceptance every entry is within 10× rtol of the closed
 //! form at every decade, through both doors, as forward mode is (issue 11).
 
+use models::stiff_relay::{cost_closed, StiffRelay, StiffRelayParams};
 use mvad::interp::InterpretedModel;
 use mvad::runtime::fd::fd_gradient;
 use mvad::{solve, GradientMode, HybridModel, ModelAlloc, Options};
-use models::stiff_relay::{cost_closed, StiffRelay, StiffRelayParams};
 use nalgebra::{DefaultAllocator, OVector};
 
 mvad::hybrid!(include "tests/fast_lag.hyb");
+
+mvad::hybrid!(include "tests/pulse_pair.hyb");
+
+/// The pulse pair's source, for the loader.
+const PULSE_PAIR: &str = include_str!("pulse_pair.hyb");
 
 /// The fast lag's source, for the loader.
 const FAST_LAG: &str = include_str!("fast_lag.hyb");
@@ -63,7 +68,10 @@ fn within_10x_rtol<M: HybridModel>(
             sol.stats.rejected_steps,
             sol.diagnostics.iter().map(|d| d.kind).collect::<Vec<_>>()
         );
-        assert!(ec <= 10.0 * rtol, "{what} rtol {rtol:e}: C rel err {ec:.1e}");
+        assert!(
+            ec <= 10.0 * rtol,
+            "{what} rtol {rtol:e}: C rel err {ec:.1e}"
+        );
         for (j, e) in errs.iter().enumerate() {
             assert!(
                 *e <= 10.0 * rtol,
@@ -89,29 +97,26 @@ fn stiff_relay_adjoint_is_within_10x_rtol_at_every_decade_both_doors() {
 }
 
 /// C and dC/d(τ, a, k) of the fast lag in closed form: u = a(1 − e^{−t/τ}),
-/// y(T) = k a (T − τ(1 − E)), E = e^{−T/τ}, and C = y(T)² + ∫₀ᵀ u² dt with
-/// ∫₀ᵀ u² dt = a² (T − 2τ(1 − E) + τ(1 − E²)/2).
+/// y(T) = k a (T − τ(1 − E)), E = e^{−T/τ}, and C = y(T)² + ∫₀ᵀ y dt with
+/// ∫₀ᵀ y dt = k a (T²/2 − τT + τ²(1 − E)).
 fn fast_lag_closed(tau: f64, a: f64, k: f64) -> (f64, [f64; 3]) {
     let t = 1.0;
     let e = (-t / tau).exp();
     let lag = t - tau * (1.0 - e);
     let y = k * a * lag;
-    let q = a * a * (t - 2.0 * tau * (1.0 - e) + 0.5 * tau * (1.0 - e * e));
-    // d/dτ of τ(1 − E) and of τ(1 − E²)/2.
+    let q = k * a * (0.5 * t * t - tau * t + tau * tau * (1.0 - e));
+    // d/dτ of τ(1 − E) and of the integral's bracket.
     let d_lag = (1.0 - e) - (t / tau) * e;
-    let d_half = 0.5 * (1.0 - e * e) - (t / tau) * e * e;
+    let d_q = k * a * (-t + 2.0 * tau * (1.0 - e) - t * e);
     let dy = [-k * a * d_lag, k * lag, a * lag];
-    let dq = [
-        a * a * (-2.0 * d_lag + d_half),
-        2.0 * q / a,
-        0.0,
-    ];
+    let dq = [d_q, q / a, q / k];
     let grad = [0, 1, 2].map(|j| 2.0 * y * dy[j] + dq[j]);
     (y * y + q, grad)
 }
 
 /// The fast lag (`fast_lag.hyb`, τ = 1e-6) in adjoint mode against its closed form at every
-/// decade, both doors; dC/dk has no share in the spike, dC/dτ most of its own.
+/// decade, both doors. λ is constant through the transient at t = 0 (F reads no state), so
+/// an error norm over λ alone lets the last backward steps grow across the spike of G_τ.
 #[test]
 fn fast_lag_adjoint_is_within_10x_rtol_at_every_decade_both_doors() {
     let compiled = FastLag::new();
@@ -124,9 +129,10 @@ fn fast_lag_adjoint_is_within_10x_rtol_at_every_decade_both_doors() {
 }
 
 /// The fast lag's closed form (and so the adjoint, held to it above) against central finite
-/// differences of tight primal runs at relative steps 1e-3, 1e-4 and 1e-5: the difference
-/// quotients converge to it (the error shrinks with the step until rounding, and the best
-/// is within 1e-7 relative), entry by entry.
+/// differences of tight primal runs at relative steps 1e-1, 1e-2 and 1e-3, entry by entry: C
+/// is quadratic in a and k and, with e^{−T/τ} = 0 in doubles, in τ, so a central difference
+/// has no truncation error, and what is left is the primal runs' rounding divided by the
+/// step (the best within 1e-7 relative, every one within 1e-5).
 #[test]
 fn fast_lag_closed_form_matches_central_differences() {
     let m = FastLag::new();
@@ -139,7 +145,7 @@ fn fast_lag_closed_form_matches_central_differences() {
     };
     let adj = solve(&m, &p, &adjoint(1e-10)).expect("runs");
     for (j, &want) in g.iter().enumerate() {
-        let errs: Vec<f64> = [1e-3, 1e-4, 1e-5]
+        let errs: Vec<f64> = [1e-1, 1e-2, 1e-3]
             .iter()
             .map(|&h| {
                 let fd = fd_gradient(&m, &p, &tight, j, h).expect("the difference runs");
@@ -148,13 +154,58 @@ fn fast_lag_closed_form_matches_central_differences() {
             .collect();
         println!(
             "dC/dθ[{j}] = {want:e} (adjoint at rtol 1e-10: {:e}), FD rel errors at steps \
-             1e-3, 1e-4, 1e-5: {}",
+             1e-1, 1e-2, 1e-3: {}",
             adj.gradient[j],
             sci(&errs)
         );
         let best = errs.iter().copied().fold(f64::INFINITY, f64::min);
         assert!(best <= 1e-7, "dC/dθ[{j}]: FD errors {}", sci(&errs));
-        assert!(errs[1] <= errs[0].max(1e-9), "dC/dθ[{j}]: {}", sci(&errs));
+        assert!(
+            errs.iter().all(|&e| e <= 1e-5),
+            "dC/dθ[{j}]: {}",
+            sci(&errs)
+        );
         assert!(((adj.gradient[j] - want) / want).abs() <= 1e-9);
+    }
+}
+
+/// The pulse pair (`pulse_pair.hyb`): x and λ constant, G a Gaussian pulse of width 0.1. With
+/// λ alone in the sweep's error norm nothing limits its steps but the primal's record (a few
+/// long steps over a constant x), and the quadrature of the pulse is off by percents at
+/// every tolerance; with g's error in the norm it is within 10× rtol. dC/dw = 0: its
+/// relative error is not defined, and it is checked absolutely against the others' scale.
+/// atol is 1e-14 here: at the default 1e-10 an entry of size 0.18 is held to atol, not to
+/// rtol 1e-12 (as S is in forward mode).
+#[test]
+fn pulse_pair_adjoint_is_within_10x_rtol_at_every_decade_both_doors() {
+    let compiled = PulsePair::new();
+    let p = compiled.default_params();
+    let da = p[2] * std::f64::consts::PI.sqrt();
+    let loaded = InterpretedModel::from_source(PULSE_PAIR).expect("the pulse pair loads");
+    for rtol in RTOLS {
+        let opts = Options {
+            atol: 1e-14,
+            ..adjoint(rtol)
+        };
+        for (what, sol) in [
+            ("compiled", solve(&compiled, &p, &opts)),
+            ("loaded", solve(&loaded, &loaded.default_params(), &opts)),
+        ] {
+            let sol = sol.unwrap_or_else(|e| panic!("pulse pair ({what}) {rtol:e}: {e}"));
+            let g = &sol.gradient;
+            let errs = [(g[0] - da) / da, (g[1] + da) / da, g[2] / da].map(f64::abs);
+            println!(
+                "pulse pair ({what}) rtol {rtol:e}: dC/dθ rel errors {}, {} steps ({} \
+                 rejected)",
+                sci(&errs),
+                sol.stats.steps,
+                sol.stats.rejected_steps
+            );
+            assert!(
+                errs.iter().all(|&e| e <= 10.0 * rtol),
+                "pulse pair ({what}) rtol {rtol:e}: dC/dθ = {g:?}, want ({da}, {}, 0)",
+                -da
+            );
+        }
     }
 }

@@ -506,8 +506,12 @@ where
         let pt = rhs.point(t, &self.hist.x);
         let q = &mut self.quad;
         match (a != 0.0, e != 0.0) {
-            (true, false) => rhs.model.adjoint_quadrature_add(pt, y, rhs.w, a, &mut q.step),
-            (false, true) => rhs.model.adjoint_quadrature_add(pt, y, rhs.w, e, &mut q.err),
+            (true, false) => rhs
+                .model
+                .adjoint_quadrature_add(pt, y, rhs.w, a, &mut q.step),
+            (false, true) => rhs
+                .model
+                .adjoint_quadrature_add(pt, y, rhs.w, e, &mut q.err),
             (true, true) => {
                 for &k in &q.support {
                     q.stage[k] = 0.0;

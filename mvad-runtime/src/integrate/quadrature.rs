@@ -77,7 +77,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             // F constant, so G is: the quadrature is exact (and makes no error).
             Scheme::Exact => {
                 let (t0, h) = self.quadrature_span(step);
-                let y0 = if step.is_attempt() { &self.y } else { &self.y_prev };
+                let y0 = if step.is_attempt() {
+                    &self.y
+                } else {
+                    &self.y_prev
+                };
                 self.sys.quadrature_add(t0, y0, theta * h, 0.0)
             }
             Scheme::Tsit5 => self.explicit_quadrature(&TSIT5, step, theta, error),
@@ -115,7 +119,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             e[..S].copy_from_slice(&tab.btilde);
         }
         let (t0, h) = self.quadrature_span(step);
-        let y0 = if step.is_attempt() { &self.y } else { &self.y_prev };
+        let y0 = if step.is_attempt() {
+            &self.y
+        } else {
+            &self.y_prev
+        };
         for (i, (&wi, &ei)) in w.iter().zip(&e).enumerate() {
             if wi == 0.0 && ei == 0.0 {
                 continue;
@@ -139,7 +147,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             ([0.0; NSTAGES], 0.0)
         };
         let (t0, h) = self.quadrature_span(step);
-        let y0 = if step.is_attempt() { &self.y } else { &self.y_prev };
+        let y0 = if step.is_attempt() {
+            &self.y
+        } else {
+            &self.y_prev
+        };
         for s in 0..NSTAGES {
             let (ws, es) = (value.0[s], err.0[s]);
             if ws == 0.0 && es == 0.0 {
