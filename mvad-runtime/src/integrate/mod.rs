@@ -210,6 +210,10 @@ const JAC_CHECK_EVERY: usize = 20;
 const JAC_STIFF_HRHO: f64 = 0.8;
 /// |h|·ρ(f_x) below which a Rodas5P step counts as non-stiff.
 const JAC_NONSTIFF_HRHO: f64 = 0.4;
+/// The rate after a restart, against the rate before it, beyond which a seeded step gives
+/// way to Hairer's heuristic ([`Integrator::set_step_size`]); within it (the controller's own
+/// growth limit) the seed stands.
+const SEED_RATE_JUMP: f64 = 10.0;
 /// Consecutive non-stiff Rodas5P steps before `auto` switches back to Tsit5.
 const NONSTIFF_STEPS_TO_SWITCH: usize = 20;
 
@@ -262,6 +266,10 @@ pub struct Integrator<Sys: OdeSystem> {
     /// (formed in [`Integrator::attempt`] under [`OdeSystem::controls_quadrature`]); once
     /// that attempt is accepted they wait for [`Integrator::close_step`].
     quadrature_formed: bool,
+    /// The proposed step `h` is a seed ([`Integrator::set_step_size`]): the scaled rate at
+    /// the start of the last step before it, until the first step after it compares it with
+    /// its own.
+    seed_rate: Option<f64>,
     /// k[0] = F(t, y) holds (computed or taken over from the FSAL stage).
     k0_valid: bool,
     /// The last accepted step left F(t, y) in this stage slot (Tsit5: k₇; Verner: the first
@@ -313,6 +321,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             r: zero(),
             k: (0..slots).map(|_| zero()).collect(),
             k0_valid: false,
+            seed_rate: None,
             quadrature_formed: false,
             carry_pending: None,
             fsal_slot: None,
@@ -349,6 +358,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.dense_h = 0.0;
         self.truncated = false;
         self.h = 0.0;
+        self.seed_rate = None;
         self.y.copy_from(y);
         self.y_prev.copy_from(y);
         self.k0_valid = false;
@@ -424,8 +434,20 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// event (call it after a restart, which otherwise starts from Hairer's heuristic; the
     /// error control still rejects and shrinks a seed that is too large). A value that is not
     /// finite and positive restores the heuristic.
+    ///
+    /// The seed belongs to the rate before the restart: when the rate after it, ‖F(t, y)‖ in
+    /// the error norm's scaling, is more than [`SEED_RATE_JUMP`] times the rate at the start
+    /// of the last step before it (k[0], still in its slot), the state's time scale has
+    /// shrunk by as much and the seed says nothing about it: the first step comes from
+    /// Hairer's heuristic, as at t₀. The error estimate cannot refuse a seed on its own when
+    /// an L-stable step strides over a fast transient the jump started (a stiff lag's new set
+    /// point): the step lands right at the transient's end, and only its dense output, which
+    /// the adjoint's sweep reads, misses the transient (the stiff relay's dC/dτ was off by
+    /// 6e6 at rtol 1e-3 in adjoint mode). Without a step before it (a rate below 1e-5) the
+    /// seed stands.
     pub fn set_step_size(&mut self, h: f64) {
         self.h = if h.is_finite() && h > 0.0 { h } else { 0.0 };
+        self.seed_rate = (self.h > 0.0).then(|| self.scaled_norm(&self.k[0], &self.y));
     }
 
     /// Take ONE accepted step towards `t_stop`, never beyond it; lands exactly on `t_stop`
@@ -445,6 +467,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.ensure_k0()?;
         if self.scheme == Scheme::Exact {
             return self.exact_step(t_stop);
+        }
+        if let Some(before) = self.seed_rate.take() {
+            let after = self.scaled_norm(&self.k[0], &self.y);
+            if before >= 1e-5 && after > SEED_RATE_JUMP * before {
+                self.h = 0.0;
+            }
         }
         if self.h == 0.0 {
             self.h = self.initial_step(t_stop - self.t);

@@ -661,17 +661,10 @@ where
         }
         // Seed the first step after the jump with the step size in use before it (the
         // error control still shrinks a seed that is too long): Hairer's start-up
-        // heuristic would otherwise spend 3–4 growing steps on every segment. Not in the
-        // adjoint's primal run (`tape`): its error norm has no S to shrink the seed, and an
-        // L-stable step seeded across a stiff transient after the jump lands right at its
-        // end while its dense output, which the sweep reads, misses the transient (the
-        // stiff relay's dC/dτ was off by 6e6 at rtol 1e-3); the heuristic starts on its
-        // time scale, as at t₀.
+        // heuristic would otherwise spend 3–4 growing steps on every segment.
         let h_seed = self.integ.last_step_size();
         self.restart(t)?;
-        if !self.tape {
-            self.integ.set_step_size(h_seed);
-        }
+        self.integ.set_step_size(h_seed);
         Ok(false)
     }
 
