@@ -1,11 +1,11 @@
 //! Fuzz target: arbitrary text into the `.hyb` loader and, when it loads, into the solver at
 //! the declared parameter values, with bounded work (few steps and events, a short horizon,
-//! a loose tolerance). Every run must come back as a solution or a `SolveError`; a panic, a
-//! hang or a stack overflow is a bug.
+//! a loose tolerance), in forward and in adjoint mode. Every run must come back as a
+//! solution or a `SolveError`; a panic, a hang or a stack overflow is a bug.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use mvad::{solve, Method, Options};
+use mvad::{solve, GradientMode, Method, Options};
 
 /// The horizon is capped here, so that a model declaring T = 1e300 stays cheap.
 const T_CAP: f64 = 10.0;
@@ -33,6 +33,13 @@ fuzz_target!(|data: &[u8]| {
         max_events: 200,
         max_steps: 2_000,
         record: data.len() % 3 == 0,
+        // Every other input also runs the backward sweep (adjoint mode), so the transposed
+        // event maps and the replay of the record see every shape of model too.
+        gradient_mode: if data.len() % 2 == 0 {
+            GradientMode::Adjoint
+        } else {
+            GradientMode::Forward
+        },
         ..Options::default()
     };
     if let Ok(sol) = solve(&model, &params, &opts) {

@@ -55,14 +55,24 @@ pub enum SolveError {
         t: f64,
         /// The step size it would need.
         h: f64,
+        /// The largest |entry| of the integrated state there (a solution blowing up at a
+        /// finite time t* shows as 1/(t* − t)).
+        largest: f64,
     },
-    /// `Options::max_steps` step attempts were used up (typically an explicit method on a
-    /// stiff model).
+    /// `Options::max_steps` step attempts were used up: an explicit method on a stiff model,
+    /// or steps shrinking towards a blow-up or a discontinuity.
     MaxSteps {
         /// Time reached.
         t: f64,
         /// The limit that was hit.
         steps: usize,
+        /// The step size the integrator had come down to.
+        h: f64,
+        /// Whether stiffness is ruled out as the cause (the implicit method was in use, or
+        /// `auto`, whose stiffness test did not switch to it).
+        not_stiff: bool,
+        /// The largest |entry| of the integrated state there.
+        largest: f64,
     },
     /// More than `Options::max_events` events fired.
     MaxEvents {
@@ -164,14 +174,36 @@ impl fmt::Display for SolveError {
             }
             SolveError::BadOption { what } => write!(f, "bad option: {what}"),
             SolveError::NonFinite { t, what } => write!(f, "non-finite value in {what} at t = {t}"),
-            SolveError::StepSizeUnderflow { t, h } => {
-                write!(f, "step size underflow at t = {t} (step {h:e})")
+            SolveError::StepSizeUnderflow { t, h, largest } => {
+                write!(f, "step size underflow at t = {t} (step {h:e}")?;
+                write_largest(f, *largest)
             }
-            SolveError::MaxSteps { t, steps } => write!(
-                f,
-                "gave up after {steps} steps at t = {t} (max_steps); the model is probably \
-                 stiff: try the method auto or rosenbrock"
-            ),
+            SolveError::MaxSteps {
+                t,
+                steps,
+                h,
+                not_stiff,
+                largest,
+            } => {
+                write!(
+                    f,
+                    "gave up after {steps} steps at t = {t} (max_steps, last step {h:e}"
+                )?;
+                write_largest(f, *largest)?;
+                if *not_stiff {
+                    write!(
+                        f,
+                        ": the steps shrank, and not for stiffness (the implicit method was in \
+                         use, or `auto` found none); the solution may blow up, or the flow may \
+                         be discontinuous or undefined just ahead"
+                    )
+                } else {
+                    write!(
+                        f,
+                        ": the model is probably stiff: try the method auto or rosenbrock"
+                    )
+                }
+            }
             SolveError::MaxEvents { t, count } => {
                 write!(f, "stopped after {count} events at t = {t} (max_events)")
             }
@@ -196,14 +228,33 @@ impl fmt::Display for SolveError {
     }
 }
 
+/// Closes a failure's parenthesis with the largest |entry| of the state it stopped at.
+fn write_largest(f: &mut fmt::Formatter<'_>, largest: f64) -> fmt::Result {
+    write!(f, "; largest |state| {largest:e})")
+}
+
 impl std::error::Error for SolveError {}
 
 impl From<StepError> for SolveError {
     fn from(e: StepError) -> Self {
         match e {
-            StepError::StepSizeUnderflow { t, h } => SolveError::StepSizeUnderflow { t, h },
+            StepError::StepSizeUnderflow { t, h, largest } => {
+                SolveError::StepSizeUnderflow { t, h, largest }
+            }
             StepError::NonFinite { t, what } => SolveError::NonFinite { t, what },
-            StepError::MaxSteps { t, steps } => SolveError::MaxSteps { t, steps },
+            StepError::MaxSteps {
+                t,
+                steps,
+                h,
+                not_stiff,
+                largest,
+            } => SolveError::MaxSteps {
+                t,
+                steps,
+                h,
+                not_stiff,
+                largest,
+            },
         }
     }
 }

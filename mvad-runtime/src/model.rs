@@ -411,6 +411,12 @@ where
     }
 }
 
+/// Two cotangents μ₁, μ₂ ∈ Rⁿ for one product ([`ModelAdjoint::reset_vjp_pair`]).
+pub type CotangentPair<'a, N> = (&'a OVector<f64, N>, &'a OVector<f64, N>);
+
+/// The (x, θ) outputs of a vector–Jacobian product: μᵀ∂/∂x (n) and μᵀ∂/∂θ (p).
+pub type VjpOutput<'a, N, P> = (&'a mut OVector<f64, N>, &'a mut OVector<f64, P>);
+
 /// Capability: vector–Jacobian products of the flow, for an adjoint (backward) pass.
 ///
 /// The default forms the dense Jacobians f_x, f_θ and multiplies (it allocates both for
@@ -504,6 +510,28 @@ where
         rx.tr_mul_to(mu, vx);
         rp.tr_mul_to(mu, vp);
         mu.dot(&rt)
+    }
+
+    /// [`ModelAdjoint::reset_vjp`] for two cotangents at one point: μ₁ᵀR_x, μ₁ᵀR_θ into
+    /// `out1` and μ₂ᵀR_x, μ₂ᵀR_θ into `out2`, returning (μ₁ᵀ∂R/∂t, μ₂ᵀ∂R/∂t). The adjoint
+    /// sweep transposes each jump for λ and, with a global error estimate, for the estimate's
+    /// remainder at the same point; a model whose Jacobian evaluation dominates (a loaded
+    /// model's tape, O(p) for a reset with p parameters) evaluates it once for both. The
+    /// default is two calls of `reset_vjp`, the same numbers bit for bit.
+    fn reset_vjp_pair(
+        &self,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
+        (mu1, mu2): CotangentPair<'_, Self::N>,
+        out1: VjpOutput<'_, Self::N, Self::P>,
+        out2: VjpOutput<'_, Self::N, Self::P>,
+    ) -> (f64, f64)
+    where
+        Self: HybridModel,
+    {
+        let r1 = self.reset_vjp(occ, at, mu1, out1.0, out1.1);
+        let r2 = self.reset_vjp(occ, at, mu2, out2.0, out2.1);
+        (r1, r2)
     }
 
     /// The derivative of [`ModelAdjoint::rhs_vjp`] along the direction (1, v) of (t, x) at

@@ -52,7 +52,7 @@ fn explicit_method_on_a_stiff_model_stops_at_max_steps() {
     };
     let err = solve(&m, &p, &opts).unwrap_err();
     match &err {
-        SolveError::MaxSteps { t, steps } => {
+        SolveError::MaxSteps { t, steps, .. } => {
             assert_eq!(*steps, 20_000);
             // ~3.3e-8 per step: far from the horizon.
             assert!(*t > 0.0 && *t < 1e-2, "t = {t}");
@@ -230,4 +230,77 @@ fn verner_skips_interpolation_stages_when_nothing_samples_them() {
     let dc = (-a).exp() / a - (1.0 - (-a).exp()) / (a * a);
     approx::assert_relative_eq!(plain.cost, c, max_relative = 1e-11);
     approx::assert_relative_eq!(plain.gradient[0], dc, max_relative = 1e-10);
+}
+
+/// ẋ = x², x(0) = 1: x = 1/(1 − t) blows up at t* = 1, inside the horizon 2.
+struct BlowUp;
+
+impl Spec for BlowUp {
+    fn info(&self) -> ModelInfo {
+        info("BlowUp", &["x"], &[("a", 1.0)], &["main"], vec![], &[], 0)
+    }
+    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
+        x[0] = p[0];
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Some(S::cst(2.0))
+    }
+    fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
+        f[0] = x[0] * x[0];
+    }
+    fn running<S: Sc>(&self, _sw: u64, _t: S, x: &[S], _p: &[S]) -> S {
+        x[0]
+    }
+}
+
+/// A run that uses up its step budget while the solution blows up blames stiffness only when
+/// stiffness is possible: with the implicit method, or with `auto` (whose stiffness test did
+/// not switch), the failure says the steps shrank for another reason and shows the state's
+/// size; an explicitly requested explicit method still gets the hint towards `auto`. Without
+/// a budget the run stops at the singularity with the state's size in the message.
+#[test]
+fn a_blow_up_is_not_called_stiffness() {
+    let m = AdModel::new(BlowUp);
+    for method in Method::ALL {
+        let opts = Options {
+            method,
+            max_steps: 40,
+            ..Options::default()
+        };
+        let err = solve(&m, &m.defaults(), &opts).unwrap_err();
+        let SolveError::MaxSteps {
+            t,
+            not_stiff,
+            largest,
+            h,
+            ..
+        } = &err
+        else {
+            panic!("{method:?}: expected MaxSteps, got {err:?}");
+        };
+        // x = 1/(1 − t) where the budget ran out, and steps shorter than the way to t*.
+        assert!(*t < 1.0, "{method:?}: t = {t}");
+        approx::assert_relative_eq!(*largest, 1.0 / (1.0 - t), max_relative = 1e-3);
+        assert!(*h < 1.0 - t, "{method:?}: h = {h}, t = {t}");
+        let explicit = matches!(method, Method::Tsit5 | Method::Verner9);
+        assert_eq!(*not_stiff, !explicit, "{method:?}");
+        let msg = err.to_string();
+        assert_eq!(
+            msg.contains("probably stiff"),
+            explicit,
+            "{method:?}: {msg}"
+        );
+        assert!(msg.contains("largest |state|"), "{msg}");
+        if !explicit {
+            assert!(msg.contains("blow up"), "{method:?}: {msg}");
+        }
+    }
+    let err = solve(&m, &m.defaults(), &Options::default()).unwrap_err();
+    match &err {
+        SolveError::StepSizeUnderflow { t, largest, .. } => {
+            assert!((t - 1.0).abs() < 1e-6, "t = {t}");
+            assert!(*largest > 1e6, "largest = {largest}");
+        }
+        other => panic!("expected StepSizeUnderflow, got {other:?}"),
+    }
 }

@@ -162,6 +162,13 @@ fn runtime_errors_get_their_flag_hints_from_the_cli() {
     // The runtime's own message names no flag.
     let e = mvad::SolveError::NoHorizon.to_string();
     assert!(!e.contains("--"), "{e}");
-    let e = mvad::SolveError::MaxSteps { t: 0.0, steps: 1 }.to_string();
+    let e = mvad::SolveError::MaxSteps {
+        t: 0.0,
+        steps: 1,
+        h: 1e-3,
+        not_stiff: false,
+        largest: 1.0,
+    }
+    .to_string();
     assert!(!e.contains("--") && e.contains("rosenbrock"), "{e}");
 }

@@ -321,6 +321,22 @@ where
         assert_vjp(&what("μᵀR_x"), vx.as_slice(), &rows(&rx), mu);
         assert_vjp(&what("μᵀR_θ"), vpp.as_slice(), &rows(&rp), mu);
         assert_vjp(&what("μᵀR_t"), &[vt], rt.as_slice(), mu);
+        // The pair product: the same numbers, bit for bit, for each of two cotangents (λ and
+        // a second one, -2λ + 1, so that no entry of it is a multiple of λ's).
+        let mu2 = lam.map(|l| 1.0 - 2.0 * l);
+        let (mut vx2, mut vp2) = (zn(), zp());
+        let (mut vx1, mut vp1) = (zn(), zp());
+        let (t1, t2) = m.reset_vjp_pair(
+            Occurrence::new(k, 0),
+            at,
+            (&lam, &mu2),
+            (&mut vx1, &mut vp1),
+            (&mut vx2, &mut vp2),
+        );
+        let (mut wx2, mut wp2) = (zn(), zp());
+        let u2 = m.reset_vjp(Occurrence::new(k, 0), at, &mu2, &mut wx2, &mut wp2);
+        assert_eq!((t1, vx1, vp1), (vt, vx, vpp), "{}", what("pair, first"));
+        assert_eq!((t2, vx2, vp2), (u2, wx2, wp2), "{}", what("pair, second"));
     }
     let mut dx0 = znp();
     m.initial_state_jac(&pv, &mut dx0);

@@ -61,6 +61,9 @@ where
     mu: OVector<f64, M::N>,
     vx: OVector<f64, M::N>,
     vp: OVector<f64, M::P>,
+    /// The estimate remainder's products (see [`transpose_jump_and_remainder`]).
+    vx_rem: OVector<f64, M::N>,
+    vp_rem: OVector<f64, M::P>,
     cx: OVector<f64, M::N>,
     cp: OVector<f64, M::P>,
 }
@@ -84,6 +87,8 @@ where
             mu: vn(),
             vx: vn(),
             vp: vp(),
+            vx_rem: vn(),
+            vp_rem: vp(),
             cx: vn(),
             cp: vp(),
         }
@@ -148,9 +153,32 @@ pub(super) fn transpose_jump<M: HybridModel>(
     p: &OVector<f64, M::P>,
     cw: f64,
     jump: &Jump,
-    (x_minus, x_plus): (&[f64], &[f64]),
+    states: (&[f64], &[f64]),
     lam: &mut OVector<f64, M::N>,
     grad: &mut OVector<f64, M::P>,
+    w: &mut JumpWork<M>,
+) -> Result<(), SolveError>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    transpose_jump_and_remainder(model, p, cw, jump, states, (lam, grad), None, w)
+}
+
+/// [`transpose_jump`] for (λ, g) and, when `remainder` is given, the jump's homogeneous
+/// part (w = 0: no cost terms) for the global error estimate's remainder (r_λ, r_g) at the
+/// same point: f±, the crossing's gradient and one [`crate::model::ModelAdjoint::reset_vjp_pair`]
+/// serve both, so a reset whose Jacobian costs O(p) is evaluated once. A failure is the main
+/// transpose's; the remainder's own (a non-finite ratio from a non-finite remainder) leaves
+/// it without its t' term, as the estimate is then already non-finite.
+#[allow(clippy::too_many_arguments)]
+fn transpose_jump_and_remainder<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    cw: f64,
+    jump: &Jump,
+    (x_minus, x_plus): (&[f64], &[f64]),
+    (lam, grad): LamGrad<'_, M::N, M::P>,
+    mut remainder: Option<LamGrad<'_, M::N, M::P>>,
     w: &mut JumpWork<M>,
 ) -> Result<(), SolveError>
 where
@@ -163,6 +191,7 @@ where
     let gdot = w.gx.dot(&w.f_minus) + gt;
     // w(ℓ⁻ − ℓ⁺): both sides of the jump, each under its own bits.
     let mut c = 0.0;
+    let mut c_rem = 0.0;
     if info.has_running_cost && cw != 0.0 {
         let l_minus = model.running_cost(&jump.sw_before, At::new(t, &w.xm, p));
         let l_plus = model.running_cost(&jump.sw_after, At::new(t, &w.xp, p));
@@ -183,19 +212,33 @@ where
                 grad.axpy(cw, &w.cp, 1.0);
                 c += cw * phi_t;
             }
-            let mu_rt = model.reset_vjp(
-                Occurrence::new(k, occ),
-                At::new(t, &w.xm, p),
-                &w.mu,
-                &mut w.vx,
-                &mut w.vp,
-            );
+            let occ = Occurrence::new(k, occ);
+            let at = At::new(t, &w.xm, p);
+            let mu_rt = match remainder.as_mut() {
+                None => model.reset_vjp(occ, at, &w.mu, &mut w.vx, &mut w.vp),
+                Some((r_lam, r_g)) => {
+                    let (mu_rt, rem_rt) = model.reset_vjp_pair(
+                        occ,
+                        at,
+                        (&w.mu, r_lam),
+                        (&mut w.vx, &mut w.vp),
+                        (&mut w.vx_rem, &mut w.vp_rem),
+                    );
+                    c_rem += w.vx_rem.dot(&w.f_minus) + rem_rt - r_lam.dot(&w.f_plus);
+                    r_lam.copy_from(&w.vx_rem);
+                    **r_g += &w.vp_rem;
+                    mu_rt
+                }
+            };
             c += w.vx.dot(&w.f_minus) + mu_rt - lam.dot(&w.f_plus);
             lam.copy_from(&w.vx);
             *grad += &w.vp;
         }
         JumpKind::Switch(_) => {
             c += lam.dot(&w.f_minus) - lam.dot(&w.f_plus);
+            if let Some((r_lam, _)) = remainder.as_ref() {
+                c_rem += r_lam.dot(&w.f_minus) - r_lam.dot(&w.f_plus);
+            }
         }
     }
     let ratio = c / gdot;
@@ -213,6 +256,13 @@ where
     }
     lam.axpy(-ratio, &w.gx, 1.0);
     grad.axpy(-ratio, &w.gp, 1.0);
+    if let Some((r_lam, r_g)) = remainder {
+        let ratio_rem = c_rem / gdot;
+        if ratio_rem.is_finite() {
+            r_lam.axpy(-ratio_rem, &w.gx, 1.0);
+            r_g.axpy(-ratio_rem, &w.gp, 1.0);
+        }
+    }
     if !(lam.iter().all(|v| v.is_finite()) && grad.iter().all(|v| v.is_finite())) {
         let what = match jump.kind {
             JumpKind::Event(k, _) => format!("adjoint jump of event `{}`", info.events[k].name),
@@ -284,12 +334,11 @@ where
 {
     s.lam_plus.copy_from(lam);
     s.g_added.copy_from(g);
-    transpose_jump(model, p, cw, jump, states, lam, g, w)?;
+    let (r_lam, r_g) = ge.remainder_mut();
+    transpose_jump_and_remainder(model, p, cw, jump, states, (lam, g), Some((r_lam, r_g)), w)?;
     // What the sweep's transpose added to g.
     s.g_added.axpy(1.0, g, -1.0);
     let (r_lam, r_g) = ge.remainder_mut();
-    // A failure would have been the main transpose's, reported above.
-    let _ = transpose_jump(model, p, 0.0, jump, states, r_lam, r_g, w);
     if let Some(shift) = shift {
         shift_error(model, p, cw, jump, states, shift, lam, (r_lam, r_g), w, s);
     }

@@ -185,7 +185,17 @@ where
     pub l_plus: f64,
     /// The event cost's (φ_x, φ_t) at (t, x⁺), if the event has a cost.
     pub cost: Option<(&'a OVector<f64, N>, f64)>,
+    /// Without sensitivities, the reset's displacement by a secant instead of `rx`/`rt`:
+    /// `secant(d⁻, δt, scratch, out)` writes R(t + δt, x⁻ + d⁻) − x⁺ into `out` (see
+    /// [`GlobalError::jump`]); `None` uses the matrices.
+    pub secant: Option<&'a ResetSecant<'a, N>>,
 }
+
+/// The secant of an event's reset along a displacement (d⁻, δt) of its point:
+/// `(d⁻, δt, scratch, out)` ↦ out = R(t + δt, x⁻ + d⁻) − x⁺ (x⁺ = R(t, x⁻)), scratch an
+/// n-vector it may overwrite.
+pub type ResetSecant<'a, N> =
+    dyn Fn(&OVector<f64, N>, f64, &mut OVector<f64, N>, &mut OVector<f64, N>) + 'a;
 
 impl<N: Dim, P: Dim> GlobalError<N, P>
 where
@@ -390,6 +400,10 @@ where
             return;
         }
         self.materialise(s.f_minus, s.l_minus, sens);
+        if let (false, Some(secant)) = (sens, s.secant) {
+            self.jump_by_secant(s, secant);
+            return;
+        }
         // w = R_x f⁻ + R_t − f⁺.
         match s.rx {
             Some(rx) => self.w.gemv(1.0, rx, s.f_minus, 0.0),
@@ -438,6 +452,31 @@ where
             self.events_grad.gemv_tr(1.0, &self.r.s, phi_x, 1.0);
             self.events_grad
                 .axpy(phi_x.dot(s.f_plus) + phi_t, &self.dts, 1.0);
+        }
+    }
+
+    /// The jump of the state's estimate without sensitivities, where only the reset's
+    /// directional derivative along the displacement is needed: with δt = −∇g·e_x⁻/ġ and
+    /// d⁻ = e_x⁻ + f⁻ δt, the linearised jump is d⁺ = R_x d⁻ + R_t δt and e_x⁺ = d⁺ − f⁺ δt
+    /// (the same as R_x e_x⁻ + w δt). d⁺ is taken as the secant R(t + δt, x⁻ + d⁻) − x⁺, one
+    /// evaluation of the reset instead of its Jacobians (whose ∂R/∂θ is p long), exact to
+    /// first order in the displacement, to rounding ε|x⁺| below it.
+    fn jump_by_secant(&mut self, s: &Saltation<'_, N>, secant: &ResetSecant<'_, N>) {
+        let inv_rate = if s.rate != 0.0 && s.rate.is_finite() {
+            -1.0 / s.rate
+        } else {
+            0.0
+        };
+        let dt = inv_rate * s.gx.dot(&self.r.x);
+        self.d_minus.copy_from(&self.r.x);
+        self.d_minus.axpy(dt, s.f_minus, 1.0);
+        secant(&self.d_minus, dt, &mut self.xs, &mut self.d_plus);
+        self.r.x.copy_from(&self.d_plus);
+        self.r.x.axpy(-dt, s.f_plus, 1.0);
+        self.shift_dt = dt;
+        self.r.q += (s.l_minus - s.l_plus) * dt;
+        if let Some((phi_x, phi_t)) = s.cost {
+            self.events_cost += phi_x.dot(&self.r.x) + (phi_x.dot(s.f_plus) + phi_t) * dt;
         }
     }
 
@@ -508,10 +547,68 @@ mod tests {
             l_minus: 0.0,
             l_plus: 0.0,
             cost: None,
+            secant: None,
         };
         ge.jump(&s, false);
         assert_relative_eq!(ge.r.x[0], 1e-3 * f_plus[0], max_relative = 1e-14);
         assert_relative_eq!(ge.r.x[1], 1e-3 * f_plus[1], max_relative = 1e-14);
+    }
+
+    /// Without sensitivities the jump by the reset's secant agrees with the Jacobian path to
+    /// first order in the displacement: a nonlinear, time-dependent reset R(t, h, v) =
+    /// (h, −e v − c v³ + k t) at an impact with a state error that is not a time shift, so
+    /// every term (R_x d⁻, R_t δt, −f⁺ δt) is exercised; the two agree to O(|d|²).
+    #[test]
+    fn the_secant_jump_agrees_with_the_jacobian_jump() {
+        let (e, c, k, g, t) = (0.8, 0.3, 0.7, 9.81, 1.2);
+        let x_minus = Vector2::new(0.0, -3.0);
+        let reset =
+            |t: f64, x: &Vector2<f64>| Vector2::new(x[0], -e * x[1] - c * x[1].powi(3) + k * t);
+        let x_plus = reset(t, &x_minus);
+        let f_minus = Vector2::new(x_minus[1], -g);
+        let f_plus = Vector2::new(x_plus[1], -g);
+        let rx = Matrix2::new(1.0, 0.0, 0.0, -e - 3.0 * c * x_minus[1].powi(2));
+        let rt = Vector2::new(0.0, k);
+        let gx = Vector2::new(1.0, 0.0);
+        let secant = |d: &Vector2<f64>, dt: f64, xs: &mut Vector2<f64>, out: &mut Vector2<f64>| {
+            *xs = x_minus + d;
+            *out = reset(t + dt, xs) - x_plus;
+        };
+        for scale in [1e-4, 1e-6, 1e-8] {
+            let run = |secant: Option<&ResetSecant<'_, Const<2>>>| {
+                let mut ge = GlobalError::new(Const::<2>, Const::<1>);
+                ge.r.x = Vector2::new(2.0 * scale, -1.5 * scale);
+                ge.zero = false;
+                let s = Saltation {
+                    rx: Some(&rx),
+                    rt: Some(&rt),
+                    f_minus: &f_minus,
+                    f_plus: &f_plus,
+                    gx: &gx,
+                    rate: gx.dot(&f_minus),
+                    l_minus: 0.0,
+                    l_plus: 0.0,
+                    cost: None,
+                    secant,
+                };
+                ge.jump(&s, false);
+                let (dm, dp, dt) = ge.jump_shift();
+                (ge.r.x, *dm, *dp, dt)
+            };
+            let (ex, dm, dp, dt) = run(None);
+            let (sx, sm, sp, st) = run(Some(&secant));
+            assert_eq!((dm, dt), (sm, st), "the displacement d⁻, δt does not use R");
+            // The secant's second-order term: 3c|v|·d_v² = 2.7 d_v² (and c·d_v³).
+            let bound = 3.0 * dm.norm_squared() + 1e-15;
+            for (a, b) in [(ex, sx), (dp, sp)] {
+                assert!((a - b).norm() <= bound, "{scale}: {a} vs {b}");
+                assert!(
+                    (a - b).norm() > 0.0 || scale < 1e-7,
+                    "{scale}: a nonlinear reset"
+                );
+            }
+            assert!(ex.norm() > 0.5 * scale, "the estimate moved: {ex}");
+        }
     }
 
     /// Moving r_x's component along f into α leaves r_x orthogonal to f in the weighted norm

@@ -90,6 +90,9 @@ pub enum StepError {
         t: f64,
         /// The step size it would need.
         h: f64,
+        /// The largest |entry| of the integrated state there (a solution that blows up
+        /// shows here).
+        largest: f64,
     },
     /// A NaN or infinity appeared and shrinking the step did not remove it.
     NonFinite {
@@ -107,19 +110,41 @@ pub enum StepError {
         t: f64,
         /// The limit that was hit.
         steps: usize,
+        /// The step size the integrator had come down to.
+        h: f64,
+        /// Whether stiffness is ruled out as the cause: the implicit scheme was in use, or
+        /// `auto` was (its stiffness test did not switch). Suggesting an implicit method
+        /// would then mislead.
+        not_stiff: bool,
+        /// The largest |entry| of the integrated state there.
+        largest: f64,
     },
 }
 
 impl fmt::Display for StepError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            StepError::StepSizeUnderflow { t, h } => {
-                write!(f, "step size underflow at t = {t:e} (h = {h:e})")
-            }
+            StepError::StepSizeUnderflow { t, h, largest } => write!(
+                f,
+                "step size underflow at t = {t:e} (h = {h:e}, largest |state| {largest:e})"
+            ),
             StepError::NonFinite { t, what } => write!(f, "non-finite {what} at t = {t:e}"),
-            StepError::MaxSteps { t, steps } => {
-                write!(f, "gave up after {steps} steps at t = {t:e} (max_steps)")
-            }
+            StepError::MaxSteps {
+                t,
+                steps,
+                h,
+                not_stiff,
+                largest,
+            } => write!(
+                f,
+                "gave up after {steps} steps at t = {t:e} (max_steps; last step {h:e}, \
+                 largest |state| {largest:e}{})",
+                if *not_stiff {
+                    ", not for stiffness"
+                } else {
+                    ""
+                }
+            ),
         }
     }
 }
@@ -498,15 +523,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 // negative, 1/0, ...) ends here: report the NaN, not the step size.
                 return Err(match nonfinite.or_else(|| self.undefined_just_ahead(dir)) {
                     Some(what) => StepError::NonFinite { t: self.t, what },
-                    None => StepError::StepSizeUnderflow { t: self.t, h },
+                    None => StepError::StepSizeUnderflow {
+                        t: self.t,
+                        h,
+                        largest: self.largest_entry(),
+                    },
                 });
             }
             let used = self.stats.steps + self.stats.rejected_steps;
             if used >= self.max_steps {
-                return Err(StepError::MaxSteps {
-                    t: self.t,
-                    steps: self.max_steps,
-                });
+                return Err(self.out_of_steps(h));
             }
             let err = self.attempt(dir * h);
             if !err.is_finite() || !self.ynew.is_finite() {
@@ -537,6 +563,25 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         }
     }
 
+    /// The largest |entry| of the primary part of the integrated state (x, or the adjoint's
+    /// λ): what a failure reports, so that a solution blowing up is told from a stiff one.
+    fn largest_entry(&self) -> f64 {
+        self.y.primary().iter().fold(0.0, |m, v| m.max(v.abs()))
+    }
+
+    /// The failure when the step budget is used up, with the step size `h` reached, whether
+    /// stiffness is ruled out (the implicit scheme in use, or `auto`, whose stiffness test
+    /// would have switched to it), and the largest state entry.
+    fn out_of_steps(&self, h: f64) -> StepError {
+        StepError::MaxSteps {
+            t: self.t,
+            steps: self.max_steps,
+            h,
+            not_stiff: self.scheme == Scheme::Rodas5P || self.requested == Method::Auto,
+            largest: self.largest_entry(),
+        }
+    }
+
     /// The one step of a [`Scheme::Exact`] segment: Y(t_stop) = Y + (t_stop − t)·F, landing on
     /// t_stop, with no error estimate, no step-size control and nothing to carry for the global
     /// error estimate (the step makes no error, and its flow, a function of θ alone, moves
@@ -548,13 +593,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             return Err(StepError::StepSizeUnderflow {
                 t: self.t,
                 h: h.abs(),
+                largest: self.largest_entry(),
             });
         }
         if self.stats.steps + self.stats.rejected_steps >= self.max_steps {
-            return Err(StepError::MaxSteps {
-                t: self.t,
-                steps: self.max_steps,
-            });
+            return Err(self.out_of_steps(h.abs()));
         }
         self.exact_attempt(h);
         self.quadrature_formed = false;
@@ -575,7 +618,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// convergence orders; the driver uses [`Integrator::step`].
     pub fn step_fixed(&mut self, h: f64) -> Result<f64, StepError> {
         if h.is_nan() || h == 0.0 || !h.is_finite() {
-            return Err(StepError::StepSizeUnderflow { t: self.t, h });
+            return Err(StepError::StepSizeUnderflow {
+                t: self.t,
+                h,
+                largest: self.largest_entry(),
+            });
         }
         self.ensure_k0()?;
         let err = self.attempt(h);

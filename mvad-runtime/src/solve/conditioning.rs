@@ -38,26 +38,43 @@ where
             return;
         }
         let (model, p) = (self.model, self.p);
-        if !self.sens {
-            // `event_reset` computes R_x and R_t only for the sensitivities.
-            model.reset_jac(
-                Occurrence::new(k, j),
-                At::new(t, &self.y.x, p),
-                &mut self.rx,
-                &mut self.rp,
-                &mut self.rt,
-            );
-        }
+        let occ = Occurrence::new(k, j);
         let l_minus = self.running_cost_minus(t);
         let phi_t = model.info().events[k].has_cost.then(|| {
-            model.event_cost_grad(
-                Occurrence::new(k, j),
-                At::new(t, &self.x_plus, p),
-                &mut self.cx,
-                &mut self.cp,
-            )
+            model.event_cost_grad(occ, At::new(t, &self.x_plus, p), &mut self.cx, &mut self.cp)
         });
-        self.error_jump(true, rate, (l_minus, l_plus), phi_t);
+        if self.sens {
+            // R_x and R_t as `event_reset` computed them for the sensitivities.
+            self.error_jump(true, rate, (l_minus, l_plus), phi_t);
+            return;
+        }
+        // Without sensitivities the estimate needs R only along its displacement: a secant
+        // of the reset (one evaluation, never the p-long ∂R/∂θ of `reset_jac`).
+        let (x_minus, x_plus) = (&self.y.x, &self.x_plus);
+        let secant = |d: &OVector<f64, M::N>,
+                      dt: f64,
+                      xs: &mut OVector<f64, M::N>,
+                      out: &mut OVector<f64, M::N>| {
+            xs.copy_from(x_minus);
+            *xs += d;
+            model.reset(occ, At::new(t + dt, xs, p), out);
+            *out -= x_plus;
+        };
+        let s = Saltation {
+            rx: None,
+            rt: None,
+            f_minus: &self.f_minus,
+            f_plus: &self.f_plus,
+            gx: &self.gx,
+            rate,
+            l_minus,
+            l_plus,
+            cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
+            secant: Some(&secant),
+        };
+        if let Some(ge) = self.integ.global_error_mut() {
+            ge.jump(&s, false);
+        }
     }
 
     /// Carries the estimate through the crossing of switching function j at t (identity
@@ -99,6 +116,7 @@ where
             l_minus,
             l_plus,
             cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
+            secant: None,
         };
         if let Some(ge) = self.integ.global_error_mut() {
             ge.jump(&s, self.sens);

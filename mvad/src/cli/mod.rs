@@ -417,7 +417,9 @@ where
 pub fn solve_err(e: SolveError) -> CliError {
     let hint = match &e {
         SolveError::NoHorizon => "; give one with --t-end",
-        SolveError::MaxSteps { .. } => " (--method auto or --method rosenbrock)",
+        SolveError::MaxSteps {
+            not_stiff: false, ..
+        } => " (--method auto or --method rosenbrock)",
         _ => "",
     };
     if e.is_bad_input() {

@@ -129,6 +129,14 @@ impl SecondTapes {
 }
 
 /// vx_k = Σ_{(i,k)} w_i·a over the (row, column, value) triples, in order, after a zero fill.
+/// The NaN outputs of a vector–Jacobian product whose tape could not run (or was handed
+/// vectors of the wrong sizes).
+fn nan_vjp(vx: &mut X, vp: &mut X) -> f64 {
+    vx.fill(f64::NAN);
+    vp.fill(f64::NAN);
+    f64::NAN
+}
+
 fn transposed(w: &[f64], triples: impl Iterator<Item = (usize, usize, f64)>, out: &mut [f64]) {
     out.fill(0.0);
     for (i, k, a) in triples {
@@ -137,6 +145,58 @@ fn transposed(w: &[f64], triples: impl Iterator<Item = (usize, usize, f64)>, out
 }
 
 impl InterpretedModel {
+    /// Runs the reset Jacobian tape of occurrence `occ` at `at` and hands `f` whether it ran
+    /// (and the cotangent length `mu_len` is n) and the product μ ↦ (μᵀR_x into vx, μᵀR_θ
+    /// into vp, returning μᵀR_t) over the tape's non-zero outputs: one evaluation serves any
+    /// number of cotangents.
+    fn with_reset_jac<R>(
+        &self,
+        occ: Occurrence,
+        at: At<'_, nalgebra::Dyn, nalgebra::Dyn>,
+        mu_len: usize,
+        f: impl FnOnce(bool, &mut dyn FnMut(&X, &mut X, &mut X) -> f64) -> R,
+    ) -> R {
+        let Occurrence { event, j } = occ;
+        let (n, np) = (self.n, self.p);
+        let row = self.tables.row(event, j);
+        let mut sc = self.scratch.borrow_mut();
+        let at = TapeAt {
+            row: &row,
+            ..pt0(at)
+        };
+        let e = self.events.get(event).filter(|_| mu_len == n);
+        let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
+            return f(false, &mut |_, _, _| f64::NAN);
+        };
+        let regs = &sc.regs;
+        let vals = || e.reset_jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
+        let (nn, nnp) = (n * n, n * n + n * np);
+        let mut vjp = |mu: &X, vx: &mut X, vp: &mut X| {
+            if vx.len() != n || vp.len() != np {
+                return nan_vjp(vx, vp);
+            }
+            let mu = mu.as_slice();
+            transposed(
+                mu,
+                vals()
+                    .filter(|&(s, _)| s < nn)
+                    .map(|(s, a)| (s / n, s % n, a)),
+                vx.as_mut_slice(),
+            );
+            transposed(
+                mu,
+                vals()
+                    .filter(|&(s, _)| s >= nn && s < nnp)
+                    .map(|(s, a)| ((s - nn) / np, (s - nn) % np, a)),
+                vp.as_mut_slice(),
+            );
+            vals()
+                .filter(|&(s, _)| s >= nnp)
+                .fold(0.0, |acc, (s, a)| acc + mu[s - nnp] * a)
+        };
+        f(true, &mut vjp)
+    }
+
     /// Runs ℓ's gradient tape at `at` when w ≠ 0 and the model has a running cost, and hands
     /// each of its non-zero outputs whose slot is in `slots` (x: 0..n, θ: n..n+p) to `add`;
     /// false when the tape cannot run.
@@ -277,42 +337,36 @@ impl ModelAdjoint for InterpretedModel {
         vx: &mut X,
         vp: &mut X,
     ) -> f64 {
-        let Occurrence { event, j } = occ;
-        let (n, np) = (self.n, self.p);
-        let sizes = mu.len() == n && vx.len() == n && vp.len() == np;
-        let row = self.tables.row(event, j);
-        let mut sc = self.scratch.borrow_mut();
-        let at = TapeAt {
-            row: &row,
-            ..pt0(at)
+        self.with_reset_jac(occ, at, mu.len(), |ok, vjp| {
+            if ok {
+                vjp(mu, vx, vp)
+            } else {
+                nan_vjp(vx, vp)
+            }
+        })
+    }
+
+    /// One run of the reset's Jacobian tape for both cotangents.
+    fn reset_vjp_pair(
+        &self,
+        occ: Occurrence,
+        at: At<'_, Self::N, Self::P>,
+        (mu1, mu2): (&X, &X),
+        (vx1, vp1): (&mut X, &mut X),
+        (vx2, vp2): (&mut X, &mut X),
+    ) -> (f64, f64) {
+        let len = if mu1.len() == mu2.len() {
+            mu1.len()
+        } else {
+            usize::MAX
         };
-        let e = self.events.get(event).filter(|_| sizes);
-        let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
-            vx.fill(f64::NAN);
-            vp.fill(f64::NAN);
-            return f64::NAN;
-        };
-        let regs = &sc.regs;
-        let mu = mu.as_slice();
-        let vals = || e.reset_jac.outputs().map(|(slot, reg)| (slot, regs[reg]));
-        let (nn, nnp) = (n * n, n * n + n * np);
-        transposed(
-            mu,
-            vals()
-                .filter(|&(s, _)| s < nn)
-                .map(|(s, a)| (s / n, s % n, a)),
-            vx.as_mut_slice(),
-        );
-        transposed(
-            mu,
-            vals()
-                .filter(|&(s, _)| s >= nn && s < nnp)
-                .map(|(s, a)| ((s - nn) / np, (s - nn) % np, a)),
-            vp.as_mut_slice(),
-        );
-        vals()
-            .filter(|&(s, _)| s >= nnp)
-            .fold(0.0, |acc, (s, a)| acc + mu[s - nnp] * a)
+        self.with_reset_jac(occ, at, len, |ok, vjp| {
+            if ok {
+                (vjp(mu1, vx1, vp1), vjp(mu2, vx2, vp2))
+            } else {
+                (nan_vjp(vx1, vp1), nan_vjp(vx2, vp2))
+            }
+        })
     }
 
     fn initial_state_vjp(&self, p: &X, mu: &X, vp: &mut X) {
