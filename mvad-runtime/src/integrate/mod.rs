@@ -490,10 +490,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let dir = if t_stop > self.t { 1.0 } else { -1.0 };
         self.close_step();
         self.ensure_k0()?;
+        let seed_rate = self.seed_rate.take();
         if self.scheme == Scheme::Exact {
             return self.exact_step(t_stop);
         }
-        if let Some(before) = self.seed_rate.take() {
+        if let Some(before) = seed_rate {
             let after = self.scaled_norm(&self.k[0], &self.y);
             if before >= 1e-5 && after > SEED_RATE_JUMP * before {
                 self.h = 0.0;
