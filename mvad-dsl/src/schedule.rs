@@ -373,6 +373,26 @@ impl ModelKernels {
         self.qps.iter().any(|q| q.dynamic && q.in_flow)
     }
 
+    /// The support of the adjoint's gradient quadrature G = −(λᵀf_θ + w ℓ_θ) in `mode`: the
+    /// parameters whose column of f_θ (its structural non-zeros, `second.p_entries`, the
+    /// entries of `jac_p`) or of ℓ_θ (the θ slots of ℓ's gradient kernel) can be non-zero,
+    /// ascending. Both back ends emit it as `ModelAdjoint::gradient_support`.
+    pub fn gradient_support(&self, mode: usize) -> Vec<usize> {
+        let (n, p) = (self.nstates(), self.nparams());
+        let mut on = vec![false; p];
+        for &(_, k) in &self.modes[mode].second.p_entries {
+            on[k] = true;
+        }
+        if let Some(rc) = &self.running_cost {
+            for &(s, _) in &rc.grad.outputs {
+                if (n..n + p).contains(&s) {
+                    on[s - n] = true;
+                }
+            }
+        }
+        (0..p).filter(|&k| on[k]).collect()
+    }
+
     /// Number of qp solution variables (all qps).
     pub fn nqp_vars(&self) -> usize {
         self.qps.iter().map(|q| q.vars.len()).sum()

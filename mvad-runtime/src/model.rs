@@ -475,6 +475,17 @@ where
         dense::adjoint_quadrature_add(self, pt, lambda, w, a, g);
     }
 
+    /// The support of the sweep's gradient quadrature G = −(λᵀf_θ + w ℓ_θ) in mode `mode`:
+    /// the parameters k, ascending and without repeats, whose column of f_θ (the mode's flow)
+    /// or of ℓ_θ can be non-zero. [`ModelAdjoint::adjoint_quadrature_add`] writes g nowhere
+    /// else, so the sweep keeps its per-step work on g (stage values, the step's increment,
+    /// its error norm) on these entries (`integrate::adjoint`). `None`, the default, stands
+    /// for every parameter 0..p; both doors give the symbolic support
+    /// (`ModelKernels::gradient_support`).
+    fn gradient_support(&self, _mode: usize) -> Option<&[usize]> {
+        None
+    }
+
     /// μᵀR_x into `vx` (n) and μᵀR_θ into `vp` (p) for event k's reset x⁺ = R_k(t, x, θ) at
     /// occurrence j;
     /// returns μᵀ∂R_k/∂t: vx_j = Σᵢ μᵢ ∂Rᵢ/∂x_j, vp_k = Σᵢ μᵢ ∂Rᵢ/∂θ_k. Both outputs are

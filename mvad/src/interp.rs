@@ -49,6 +49,8 @@ struct ModeTapes {
     jac: Tape,
     second: SecondTapes,
     sparsity: Vec<(usize, usize)>,
+    /// The support of the adjoint's gradient quadrature (`ModelKernels::gradient_support`).
+    gradient_support: Vec<usize>,
     depends_on_t: bool,
     constant: bool,
 }
@@ -199,7 +201,8 @@ impl InterpretedModel {
             modes: k
                 .modes
                 .iter()
-                .map(|m| ModeTapes {
+                .enumerate()
+                .map(|(mode, m)| ModeTapes {
                     rhs: tape(&m.rhs),
                     jac_x: tape(&m.jac_x),
                     jac_p: tape(&m.jac_p),
@@ -208,6 +211,7 @@ impl InterpretedModel {
                     jac: tape(&m.jac),
                     second: second(&m.second),
                     sparsity: m.sparsity.clone(),
+                    gradient_support: k.gradient_support(mode),
                     depends_on_t: m.depends_on_t,
                     constant: m.constant,
                 })

@@ -205,9 +205,9 @@ fn the_estimate_can_be_switched_off() {
     assert_eq!(on.gradient, off.gradient);
 }
 
-/// Adjoint mode (issue 8): the sweep's estimate on the unstable flow. Measured since the
-/// gradient quadrature left the stepper (it is not under error control, and its local error
-/// is the embedded weights' difference, the lower-order quadrature's error): est/err from 1.2
+/// Adjoint mode (issue 8): the sweep's estimate on the unstable flow. Measured after the
+/// gradient quadrature left the stepper and before it came under error control (its local
+/// error is the embedded weights' difference, the lower-order quadrature's error): est/err from 1.2
 /// to 4.6e3 (Tsit5 2e3 to 5e3, Verner 9 600 to 1.5e3, Rodas5P 1.2 to 40); without the
 /// quadrature's own error it was 100 to 1e3, and the stiff relay's dC/dτ at rtol 1e-3 was
 /// wrong by 6e6 with no diagnostic. Verner 9 at rtol 1e-10 for a = 3 may run out of steps in
@@ -221,9 +221,9 @@ fn an_unstable_flow_is_reported_in_adjoint_mode() {
 /// 10³ × rtol and its estimate stays silent, at every method — except on the tracking flow
 /// (whose dC/db = 1.84 is the sum of an integrand of size ~150, λ ~ e^{a(T−t)}): Rodas5P at
 /// every rtol (errors 46, 67 and 73 × rtol) and Tsit5 at rtol 1e-10 (error 1.1 × rtol,
-/// estimate 1.5e3 × rtol). The gradient quadrature is not under error control, and its
-/// estimated local error is the embedded (lower-order) quadrature's, which the cancellation
-/// amplifies 80×: alarms there are known and allowed, not required.
+/// estimate 1.5e3 × rtol; measured before the gradient quadrature came under error
+/// control). Its estimated local error is the embedded (lower-order) quadrature's, which the
+/// cancellation amplifies 80×: alarms there are known and allowed, not required.
 #[test]
 fn a_bounded_error_raises_nothing_in_adjoint_mode() {
     bounded_cases_raise_nothing(GradientMode::Adjoint, |method, rtol| {

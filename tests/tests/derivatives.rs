@@ -240,6 +240,27 @@ where
                 what("adjoint_quadrature_add adds")
             );
         }
+        // G's support (`gradient_support`, what the sweep's per-step work runs over): the
+        // columns of f_θ and ℓ_θ outside it are zero, and the product leaves g alone there.
+        if let Some(support) = m.gradient_support(mode) {
+            let np = lp.len();
+            assert!(
+                support.windows(2).all(|s| s[0] < s[1]) && support.iter().all(|&k| k < np),
+                "{}: {support:?}",
+                what("gradient_support")
+            );
+            let mut g = zp();
+            g.fill(7.0);
+            m.adjoint_quadrature_add(pt_at(t, &x), &lam, w, 1.0, &mut g);
+            for k in (0..np).filter(|k| !support.contains(k)) {
+                let column_zero = fp.column(k).iter().all(|&v| v == 0.0) && lp[k] == 0.0;
+                assert!(
+                    column_zero && g[k] == 7.0,
+                    "{}: parameter {k} is outside {support:?}",
+                    what("gradient_support")
+                );
+            }
+        }
         // ∂ₓ(f_x S + f_θ)·v and ∂ₜ(f_x S + f_θ) against differences of rhs_sens.
         let ds = |t: f64, x: &OVector<f64, M::N>| {
             let (mut f, mut ds) = (zn(), znp());

@@ -247,6 +247,13 @@ impl Gen<'_> {
         );
         let rate = self.dispatch(quote!(mode), rate_arms, quote!(out.fill(f64::NAN);), nm);
         let quad = self.dispatch(quote!(mode), quad_arms, quote!(g.fill(f64::NAN);), nm);
+        let support_arms = (0..nm)
+            .map(|m| {
+                let cols = k.gradient_support(m).into_iter().map(usize_lit);
+                (m, quote!(Some(&[#(#cols),*])))
+            })
+            .collect();
+        let support = self.dispatch(quote!(mode), support_arms, quote!(None), 0);
 
         let reset_arms = (0..k.events.len())
             .map(|e| {
@@ -306,6 +313,7 @@ impl Gen<'_> {
                 let #pr::Point { mode, sw, t, x, p } = pt; { #rate } out.neg_mut(); #rc_rate }
             fn adjoint_quadrature_add(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, a: f64, g: &mut #pv) {
                 let #pr::Point { mode, sw, t, x, p } = pt; { #quad } #rc_quad }
+            fn gradient_support(&self, mode: usize) -> Option<&[usize]> { #support }
             fn reset_vjp(&self, #occ, #at, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #let_occ #let_at #row #reset }
             fn initial_state_vjp(&self, p: &#pv, mu: &#xv, vp: &mut #pv) { #x0 }
         }

@@ -218,6 +218,13 @@ fn sorted_samples<'a>(cot: &Cotangents<'a>, nobs: usize) -> Vec<Sample<'a>> {
 /// 6.4e-13), more than 5× forward mode's error or 5× rtol at 1e-12: this factor, not the
 /// sweep, is what keeps the adjoint slower than forward mode on a model whose flow has the p
 /// terms (`benches/adjoint.rs`, chain: 1222 primal steps against forward mode's 249–398).
+///
+/// The primal's absolute tolerance is this factor times min(atol, rtol): with atol > rtol
+/// (rtol 1e-12 at the default atol 1e-10) an O(1) state would be held to atol alone, looser
+/// than the relative accuracy asked of the gradient, which reads x through G's sensitivity
+/// to it: the stiff relay's G_τ = −λ_u(−1 − u)/τ² amplifies an error of u in its transient
+/// ~90× into dC/dτ (rel. 6.2e-11 at rtol 1e-12 with the primal at atol 1e-12; 1.3e-12 at
+/// 1e-14, for 2× the primal steps; forward mode holds S_τ relative to itself instead).
 pub const PRIMAL_TOL_FACTOR: f64 = 0.01;
 
 /// The primal run with the tape; a [`Handover`] when it did not reach T normally (an
@@ -233,7 +240,7 @@ where
     let primal = Options {
         sensitivities: false,
         rtol: opts.rtol * PRIMAL_TOL_FACTOR,
-        atol: opts.atol * PRIMAL_TOL_FACTOR,
+        atol: opts.atol.min(opts.rtol) * PRIMAL_TOL_FACTOR,
         ..opts.clone()
     };
     let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;

@@ -15,20 +15,33 @@
 //! λ(b)ᵀS(b) + w ∫_a^b (ℓ_x S + ℓ_θ) dt = λ(a)ᵀS(a) + [g(a) − g(b)]:
 //! the segment's share of dC/dθ moves into g without ever forming S.
 //!
-//! ## The quadrature outside the stepper
+//! ## The quadrature outside the stepper, under error control
 //! G never feeds back into λ̇, so g is not part of the integrated vector: the stepper's
-//! stages, error norm, dense output and finiteness checks are all n long, and g (p long) is
-//! kept here and added to once per accepted step, when it is known where the step ends
-//! (`Integrator::close_step`), by the scheme's own weights on the step's stage values
+//! stages, dense output and finiteness checks are all n long, and g (p long) is kept here.
+//! Each step's increment Δg is formed by the scheme's own weights on the step's stage values
 //! (`integrate/quadrature.rs`): for the augmented system (λ, g) the Runge–Kutta update of g
-//! is exactly g₁ = g₀ + h Σᵢ bᵢ G(tᵢ, Λᵢ) with Λᵢ the λ-part of stage i's argument, so
-//! the result is the augmented integration's to rounding (the same order, and the same steps
-//! when g is not under error control). Each term is the model's sparse product
-//! [`crate::model::ModelAdjoint::adjoint_quadrature_add`], g += a·G, which touches only the
-//! structural non-zeros of f_θ and ℓ_θ; the stages use
-//! [`crate::model::ModelAdjoint::adjoint_rate`], which touches nothing of size p. So a
-//! backward step costs O(n + nnz(f_θ)) beyond the model's own work, never O(p) (as SUNDIALS
-//! does with `errconQB = false`, g does not enter the step-size control).
+//! is exactly g₁ = g₀ + h Σᵢ bᵢ G(tᵢ, Λᵢ) with Λᵢ the λ-part of stage i's argument, and its
+//! embedded error estimate e_g = h Σᵢ (bᵢ − b̂ᵢ) G(tᵢ, Λᵢ) comes from the same stage values.
+//!
+//! g is under error control (CVODES' `errconQB = true`; `Options::sens_error_control`, on by
+//! default, as S is in forward mode): every attempt forms Δg and e_g, one evaluation of G per
+//! stage, and is accepted when max(‖e_λ‖, ‖e_g‖) ≤ 1, with
+//! ‖e_g‖ = sqrt(1/|P| Σ_{j∈P} (w_j e_j / (atol + rtol·w_j·max(|g_j|, |g_j + Δg_j|)))²) over
+//! the support P and w_j = max(1, |θ_j|) (`gradient_weight`). Without it, λ's norm alone
+//! strides over the places where G is sharp and λ is not: behind a stiff lag's transient
+//! (u relaxing in τ after a relay switch) λ_u is quasi-steady while G_τ = −λ_u(1 − u)/τ² is a
+//! spike of height ~1/τ and width τ carrying an O(1) share of dC/dτ. Δg waits until the
+//! accepted step is closed (`Integrator::close_step`), so a rejected attempt leaves nothing
+//! in g; the result is the augmented integration's to rounding, the same order and the same
+//! steps.
+//!
+//! Flat in p: every term is the model's sparse product
+//! [`crate::model::ModelAdjoint::adjoint_quadrature_add`], which touches only the structural
+//! non-zeros of f_θ and ℓ_θ, and every loop over g (the stage value's scratch, the sums, the
+//! norm, the close) runs over the mode's support
+//! [`crate::model::ModelAdjoint::gradient_support`], the parameters f_θ and ℓ_θ can reach;
+//! the stages use [`crate::model::ModelAdjoint::adjoint_rate`], which touches nothing of size
+//! p. So a backward step costs O(n + nnz(f_θ) + |P|) beyond the model's own work, never O(p).
 //!
 //! ## For Rodas5P
 //! J_λλ = −f_xᵀ, and with W = I + hγ f_xᵀ (the `WMatrix` of J_λλ, factorised once per
@@ -41,8 +54,8 @@
 //! [`crate::model::ModelAdjoint::rhs_vjp_dir`] and
 //! [`crate::model::ModelAdjoint::running_cost_grad_dir`] (nothing here takes a difference
 //! quotient; their trait defaults do, on the scale of the direction, so that a stiff
-//! transient is differenced on its own time scale). G_t is p long: a Rodas5P step costs O(p)
-//! once, at its start. The adjoint of a stiff flow is stiff backwards in time (the
+//! transient is differenced on its own time scale). G_t is p long as the model's product
+//! writes it (its work, once per step start); it enters the sums on the support. The adjoint of a stiff flow is stiff backwards in time (the
 //! eigenvalues of −f_xᵀ, stepped with h < 0, are those of f_x stepped forwards), so `auto`
 //! switches to Rodas5P on it as on the forward run.
 
@@ -129,6 +142,8 @@ where
     /// g: the gradient quadrature, with whatever the sweep adds to it (jumps, samples, the
     /// terminal and initial terms).
     g: OVector<f64, M::P>,
+    /// The step being formed: its Δg, its error, G's support (see [`StepQuadrature`]).
+    quad: StepQuadrature<M::P>,
     /// The sweep's global error estimate (`Options::global_error`).
     global: Option<AdjointError<M::N, M::P>>,
     /// The buffers of its primal coupling (with it).
@@ -149,6 +164,50 @@ where
     xe: OVector<f64, N>,
     f: OVector<f64, N>,
     d: OVector<f64, N>,
+}
+
+/// The gradient quadrature of the step being formed (`quadrature.rs`), on the support of G
+/// in the segment's mode ([`crate::model::ModelAdjoint::gradient_support`]): every loop
+/// below runs over `support`, never over 0..p, and entries outside it are never read.
+struct StepQuadrature<P: Dim>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<P>,
+{
+    /// The parameters G can reach in the current mode, ascending (capacity p, filled per
+    /// segment without allocating).
+    support: Vec<usize>,
+    /// One stage value G(tᵢ, Λᵢ), when it goes to both sums.
+    stage: OVector<f64, P>,
+    /// Δg of the step.
+    step: OVector<f64, P>,
+    /// Its local error estimate.
+    err: OVector<f64, P>,
+    /// g's local error enters the step acceptance (`Options::sens_error_control`).
+    controlled: bool,
+}
+
+impl<P: Dim> StepQuadrature<P>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<P>,
+{
+    /// The sum `sum` of the step.
+    #[inline]
+    fn sum_mut(&mut self, sum: QuadratureSum) -> &mut OVector<f64, P> {
+        match sum {
+            QuadratureSum::Step => &mut self.step,
+            QuadratureSum::Error => &mut self.err,
+        }
+    }
+}
+
+/// The weight of g_j in the sweep's error norm: max(1, |θ_j|). Forward mode weighs S's
+/// column j by |θ_j| ([`super::sens_weight`]), which makes its absolute tolerance atol/|θ_j|;
+/// for g that floor would be far above g_j itself when θ_j is small (a lag τ = 1e-8 with
+/// dC/dτ ~ 1 would be held to 1e-2 at atol 1e-10), so g_j is held to the stricter of atol and
+/// atol/|θ_j| besides rtol·|g_j|.
+#[inline]
+fn gradient_weight(theta: f64) -> f64 {
+    super::sens_weight(theta).max(1.0)
 }
 
 /// Everything F needs besides x(t).
@@ -280,6 +339,13 @@ where
                 prepared: false,
             },
             g: OVector::zeros_generic(np, Const::<1>),
+            quad: StepQuadrature {
+                support: Vec::with_capacity(np.value()),
+                stage: OVector::zeros_generic(np, Const::<1>),
+                step: OVector::zeros_generic(np, Const::<1>),
+                err: OVector::zeros_generic(np, Const::<1>),
+                controlled: opts.sens_error_control,
+            },
             global: opts.global_error.then(|| AdjointError::new(n, np)),
             coupling: opts.global_error.then(|| Coupling {
                 ex: vn(),
@@ -402,40 +468,92 @@ where
         true
     }
 
+    /// g's local error enters the step acceptance, as S's does in forward mode
+    /// (`Options::sens_error_control`): λ is smooth through the primal's fast transients
+    /// (the adjoint of a stiff lag is quasi-steady), while G = −(λᵀf_θ + w ℓ_θ) is not
+    /// (−λ_u(1 − u)/τ² spikes to ~1/τ there): an error norm over λ alone strides over it.
+    #[inline]
+    fn controls_quadrature(&self) -> bool {
+        self.quad.controlled
+    }
+
     /// The quadrature's local error goes into the sweep's estimate, when it keeps one.
     #[inline]
     fn estimates_quadrature_error(&self) -> bool {
         self.global.is_some()
     }
 
-    /// `sum` += a·G(t, λ) = −a (λᵀf_θ + w ℓ_θ) at x(t): the model's sparse product (g, or
-    /// the estimate's r_g).
     #[inline]
-    fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64, sum: QuadratureSum) {
-        self.hist.at(t);
-        let Some(target) = quadrature_sum(&mut self.g, &mut self.global, sum) else {
-            return;
+    fn quadrature_clear(&mut self, sum: QuadratureSum) {
+        let q = &mut self.quad;
+        let v = match sum {
+            QuadratureSum::Step => &mut q.step,
+            QuadratureSum::Error => &mut q.err,
         };
+        for &k in &q.support {
+            v[k] = 0.0;
+        }
+    }
+
+    /// G(t, λ) = −(λᵀf_θ + w ℓ_θ) at x(t), the model's sparse product, once: straight into
+    /// the one sum with a non-zero weight, or into a scratch (zeroed on the support) and
+    /// from there into both.
+    #[inline]
+    fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64, e: f64) {
+        self.hist.at(t);
         let rhs = &mut self.rhs;
         rhs.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
-        rhs.model.adjoint_quadrature_add(pt, y, rhs.w, a, target);
+        let q = &mut self.quad;
+        match (a != 0.0, e != 0.0) {
+            (true, false) => rhs
+                .model
+                .adjoint_quadrature_add(pt, y, rhs.w, a, &mut q.step),
+            (false, true) => rhs
+                .model
+                .adjoint_quadrature_add(pt, y, rhs.w, e, &mut q.err),
+            (true, true) => {
+                for &k in &q.support {
+                    q.stage[k] = 0.0;
+                }
+                rhs.model
+                    .adjoint_quadrature_add(pt, y, rhs.w, 1.0, &mut q.stage);
+                for &k in &q.support {
+                    let gk = q.stage[k];
+                    q.step[k] += a * gk;
+                    q.err[k] += e * gk;
+                }
+            }
+            (false, false) => {}
+        }
     }
-}
 
-/// The vector a quadrature term goes to: g, or the estimate's r_g (`None` without one).
-#[inline]
-fn quadrature_sum<'b, N: Dim, P: Dim>(
-    g: &'b mut OVector<f64, P>,
-    global: &'b mut Option<AdjointError<N, P>>,
-    sum: QuadratureSum,
-) -> Option<&'b mut OVector<f64, P>>
-where
-    DefaultAllocator: ModelAlloc<N, P>,
-{
-    match sum {
-        QuadratureSum::Value => Some(g),
-        QuadratureSum::Error => global.as_mut().map(|ge| ge.remainder_mut().1),
+    /// [`WeightedRms`] over the support of the error of Δg against g and g + Δg, entry j
+    /// weighted by [`gradient_weight`]`(θ_j)`: g is a running sum, held relative to its own
+    /// size as forward mode holds S.
+    fn quadrature_error_norm(&self, atol: f64, rtol: f64) -> f64 {
+        let q = &self.quad;
+        let mut rms = WeightedRms::new(atol, rtol);
+        for &k in &q.support {
+            let g0 = self.g[k];
+            let w = gradient_weight(self.rhs.p[k]);
+            rms.add_entry(q.err[k], g0, g0 + q.step[k], w);
+        }
+        rms.norm()
+    }
+
+    /// g += Δg, and with `error` the estimate's r_g += the step's error (on the support).
+    fn quadrature_close(&mut self, error: bool) {
+        let q = &self.quad;
+        for &k in &q.support {
+            self.g[k] += q.step[k];
+        }
+        if let (true, Some(ge)) = (error, self.global.as_mut()) {
+            let (_, r_g) = ge.remainder_mut();
+            for &k in &q.support {
+                r_g[k] += q.err[k];
+            }
+        }
     }
 }
 
@@ -491,23 +609,27 @@ where
     /// `sum` += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
     fn quadrature_jac_add(&mut self, t0: f64, v: &Self::Vector, a: f64, sum: QuadratureSum) {
         self.hist.at(t0);
-        let Some(target) = quadrature_sum(&mut self.g, &mut self.global, sum) else {
-            return;
-        };
         let rhs = &mut self.rhs;
         let pt = rhs.point(t0, &self.hist.x);
+        let target = self.quad.sum_mut(sum);
         rhs.model.adjoint_quadrature_add(pt, v, 0.0, a, target);
     }
 
     /// `sum` += a·G_t at the step start (from `prepare`, recomputed if it was for another
-    /// one).
+    /// one), on the support (G_t vanishes off it).
     fn quadrature_dt_add(&mut self, t0: f64, y0: &Self::Vector, a: f64, sum: QuadratureSum) {
         if self.imp.dt_at != Some(t0) {
             self.time_derivatives(t0, y0);
             self.imp.prepared = false;
         }
-        if let Some(target) = quadrature_sum(&mut self.g, &mut self.global, sum) {
-            target.axpy(a, &self.imp.dt_g, 1.0);
+        let dt_g = &self.imp.dt_g;
+        let q = &mut self.quad;
+        let target = match sum {
+            QuadratureSum::Step => &mut q.step,
+            QuadratureSum::Error => &mut q.err,
+        };
+        for &k in &q.support {
+            target[k] += a * dt_g[k];
         }
     }
 
@@ -622,6 +744,12 @@ where
         sys.rhs.mode = seg.mode;
         sys.rhs.sw.clone_from(&seg.sw);
         sys.rhs.t_start = seg.t_start;
+        let q = &mut sys.quad;
+        q.support.clear();
+        match sys.rhs.model.gradient_support(seg.mode) {
+            Some(support) => q.support.extend_from_slice(support),
+            None => q.support.extend(0..sys.g.len()),
+        }
         self.restart_at(s, lambda);
     }
 

@@ -26,10 +26,10 @@
 //!   applied to the same stage values: le_g = h Σᵢ (bᵢ − b̂ᵢ) G(tᵢ, Λᵢ) for an explicit pair
 //!   (Λᵢ the λ-part of stage i's argument), and for Rodas5P (whose estimate is the last stage
 //!   K₈) the Q-block of K₈, formed like the update with the weights of the unit vector e₈
-//!   (`rosenbrock::quadrature_weights`). It is added straight into r_g as the integrator
-//!   closes the step (`OdeSystem::quadrature_add` with [`super::QuadratureSum::Error`]), one
-//!   sparse product `adjoint_quadrature_add` per stage with a non-zero weight: O(nnz(f_θ)),
-//!   never O(p). A step cut short (θ < 1, forward runs only) keeps the whole step's estimate,
+//!   (`rosenbrock::quadrature_weights`). It is the same e_g the step acceptance reads
+//!   ([`super::QuadratureSum::Error`], formed with Δg from one evaluation of G per stage,
+//!   `adjoint_quadrature_add` on G's support: O(nnz(f_θ)), never O(p)), and is added into
+//!   r_g as the integrator closes the step (`OdeSystem::quadrature_close`). A step cut short (θ < 1, forward runs only) keeps the whole step's estimate,
 //!   as λ's does. The error λ's local errors cause in g is the transport's ṙ_g = −f_θᵀr_λ:
 //!   the propagation of λ's error through ∫ λᵀf_θ dt.
 //!

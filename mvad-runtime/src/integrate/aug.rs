@@ -362,6 +362,13 @@ impl WeightedRms {
         }
     }
 
+    /// Adds one entry: its error `e`, its values `y0`, `y1` at the two ends of the step, and
+    /// its weight `w`.
+    #[inline]
+    pub(super) fn add_entry(&mut self, e: f64, y0: f64, y1: f64, w: f64) {
+        self.add_one(e, magnitude(y0, y1), w, self.rtol * w);
+    }
+
     /// Adds one entry: error `e`, magnitude `m` = max(|y0|, |y1|), weight `w`, `rw` = rtol·w.
     #[inline(always)]
     fn add_one(&mut self, e: f64, m: f64, w: f64, rw: f64) {

@@ -132,7 +132,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// Weighted RMS norm of `v` with scale atol + rtol |y|, over the controlled parts.
-    fn scaled_norm(&self, v: &Sys::Vector, y: &Sys::Vector) -> f64 {
+    pub(super) fn scaled_norm(&self, v: &Sys::Vector, y: &Sys::Vector) -> f64 {
         self.sys.error_norm(v, y, y, self.atol, self.rtol)
     }
 }

@@ -235,6 +235,10 @@ const JAC_CHECK_EVERY: usize = 20;
 const JAC_STIFF_HRHO: f64 = 0.8;
 /// |h|·ρ(f_x) below which a Rodas5P step counts as non-stiff.
 const JAC_NONSTIFF_HRHO: f64 = 0.4;
+/// The rate after a restart, against the rate before it, beyond which a seeded step gives
+/// way to Hairer's heuristic ([`Integrator::set_step_size`]); within it (the controller's own
+/// growth limit) the seed stands.
+const SEED_RATE_JUMP: f64 = 10.0;
 /// Consecutive non-stiff Rodas5P steps before `auto` switches back to Tsit5.
 const NONSTIFF_STEPS_TO_SWITCH: usize = 20;
 
@@ -283,6 +287,14 @@ pub struct Integrator<Sys: OdeSystem> {
     /// error estimate not carried over it, its quadrature not added (see
     /// [`Integrator::close_step`]).
     carry_pending: Option<f64>,
+    /// The system's quadrature sums hold the last attempt's whole-step ΔQ and its error
+    /// (formed in [`Integrator::attempt`] under [`OdeSystem::controls_quadrature`]); once
+    /// that attempt is accepted they wait for [`Integrator::close_step`].
+    quadrature_formed: bool,
+    /// The proposed step `h` is a seed ([`Integrator::set_step_size`]): the scaled rate at
+    /// the start of the last step before it, until the first step after it compares it with
+    /// its own.
+    seed_rate: Option<f64>,
     /// k[0] = F(t, y) holds (computed or taken over from the FSAL stage).
     k0_valid: bool,
     /// The last accepted step left F(t, y) in this stage slot (Tsit5: k₇; Verner: the first
@@ -334,6 +346,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             r: zero(),
             k: (0..slots).map(|_| zero()).collect(),
             k0_valid: false,
+            seed_rate: None,
+            quadrature_formed: false,
             carry_pending: None,
             fsal_slot: None,
             ctrl: Controller::new(),
@@ -369,6 +383,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.dense_h = 0.0;
         self.truncated = false;
         self.h = 0.0;
+        self.seed_rate = None;
         self.y.copy_from(y);
         self.y_prev.copy_from(y);
         self.k0_valid = false;
@@ -444,8 +459,20 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// event (call it after a restart, which otherwise starts from Hairer's heuristic; the
     /// error control still rejects and shrinks a seed that is too large). A value that is not
     /// finite and positive restores the heuristic.
+    ///
+    /// The seed belongs to the rate before the restart: when the rate after it, ‖F(t, y)‖ in
+    /// the error norm's scaling, is more than [`SEED_RATE_JUMP`] times the rate at the start
+    /// of the last step before it (k[0], still in its slot), the state's time scale has
+    /// shrunk by as much and the seed says nothing about it: the first step comes from
+    /// Hairer's heuristic, as at t₀. The error estimate cannot refuse a seed on its own when
+    /// an L-stable step strides over a fast transient the jump started (a stiff lag's new set
+    /// point): the step lands right at the transient's end, and only its dense output, which
+    /// the adjoint's sweep reads, misses the transient (the stiff relay's dC/dτ was off by
+    /// 6e6 at rtol 1e-3 in adjoint mode). Without a step before it (a rate below 1e-5) the
+    /// seed stands.
     pub fn set_step_size(&mut self, h: f64) {
         self.h = if h.is_finite() && h > 0.0 { h } else { 0.0 };
+        self.seed_rate = (self.h > 0.0).then(|| self.scaled_norm(&self.k[0], &self.y));
     }
 
     /// Take ONE accepted step towards `t_stop`, never beyond it; lands exactly on `t_stop`
@@ -463,8 +490,15 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let dir = if t_stop > self.t { 1.0 } else { -1.0 };
         self.close_step();
         self.ensure_k0()?;
+        let seed_rate = self.seed_rate.take();
         if self.scheme == Scheme::Exact {
             return self.exact_step(t_stop);
+        }
+        if let Some(before) = seed_rate {
+            let after = self.scaled_norm(&self.k[0], &self.y);
+            if before >= 1e-5 && after > SEED_RATE_JUMP * before {
+                self.h = 0.0;
+            }
         }
         if self.h == 0.0 {
             self.h = self.initial_step(t_stop - self.t);
@@ -567,6 +601,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             return Err(self.out_of_steps(h.abs()));
         }
         self.exact_attempt(h);
+        self.quadrature_formed = false;
         if !self.ynew.is_finite() {
             self.stats.rejected_steps += 1;
             let what = self.nonfinite_source();
@@ -604,22 +639,33 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// Closes the last accepted step, if that is still pending: carries the system's global
-    /// error estimate over it and adds its quadrature ([`OdeSystem::has_quadrature`]). A
-    /// step is closed once it is known where it ends: when the next step starts, when
-    /// [`Integrator::truncate`] cuts it (over the cut length), at a restart, or when the
-    /// caller asks before reading the estimate or the quadrature (at the end of a run or a
-    /// segment). Until then t_prev, y_prev, the stages k (k[0] = F(t_prev, y_prev)) and the
-    /// local error estimate are the step's. An exact step makes no error, and its flow (a
-    /// function of θ alone) moves none: it carries nothing, but adds its quadrature.
+    /// error estimate over it and adds its quadrature ([`OdeSystem::has_quadrature`]; ΔQ as
+    /// the accepted attempt formed it, re-formed with the weights bᵢ(θ) when the step was
+    /// cut, or formed now when the attempt did not, `quadrature.rs`). A step is closed once
+    /// it is known where it ends: when the next step starts, when [`Integrator::truncate`]
+    /// cuts it (over the cut length), at a restart, or when the caller asks before reading
+    /// the estimate or the quadrature (at the end of a run or a segment). Until then t_prev,
+    /// y_prev, the stages k (k[0] = F(t_prev, y_prev)) and the local error estimate are the
+    /// step's. An exact step makes no error, and its flow (a function of θ alone) moves none:
+    /// it carries nothing, but adds its quadrature.
     pub fn close_step(&mut self) {
         if let Some(h) = self.carry_pending.take() {
-            if self.dense_scheme != Scheme::Exact {
+            let exact = self.dense_scheme == Scheme::Exact;
+            if !exact {
                 self.sys
                     .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
             }
             if self.sys.has_quadrature() {
-                self.add_step_quadrature(h);
+                let error = self.sys.estimates_quadrature_error() && !exact;
+                let of = quadrature::QuadratureOf::Accepted(h / self.dense_h);
+                if !self.quadrature_formed {
+                    self.form_quadrature(of, error);
+                } else if h != self.dense_h {
+                    self.form_quadrature(of, false);
+                }
+                self.sys.quadrature_close(error);
             }
+            self.quadrature_formed = false;
         }
     }
 
@@ -672,6 +718,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 return self.sys.stage_source(k);
             }
         }
+        if self.quadrature_formed && self.ynew.is_finite() {
+            return format!("quadrature of the {}", self.sys.flow_name());
+        }
         let part = self
             .sys
             .nonfinite_part(&self.ynew)
@@ -680,14 +729,32 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// One attempt of the active scheme with signed step h from (t, y): fills `ynew`, the
-    /// stages and `yerr`, and returns the error norm (NaN when something overflowed).
+    /// stages and `yerr`, and returns the error norm (NaN when something overflowed). Under
+    /// [`OdeSystem::controls_quadrature`] an attempt that Y's norm accepts also forms the
+    /// quadrature's ΔQ and its error, and the norm is max(‖e_Y‖, ‖e_Q‖).
     #[inline]
     fn attempt(&mut self, h: f64) -> f64 {
-        match self.scheme {
+        let err = match self.scheme {
             Scheme::Tsit5 => self.explicit_attempt(&TSIT5, h),
             Scheme::Verner9 => self.explicit_attempt(&VERNER9, h),
             Scheme::Rodas5P => self.rosenbrock_attempt(h),
             Scheme::Exact => self.exact_attempt(h),
+        };
+        self.quadrature_formed = false;
+        let controlled = self.scheme != Scheme::Exact
+            && self.sys.has_quadrature()
+            && self.sys.controls_quadrature();
+        if !controlled || err.is_nan() || err > 1.0 {
+            return err;
+        }
+        self.form_quadrature(quadrature::QuadratureOf::Attempt(h), true);
+        self.quadrature_formed = true;
+        let eq = self.sys.quadrature_error_norm(self.atol, self.rtol);
+        // A non-finite ΔQ or error makes the attempt non-finite (`f64::max` would drop it).
+        if eq.is_nan() {
+            f64::NAN
+        } else {
+            err.max(eq)
         }
     }
 

@@ -146,13 +146,15 @@ where
     }
 }
 
-/// Which sum a quadrature term goes to: the quadrature Q itself, or the estimate of its
-/// local error over the closed step (see [`OdeSystem::estimates_quadrature_error`]).
+/// Which sum of the step being formed a quadrature term goes to: the step's increment ΔQ,
+/// or the estimate of its local error (see [`OdeSystem::controls_quadrature`] and
+/// [`OdeSystem::estimates_quadrature_error`]). The system holds both until the step is
+/// closed ([`OdeSystem::quadrature_close`]) or another attempt clears them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum QuadratureSum {
-    /// Q.
-    Value,
-    /// The system's estimate of Q's error.
+    /// ΔQ over the step.
+    Step,
+    /// The estimate of ΔQ's local error.
     Error,
 }
 
@@ -184,21 +186,39 @@ pub trait OdeSystem {
     /// Evaluations of F so far (including those for difference quotients).
     fn evals(&self) -> usize;
     /// Whether the system keeps a quadrature Q̇ = G(t, Y) outside the integrated vector (F
-    /// never reads Q, so Q needs no stage of its own: the integrator adds each accepted
-    /// step's share with the scheme's weights, `quadrature.rs`). The default, `false`, has
-    /// none.
+    /// never reads Q, so Q needs no stage of its own: the integrator forms each step's share
+    /// ΔQ with the scheme's weights on the step's stage values, `quadrature.rs`). The
+    /// default, `false`, has none, and no quadrature method is called.
     fn has_quadrature(&self) -> bool {
         false
     }
-    /// Whether the system estimates the quadrature's local error (the difference of the
-    /// scheme's embedded weights on the same stage values, summed into
-    /// [`QuadratureSum::Error`]). The default, `false`, does not: no error term is formed.
+    /// Whether Q's local error enters the step acceptance (as CVODES' `errconQB`): then every
+    /// attempt forms ΔQ and its error estimate, and the attempt's norm is
+    /// max(‖e_Y‖, [`OdeSystem::quadrature_error_norm`]). Otherwise ΔQ is formed once, when
+    /// the accepted step is closed. The default, `false`, leaves Q out.
+    fn controls_quadrature(&self) -> bool {
+        false
+    }
+    /// Whether the system wants Q's local error estimate of each accepted step (for a
+    /// global error estimate; handed over by [`OdeSystem::quadrature_close`]). The default,
+    /// `false`, does not.
     fn estimates_quadrature_error(&self) -> bool {
         false
     }
-    /// `sum` += a·G(t, y) (a stage value of a closed step times its weight h·bᵢ, or its error
-    /// weight h·(bᵢ − b̂ᵢ)).
-    fn quadrature_add(&mut self, _t: f64, _y: &Self::Vector, _a: f64, _sum: QuadratureSum) {}
+    /// Sets `sum` to 0 (before a step's terms are added to it).
+    fn quadrature_clear(&mut self, _sum: QuadratureSum) {}
+    /// Evaluates G(t, y) once (a stage value of the step being formed) and adds `a`·G to
+    /// [`QuadratureSum::Step`] and `e`·G to [`QuadratureSum::Error`] (h·bᵢ and h·(bᵢ − b̂ᵢ);
+    /// a zero weight adds nothing).
+    fn quadrature_add(&mut self, _t: f64, _y: &Self::Vector, _a: f64, _e: f64) {}
+    /// The weighted RMS norm of [`QuadratureSum::Error`] against Q at both ends of the step,
+    /// Q and Q + ΔQ (for [`OdeSystem::controls_quadrature`]).
+    fn quadrature_error_norm(&self, _atol: f64, _rtol: f64) -> f64 {
+        0.0
+    }
+    /// Closes the step: Q += ΔQ, and with `error` the error estimate goes to the system's
+    /// global error estimate.
+    fn quadrature_close(&mut self, _error: bool) {}
     /// The weighted RMS norm of the local error `e` of a step from `y0` to `y1`,
     /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over the controlled
     /// entries with the system's weights w_i. Also the norm of Hairer's initial-step heuristic

@@ -335,6 +335,10 @@ impl ModelAdjoint for InterpretedModel {
         }
     }
 
+    fn gradient_support(&self, mode: usize) -> Option<&[usize]> {
+        self.mode(mode).map(|m| m.gradient_support.as_slice())
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn reset_vjp(
         &self,
