@@ -472,7 +472,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// seed stands.
     pub fn set_step_size(&mut self, h: f64) {
         self.h = if h.is_finite() && h > 0.0 { h } else { 0.0 };
-        self.seed_rate = (self.h > 0.0).then(|| self.scaled_norm(&self.k[0], &self.y));
+        // An exact segment takes no seed (and its k[0] is already the new F).
+        let adaptive = self.h > 0.0 && self.scheme != Scheme::Exact;
+        self.seed_rate = adaptive.then(|| self.scaled_norm(&self.k[0], &self.y));
     }
 
     /// Take ONE accepted step towards `t_stop`, never beyond it; lands exactly on `t_stop`
