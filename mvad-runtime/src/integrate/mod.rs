@@ -72,7 +72,7 @@ pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
-pub use global_error::{GlobalError, Saltation};
+pub use global_error::{GlobalError, ResetSecant, Saltation};
 pub use system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 
 use crate::solution::{Method, Options, Stats};

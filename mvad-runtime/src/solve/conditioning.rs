@@ -13,10 +13,20 @@
 //! weighs S by |θ_j|, adjoint mode's quadrature g is controlled unweighted.
 
 use super::Driver;
-use crate::integrate::{sens_weight, Saltation};
+use crate::integrate::{sens_weight, ResetSecant, Saltation};
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence};
 use crate::solution::{Diagnostic, DiagnosticKind, ErrorEstimate, ILL_CONDITIONED_FACTOR};
 use nalgebra::{Const, DefaultAllocator, OVector};
+
+/// How an estimate's jump takes the reset (see [`Saltation`]).
+enum Reset {
+    /// The identity (a switch crossing).
+    Identity,
+    /// R_x and R_t as the sensitivities' jump computed them.
+    Jacobians,
+    /// Without sensitivities: the secant of occurrence `.0`'s reset at time `.1`.
+    Secant(Occurrence, f64),
+}
 
 impl<M: HybridModel> Driver<'_, M>
 where
@@ -43,38 +53,15 @@ where
         let phi_t = model.info().events[k].has_cost.then(|| {
             model.event_cost_grad(occ, At::new(t, &self.x_plus, p), &mut self.cx, &mut self.cp)
         });
-        if self.sens {
+        let reset = if self.sens {
             // R_x and R_t as `event_reset` computed them for the sensitivities.
-            self.error_jump(true, rate, (l_minus, l_plus), phi_t);
-            return;
-        }
-        // Without sensitivities the estimate needs R only along its displacement: a secant
-        // of the reset (one evaluation, never the p-long ∂R/∂θ of `reset_jac`).
-        let (x_minus, x_plus) = (&self.y.x, &self.x_plus);
-        let secant = |d: &OVector<f64, M::N>,
-                      dt: f64,
-                      xs: &mut OVector<f64, M::N>,
-                      out: &mut OVector<f64, M::N>| {
-            xs.copy_from(x_minus);
-            *xs += d;
-            model.reset(occ, At::new(t + dt, xs, p), out);
-            *out -= x_plus;
+            Reset::Jacobians
+        } else {
+            // Without sensitivities the estimate needs R only along its displacement: a
+            // secant of the reset (one evaluation, never the p-long ∂R/∂θ of `reset_jac`).
+            Reset::Secant(occ, t)
         };
-        let s = Saltation {
-            rx: None,
-            rt: None,
-            f_minus: &self.f_minus,
-            f_plus: &self.f_plus,
-            gx: &self.gx,
-            rate,
-            l_minus,
-            l_plus,
-            cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
-            secant: Some(&secant),
-        };
-        if let Some(ge) = self.integ.global_error_mut() {
-            ge.jump(&s, false);
-        }
+        self.error_jump(reset, rate, (l_minus, l_plus), phi_t);
     }
 
     /// Carries the estimate through the crossing of switching function j at t (identity
@@ -93,22 +80,41 @@ where
         } else {
             0.0
         };
-        self.error_jump(false, rate, (l_minus, l_plus), None);
+        self.error_jump(Reset::Identity, rate, (l_minus, l_plus), None);
     }
 
-    /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, R_x and R_t from
-    /// them too when `reset` (else the identity), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event
-    /// cost, φ_t with φ_x in `cx`.
+    /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, the reset as
+    /// `reset` says (R_x, R_t from the driver's buffers, or the secant of R at x⁻ in `y.x`
+    /// with x⁺ in `x_plus`), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event cost, φ_t with φ_x in
+    /// `cx`.
     fn error_jump(
         &mut self,
-        reset: bool,
+        reset: Reset,
         rate: f64,
         (l_minus, l_plus): (f64, f64),
         phi_t: Option<f64>,
     ) {
+        let (model, p) = (self.model, self.p);
+        let (x_minus, x_plus) = (&self.y.x, &self.x_plus);
+        let secant_at = |occ: Occurrence, t: f64| {
+            move |d: &OVector<f64, M::N>,
+                  dt: f64,
+                  xs: &mut OVector<f64, M::N>,
+                  out: &mut OVector<f64, M::N>| {
+                xs.copy_from(x_minus);
+                *xs += d;
+                model.reset(occ, At::new(t + dt, xs, p), out);
+                *out -= x_plus;
+            }
+        };
+        let secant = match reset {
+            Reset::Secant(occ, t) => Some(secant_at(occ, t)),
+            _ => None,
+        };
+        let jacobians = matches!(reset, Reset::Jacobians);
         let s = Saltation {
-            rx: reset.then_some(&self.rx),
-            rt: reset.then_some(&self.rt),
+            rx: jacobians.then_some(&self.rx),
+            rt: jacobians.then_some(&self.rt),
             f_minus: &self.f_minus,
             f_plus: &self.f_plus,
             gx: &self.gx,
@@ -116,7 +122,7 @@ where
             l_minus,
             l_plus,
             cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
-            secant: None,
+            secant: secant.as_ref().map(|f| f as &ResetSecant<'_, M::N>),
         };
         if let Some(ge) = self.integ.global_error_mut() {
             ge.jump(&s, self.sens);
