@@ -525,6 +525,28 @@ mod tests {
     use approx::assert_relative_eq;
     use nalgebra::{Matrix2, Vector2};
 
+    /// An event's jump without running or event costs: R_x, R_t (`None`: zero), f±, ∇g and
+    /// the rate ∇g·f⁻, and optionally the reset's secant.
+    fn impact<'a>(
+        (rx, rt): (&'a Matrix2<f64>, Option<&'a Vector2<f64>>),
+        (f_minus, f_plus): (&'a Vector2<f64>, &'a Vector2<f64>),
+        gx: &'a Vector2<f64>,
+        secant: Option<&'a ResetSecant<'a, Const<2>>>,
+    ) -> Saltation<'a, Const<2>> {
+        Saltation {
+            rx: Some(rx),
+            rt,
+            f_minus,
+            f_plus,
+            gx,
+            rate: gx.dot(f_minus),
+            l_minus: 0.0,
+            l_plus: 0.0,
+            cost: None,
+            secant,
+        }
+    }
+
     /// A time shift passes an event exactly: with the ball's impact (R = (h, −e v), g = h),
     /// e_x⁻ = α f⁻ becomes α f⁺ + (the shift's own effect on nothing else), i.e. Σ f⁻ = f⁺.
     #[test]
@@ -537,18 +559,7 @@ mod tests {
         let f_plus = Vector2::new(-e * v, -g);
         let rx = Matrix2::new(1.0, 0.0, 0.0, -e);
         let gx = Vector2::new(1.0, 0.0);
-        let s = Saltation {
-            rx: Some(&rx),
-            rt: None,
-            f_minus: &f_minus,
-            f_plus: &f_plus,
-            gx: &gx,
-            rate: gx.dot(&f_minus),
-            l_minus: 0.0,
-            l_plus: 0.0,
-            cost: None,
-            secant: None,
-        };
+        let s = impact((&rx, None), (&f_minus, &f_plus), &gx, None);
         ge.jump(&s, false);
         assert_relative_eq!(ge.r.x[0], 1e-3 * f_plus[0], max_relative = 1e-14);
         assert_relative_eq!(ge.r.x[1], 1e-3 * f_plus[1], max_relative = 1e-14);
@@ -579,18 +590,7 @@ mod tests {
                 let mut ge = GlobalError::new(Const::<2>, Const::<1>);
                 ge.r.x = Vector2::new(2.0 * scale, -1.5 * scale);
                 ge.zero = false;
-                let s = Saltation {
-                    rx: Some(&rx),
-                    rt: Some(&rt),
-                    f_minus: &f_minus,
-                    f_plus: &f_plus,
-                    gx: &gx,
-                    rate: gx.dot(&f_minus),
-                    l_minus: 0.0,
-                    l_plus: 0.0,
-                    cost: None,
-                    secant,
-                };
+                let s = impact((&rx, Some(&rt)), (&f_minus, &f_plus), &gx, secant);
                 ge.jump(&s, false);
                 let (dm, dp, dt) = ge.jump_shift();
                 (ge.r.x, *dm, *dp, dt)

@@ -147,14 +147,14 @@ fn transposed(w: &[f64], triples: impl Iterator<Item = (usize, usize, f64)>, out
 
 impl InterpretedModel {
     /// Runs the reset Jacobian tape of occurrence `occ` at `at` and hands `f` whether it ran
-    /// (and the cotangent length `mu_len` is n) and the product μ ↦ (μᵀR_x into vx, μᵀR_θ
+    /// (and the cotangents' sizes were right, `sizes`) and the product μ ↦ (μᵀR_x into vx, μᵀR_θ
     /// into vp, returning μᵀR_t) over the tape's non-zero outputs: one evaluation serves any
     /// number of cotangents.
     fn with_reset_jac<R>(
         &self,
         occ: Occurrence,
         at: At<'_, nalgebra::Dyn, nalgebra::Dyn>,
-        mu_len: usize,
+        sizes: bool,
         f: impl FnOnce(bool, &mut dyn FnMut(&X, &mut X, &mut X) -> f64) -> R,
     ) -> R {
         let Occurrence { event, j } = occ;
@@ -165,7 +165,7 @@ impl InterpretedModel {
             row: &row,
             ..pt0(at)
         };
-        let e = self.events.get(event).filter(|_| mu_len == n);
+        let e = self.events.get(event).filter(|_| sizes);
         let Some(e) = e.filter(|e| self.run(&e.reset_jac, &at, &mut sc.regs)) else {
             return f(false, &mut |_, _, _| f64::NAN);
         };
@@ -348,7 +348,7 @@ impl ModelAdjoint for InterpretedModel {
         vx: &mut X,
         vp: &mut X,
     ) -> f64 {
-        self.with_reset_jac(occ, at, mu.len(), |ok, vjp| {
+        self.with_reset_jac(occ, at, mu.len() == self.n, |ok, vjp| {
             if ok {
                 vjp(mu, vx, vp)
             } else {
@@ -366,12 +366,8 @@ impl ModelAdjoint for InterpretedModel {
         (vx1, vp1): (&mut X, &mut X),
         (vx2, vp2): (&mut X, &mut X),
     ) -> (f64, f64) {
-        let len = if mu1.len() == mu2.len() {
-            mu1.len()
-        } else {
-            usize::MAX
-        };
-        self.with_reset_jac(occ, at, len, |ok, vjp| {
+        let sizes = mu1.len() == self.n && mu2.len() == self.n;
+        self.with_reset_jac(occ, at, sizes, |ok, vjp| {
             if ok {
                 (vjp(mu1, vx1, vp1), vjp(mu2, vx2, vp2))
             } else {
