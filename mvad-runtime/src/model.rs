@@ -459,6 +459,22 @@ where
         dense::adjoint_rate(self, pt, lambda, w, out);
     }
 
+    /// ℓ_x alone into `lx` (n, overwritten; zeros without a running cost), with the frozen
+    /// branches `sw`, touching nothing of size p: what the global error estimate of a run
+    /// without sensitivities (the adjoint's primal run) needs of ℓ at every step, and what
+    /// the implicit stages read (`integrate::forward`). The default is
+    /// [`dense::running_cost_grad_x`].
+    fn running_cost_grad_x(
+        &self,
+        sw: &Switches,
+        at: At<'_, Self::N, Self::P>,
+        lx: &mut OVector<f64, Self::N>,
+    ) where
+        Self: HybridModel,
+    {
+        dense::running_cost_grad_x(self, sw, at, lx);
+    }
+
     /// The sweep's gradient quadrature, scaled and added: g += −a (λᵀf_θ + w ℓ_θ), touching
     /// only the structural non-zeros of f_θ and ℓ_θ (`integrate::quadrature`). The default
     /// is [`dense::adjoint_quadrature_add`].

@@ -1,8 +1,8 @@
 //! The capability products of the model traits against their mathematics on small models
 //! with known second derivatives, through both doors (`hybrid!` and the loader) and through
 //! the traits' dense and finite-difference defaults ([`Defaults`]): the vector–Jacobian
-//! products of a flow, a reset and x₀, the second-order products of a flow and a running cost
-//! in x and t, and frozen switch bits picking the branch of each.
+//! products of a flow, a reset and x₀, ℓ_x alone, the second-order products of a flow and a
+//! running cost in x and t, and frozen switch bits picking the branch of each.
 
 use mvad::interp::InterpretedModel;
 use mvad::{At, HybridModel, ModelAlloc, Occurrence, Switches};
@@ -50,6 +50,10 @@ fn adjoint_products_of(m: &impl HybridModel<N = U2, P = U1>) {
         "{vx:?}"
     );
     assert!((vp[0] - want_p).abs() < 1e-15, "{vp:?}");
+    // No running cost: ℓ_x = 0, whatever the buffer held.
+    let mut lx = lam;
+    m.running_cost_grad_x(&Switches::default(), At::new(0.0, &xv, &pv), &mut lx);
+    assert_eq!(lx, Vector2::zeros());
 }
 
 #[test]
@@ -240,6 +244,10 @@ where
         tol,
     );
     close("Timed ∂ₜℓ", &[lt], &[b * x * x], tol);
+    // ℓ_x = (2bxt, a) alone.
+    let mut lx = v.clone();
+    m.running_cost_grad_x(&sw, At::new(t, &xv, &pv), &mut lx);
+    close("Timed ℓ_x", lx.as_slice(), &[2.0 * b * x * t, a], tol);
 }
 
 #[test]
@@ -272,6 +280,9 @@ where
         let mut o = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
         m.running_cost_sens_dir_x(&sw, At::new(0.3, &xv, &pv), &sv, &vv, &mut o);
         close("Kinked D v", o.as_slice(), &[sign * v], tol);
+        let mut lx = vv.clone();
+        m.running_cost_grad_x(&sw, At::new(0.3, &xv, &pv), &mut lx);
+        close("Kinked ℓ_x", lx.as_slice(), &[sign * a], tol);
         let (mut vx, mut vp) = (xv.clone(), pv.clone());
         m.rhs_vjp(
             mvad::Point::new(0, &sw, 0.3, &xv, &pv),

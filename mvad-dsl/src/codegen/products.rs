@@ -185,8 +185,8 @@ impl Gen<'_> {
         }
     }
 
-    /// The `ModelAdjoint` methods: λᵀf_x, λᵀf_θ per mode, μᵀR_x, μᵀR_θ, μᵀR_t per event and
-    /// μᵀ∂x₀/∂θ, each from the non-zero entries of its Jacobian kernel.
+    /// The `ModelAdjoint` methods: λᵀf_x, λᵀf_θ per mode, ℓ_x alone, μᵀR_x, μᵀR_θ, μᵀR_t per
+    /// event and μᵀ∂x₀/∂θ, each from the non-zero entries of its Jacobian kernel.
     pub(super) fn adjoint_methods(&self, k: &ModelKernels) -> TokenStream {
         let pr = quote!(::mvad::__private);
         let (n, p) = (k.nstates(), k.nparams());
@@ -216,14 +216,16 @@ impl Gen<'_> {
             let quad = scaled_transposed_add(pe, &a[nx..], &lam, quote!(a), quote!(g));
             quad_arms.push((m, quote!(#lets #quad)));
         }
-        let (rc_rate, rc_quad) = match &k.running_cost {
+        let (rc_rate, rc_quad, rc_x) = match &k.running_cost {
             Some(c) => {
                 let body = self.body(&c.grad);
-                let (mut xs, mut ps) = (TokenStream::new(), TokenStream::new());
+                let (mut xs, mut ps, mut lx) =
+                    (TokenStream::new(), TokenStream::new(), TokenStream::new());
                 for (s, v) in &body.outputs {
                     if *s < n {
                         let i = usize_lit(*s);
                         xs.extend(quote!(out[#i] -= w * (#v);));
+                        lx.extend(quote!(lx[#i] = #v;));
                     } else if *s < n + p {
                         let i = usize_lit(s - n);
                         ps.extend(quote!(g[#i] -= aw * (#v);));
@@ -233,9 +235,10 @@ impl Gen<'_> {
                 (
                     quote!(if w != 0.0 { #lets #xs }),
                     quote!(if w != 0.0 { let aw = a * w; #lets #ps }),
+                    quote!(#lets #lx),
                 )
             }
-            None => (TokenStream::new(), TokenStream::new()),
+            None => (TokenStream::new(), TokenStream::new(), TokenStream::new()),
         };
         self.frozen.set(false);
         let nm = k.modes.len();
@@ -313,6 +316,8 @@ impl Gen<'_> {
                 let #pr::Point { mode, sw, t, x, p } = pt; { #rate } out.neg_mut(); #rc_rate }
             fn adjoint_quadrature_add(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, a: f64, g: &mut #pv) {
                 let #pr::Point { mode, sw, t, x, p } = pt; { #quad } #rc_quad }
+            fn running_cost_grad_x(&self, sw: &#pr::Switches, #at, lx: &mut #xv) {
+                #let_at lx.fill(0.0); #rc_x }
             fn gradient_support(&self, mode: usize) -> Option<&[usize]> { #support }
             fn reset_vjp(&self, #occ, #at, mu: &#xv, vx: &mut #xv, vp: &mut #pv) -> f64 { #let_occ #let_at #row #reset }
             fn initial_state_vjp(&self, p: &#pv, mu: &#xv, vp: &mut #pv) { #x0 }

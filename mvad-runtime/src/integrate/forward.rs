@@ -9,7 +9,9 @@
 //!
 //! f and f_x S + f_θ come from [`HybridModel::rhs_sens`] (or f alone from
 //! [`HybridModel::rhs`] without sensitivities), ℓ, ℓ_x, ℓ_θ from
-//! [`HybridModel::running_cost_value_grad`] (only when the model has a running cost; otherwise q ≡ 0).
+//! [`HybridModel::running_cost_value_grad`] (only when the model has a running cost; otherwise q ≡ 0);
+//! the implicit stages and the global error estimate read ℓ_x alone
+//! ([`crate::model::ModelAdjoint::running_cost_grad_x`], nothing of size p).
 //!
 //! ## The augmented Jacobian, factorised once (for Rodas5P)
 //! J = ∂F/∂Y is block lower triangular:
@@ -114,8 +116,6 @@ where
     w: WMatrix<N>,
     /// ℓ_x at the step start (zeros without running cost).
     lx0: OVector<f64, N>,
-    /// ℓ_θ scratch.
-    lp0: OVector<f64, P>,
     /// A zero S and its q̇_θ_t, full width, for ∂ₜℓ in a narrow primal run (else empty).
     s0: OMatrix<f64, N, P>,
     qp0: OVector<f64, P>,
@@ -182,7 +182,6 @@ where
             imp: ImplicitWork {
                 w: WMatrix::new(n, used),
                 lx0: OVector::zeros_generic(rn, Const::<1>),
-                lp0: OVector::zeros_generic(rp, Const::<1>),
                 s0: OMatrix::zeros_generic(n, s0p),
                 qp0: OVector::zeros_generic(s0p, Const::<1>),
                 dt: AugState::zeros(rn, rsp),
@@ -363,7 +362,7 @@ where
             w.dt.s.fill(0.0);
         }
         if rhs.has_rc {
-            model.running_cost_value_grad(&rhs.sw, At::new(t0, &y0.x, p), &mut w.lx0, &mut w.lp0);
+            model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut w.lx0);
             w.dt.q = if y0.s.ncols() == p.len() {
                 model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &y0.s, &mut w.dt.qp)
             } else {
@@ -465,12 +464,7 @@ where
         let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, p);
         model.rhs_jac_x(pt, &mut imp.w.jac);
         if rhs.has_rc {
-            model.running_cost_value_grad(
-                &rhs.sw,
-                At::new(t0, &y0.x, p),
-                &mut imp.lx0,
-                &mut imp.lp0,
-            );
+            model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
         }
         // f_x and ℓ_x now hold the carried step's start, not the next step's.
         imp.base_valid = false;

@@ -1,9 +1,9 @@
 //! The dense defaults of the adjoint sweep's products ([`super::ModelAdjoint::adjoint_rate`],
-//! [`super::ModelAdjoint::adjoint_quadrature_add`]), built on `rhs_vjp` and
+//! [`super::ModelAdjoint::adjoint_quadrature_add`], [`super::ModelAdjoint::running_cost_grad_x`]), built on `rhs_vjp` and
 //! `running_cost_value_grad`, for hand-written models. They allocate p-long scratch and cost
 //! O(p) per call; both doors override the products with sparse kernels that do neither.
 
-use super::{HybridModel, ModelAlloc, Point};
+use super::{At, HybridModel, ModelAlloc, Point, Switches};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
 /// out = −(λᵀf_x + w ℓ_x) at `pt` (ℓ not evaluated when w = 0 or the model has none).
@@ -47,4 +47,22 @@ pub fn adjoint_quadrature_add<M: HybridModel + ?Sized>(
         m.running_cost_value_grad(pt.sw, pt.at(), &mut vx, &mut vp);
         g.axpy(-a * w, &vp, 1.0);
     }
+}
+
+/// lx = ℓ_x at `at` under the bits `sw` (zeros without a running cost), through the full
+/// gradient with a p-long scratch ℓ_θ.
+pub fn running_cost_grad_x<M: HybridModel + ?Sized>(
+    m: &M,
+    sw: &Switches,
+    at: At<'_, M::N, M::P>,
+    lx: &mut OVector<f64, M::N>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    if !m.info().has_running_cost {
+        lx.fill(0.0);
+        return;
+    }
+    let mut lp = OVector::<f64, M::P>::zeros_generic(m.nparams(), Const::<1>);
+    m.running_cost_value_grad(sw, at, lx, &mut lp);
 }

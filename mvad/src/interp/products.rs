@@ -304,6 +304,20 @@ impl ModelAdjoint for InterpretedModel {
         }
     }
 
+    /// ℓ_x: ℓ's gradient tape over its x slots only (its θ outputs are not read).
+    fn running_cost_grad_x(&self, sw: &Switches, at: At<'_, Self::N, Self::P>, lx: &mut X) {
+        lx.fill(0.0);
+        if lx.len() != self.n {
+            lx.fill(f64::NAN);
+            return;
+        }
+        let mut sc = self.scratch.borrow_mut();
+        let put = |s: usize, v: f64| lx[s] = v;
+        if !self.running_cost_slots(&at_sw(at, sw), &mut sc.regs, 1.0, 0..self.n, put) {
+            lx.fill(f64::NAN);
+        }
+    }
+
     /// g −= a·(λᵀf_θ + w ℓ_θ) over the non-zero entries of the flow's f_θ tape and the θ
     /// slots of ℓ's gradient tape: O(non-zeros), never O(p).
     fn adjoint_quadrature_add(
