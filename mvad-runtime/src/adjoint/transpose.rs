@@ -44,7 +44,7 @@
 use super::record::{Jump, JumpKind};
 use crate::error::SolveError;
 use crate::integrate::{AdjointError, LamGrad};
-use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point, VjpOutput};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
 /// Scratch for the transposes (allocated once per sweep).
@@ -66,6 +66,12 @@ where
     vp_rem: OVector<f64, M::P>,
     cx: OVector<f64, M::N>,
     cp: OVector<f64, M::P>,
+    /// What the last [`transpose_jump_and_remainder`] applied, for [`shift_error`]: the
+    /// event-time coefficient c/ġ and c's part that does not read f± or ℓ±, λ̃ᵀR_t + wφ_t
+    /// (0 for a switch flip). `vx` still holds R_xᵀλ̃ (λ⁺ for a switch flip), `gx`, `gp`
+    /// the crossing's gradient.
+    ratio: f64,
+    c_fixed: f64,
 }
 
 impl<M: HybridModel> JumpWork<M>
@@ -91,6 +97,8 @@ where
             vp_rem: vp(),
             cx: vn(),
             cp: vp(),
+            ratio: 0.0,
+            c_fixed: 0.0,
         }
     }
 
@@ -133,15 +141,27 @@ where
     /// ∂g/∂t of the guard (g = t − τ for a time event) or switching function that fired, with
     /// ∇ₓ into `gx` and ∂θ into `gp`, at (t, x⁻).
     pub(super) fn crossing_grad(&mut self, model: &M, p: &OVector<f64, M::P>, jump: &Jump) -> f64 {
-        let (t, x) = (jump.t, &self.xm);
-        match jump.kind {
-            JumpKind::Event(k, occ) => {
-                crate::sens::event_guard_grad(model, k, occ, t, x, p, &mut self.gx, &mut self.gp)
-            }
-            JumpKind::Switch(j) => {
-                model.switch_grad(j, At::new(t, x, p), &mut self.gx, &mut self.gp)
-            }
+        crossing_grad(model, p, jump, &self.xm, (&mut self.gx, &mut self.gp))
+    }
+}
+
+/// ∂g/∂t of the guard or switching function that fired at `jump` (at its time t), with ∇ₓ
+/// into `gx` and ∂θ into `gp`, at (t, x⁻ = `x`).
+fn crossing_grad<M: HybridModel>(
+    model: &M,
+    p: &OVector<f64, M::P>,
+    jump: &Jump,
+    x: &OVector<f64, M::N>,
+    (gx, gp): VjpOutput<'_, M::N, M::P>,
+) -> f64
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    match jump.kind {
+        JumpKind::Event(k, occ) => {
+            crate::sens::event_guard_grad(model, k, occ, jump.t, x, p, gx, gp)
         }
+        JumpKind::Switch(j) => model.switch_grad(j, At::new(jump.t, x, p), gx, gp),
     }
 }
 
@@ -192,6 +212,7 @@ where
     // w(ℓ⁻ − ℓ⁺): both sides of the jump, each under its own bits.
     let mut c = 0.0;
     let mut c_rem = 0.0;
+    w.c_fixed = 0.0;
     if info.has_running_cost && cw != 0.0 {
         let l_minus = model.running_cost(&jump.sw_before, At::new(t, &w.xm, p));
         let l_plus = model.running_cost(&jump.sw_after, At::new(t, &w.xp, p));
@@ -211,6 +232,7 @@ where
                 w.mu.axpy(cw, &w.cx, 1.0);
                 grad.axpy(cw, &w.cp, 1.0);
                 c += cw * phi_t;
+                w.c_fixed = cw * phi_t;
             }
             let occ = Occurrence::new(k, occ);
             let at = At::new(t, &w.xm, p);
@@ -231,11 +253,13 @@ where
                 }
             };
             c += w.vx.dot(&w.f_minus) + mu_rt - lam.dot(&w.f_plus);
+            w.c_fixed += mu_rt;
             lam.copy_from(&w.vx);
             *grad += &w.vp;
         }
         JumpKind::Switch(_) => {
             c += lam.dot(&w.f_minus) - lam.dot(&w.f_plus);
+            w.vx.copy_from(lam);
             if let Some((r_lam, _)) = remainder.as_ref() {
                 c_rem += r_lam.dot(&w.f_minus) - r_lam.dot(&w.f_plus);
             }
@@ -256,6 +280,7 @@ where
     }
     lam.axpy(-ratio, &w.gx, 1.0);
     grad.axpy(-ratio, &w.gp, 1.0);
+    w.ratio = ratio;
     if let Some((r_lam, r_g)) = remainder {
         let ratio_rem = c_rem / gdot;
         if ratio_rem.is_finite() {
@@ -282,12 +307,11 @@ where
     jump: Option<Jump>,
     xm: Vec<f64>,
     xp: Vec<f64>,
-    /// λ⁺ and g before the sweep's transpose, then what it added to g.
+    /// λ⁺, kept before the sweep's transpose overwrites it.
     lam_plus: OVector<f64, M::N>,
-    g_added: OVector<f64, M::P>,
-    /// T(λ⁺) at the exact jump.
-    lam: OVector<f64, M::N>,
-    g: OVector<f64, M::P>,
+    /// The crossing's gradient at the exact jump.
+    gx: OVector<f64, M::N>,
+    gp: OVector<f64, M::P>,
 }
 
 impl<M: HybridModel> JumpErrorWork<M>
@@ -298,15 +322,13 @@ where
     pub(super) fn new(model: &M) -> Self {
         let (n, p) = (model.nstates(), model.nparams());
         let vn = || OVector::zeros_generic(n, Const::<1>);
-        let vp = || OVector::zeros_generic(p, Const::<1>);
         JumpErrorWork {
             jump: None,
             xm: vec![0.0; n.value()],
             xp: vec![0.0; n.value()],
             lam_plus: vn(),
-            g_added: vp(),
-            lam: vn(),
-            g: vp(),
+            gx: vn(),
+            gp: OVector::zeros_generic(p, Const::<1>),
         }
     }
 }
@@ -314,8 +336,8 @@ where
 /// The sweep's transpose of jump `jump` ([`transpose_jump`], λ and g in place) with its share
 /// of the global error estimate `ge`: the jump's homogeneous part (w = 0) maps the remainder
 /// (r_λ, r_g) as the transpose maps (λ, g), and the primal run's displacement `shift` of the
-/// jump, if it was recorded, adds [`shift_error`]. O(n + p) per jump (the transposes' own
-/// products are).
+/// jump, if it was recorded, adds [`shift_error`]. O(n + p) per jump beyond the model's own
+/// products (one reset product for both cotangents; the shift evaluates no reset).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn transpose_jump_with_error<M: HybridModel>(
     model: &M,
@@ -333,14 +355,10 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     s.lam_plus.copy_from(lam);
-    s.g_added.copy_from(g);
     let (r_lam, r_g) = ge.remainder_mut();
     transpose_jump_and_remainder(model, p, cw, jump, states, (lam, g), Some((r_lam, r_g)), w)?;
-    // What the sweep's transpose added to g.
-    s.g_added.axpy(1.0, g, -1.0);
-    let (r_lam, r_g) = ge.remainder_mut();
     if let Some(shift) = shift {
-        shift_error(model, p, cw, jump, states, shift, lam, (r_lam, r_g), w, s);
+        shift_error(model, p, cw, jump, shift, ge.remainder_mut(), w, s);
     }
     Ok(())
 }
@@ -349,11 +367,25 @@ where
 /// (t̃, x̃⁻, x̃⁺), the exact one (t, x⁻, x⁺) moved by its state error:
 /// (δt, d⁻, d⁺) = `shift` (see [`crate::integrate::GlobalError::jump_shift`]). The sweep
 /// transposes the jump there, so it maps (λ⁺, g) by T̃ where the exact jump's transpose is T:
-/// the remainder r = (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺). T̃(λ⁺) is what the sweep computed, λ⁻
-/// (`lam_minus`) and its addition to g (`s.g_added`); T(λ⁺) is evaluated here, so the
-/// difference is a secant over the actual displacement (its rounding, ε|T|, is far below any
-/// tolerance). Nothing is added when the jump was not displaced. What it leaves out: the
-/// sweep also changes segments at t̃ instead of t, which moves (F⁻ − F⁺)·δt of the adjoint's
+/// the remainder r = (r_λ, r_g) gains T̃(λ⁺) − T(λ⁺). Nothing is added when the jump was not
+/// displaced.
+///
+/// T is taken with the products of the reset and of the event cost as the sweep formed them
+/// at the recorded jump (R_xᵀλ̃, R_θᵀλ̃, λ̃ᵀR_t, φ_x, φ_θ, φ_t): those terms cancel in
+/// T̃ − T, and what remains is the event-time term, evaluated at both jumps,
+///
+/// ```text
+///   T̃(λ⁺) − T(λ⁺) = (c/ġ)(g_x, g_θ) − (c̃/ġ̃)(g̃_x, g̃_θ),
+///   c = (R_xᵀλ̃)·f⁻ − λ⁺·f⁺ + λ̃ᵀR_t + w(φ_t + ℓ⁻ − ℓ⁺),   ġ = g_x·f⁻ + g_t,
+/// ```
+///
+/// with f±, ℓ± and the crossing's gradient at the exact jump (c̃/ġ̃ is what the sweep
+/// applied: a secant over the actual displacement, whose rounding, ε|c/ġ|, is far below
+/// any tolerance). A switch flip has λ̃ = λ⁺ and no reset or cost. So no reset is evaluated
+/// here, and nothing of size p beyond the crossing's ∂θ. Left out: the change of the reset's
+/// and the event cost's derivatives along the displacement (second derivatives of R and φ,
+/// as forward mode's estimate leaves out the jump map's derivative in x⁻), and the sweep's
+/// segments changing at t̃ instead of t, which moves (F⁻ − F⁺)·δt of the adjoint's
 /// right-hand side across the jump.
 #[allow(clippy::too_many_arguments)]
 fn shift_error<M: HybridModel>(
@@ -361,9 +393,7 @@ fn shift_error<M: HybridModel>(
     p: &OVector<f64, M::P>,
     cw: f64,
     jump: &Jump,
-    (x_minus, x_plus): (&[f64], &[f64]),
     (d_minus, d_plus, dt): (&[f64], &[f64], f64),
-    lam_minus: &OVector<f64, M::N>,
     (r_lam, r_g): LamGrad<'_, M::N, M::P>,
     w: &mut JumpWork<M>,
     s: &mut JumpErrorWork<M>,
@@ -381,19 +411,129 @@ fn shift_error<M: HybridModel>(
         None => s.jump.insert(jump.clone()),
     };
     exact.t = jump.t - dt;
-    for (e, (x, d)) in s.xm.iter_mut().zip(x_minus.iter().zip(d_minus)) {
+    for (e, (x, d)) in s.xm.iter_mut().zip(w.xm.iter().zip(d_minus)) {
         *e = x - d;
     }
-    for (e, (x, d)) in s.xp.iter_mut().zip(x_plus.iter().zip(d_plus)) {
+    for (e, (x, d)) in s.xp.iter_mut().zip(w.xp.iter().zip(d_plus)) {
         *e = x - d;
     }
-    s.lam.copy_from(&s.lam_plus);
-    s.g.fill(0.0);
-    let states = (s.xm.as_slice(), s.xp.as_slice());
-    if transpose_jump(model, p, cw, exact, states, &mut s.lam, &mut s.g, w).is_ok() {
-        *r_lam += lam_minus;
-        *r_lam -= &s.lam;
-        *r_g += &s.g_added;
-        *r_g -= &s.g;
+    // f± at the exact jump (x± and f± of the recorded one are no longer needed).
+    w.approach(model, p, exact, &s.xm, &s.xp);
+    let gt = crossing_grad(model, p, exact, &w.xm, (&mut s.gx, &mut s.gp));
+    let gdot = s.gx.dot(&w.f_minus) + gt;
+    let mut c = 0.0;
+    if model.info().has_running_cost && cw != 0.0 {
+        let l_minus = model.running_cost(&exact.sw_before, At::new(exact.t, &w.xm, p));
+        let l_plus = model.running_cost(&exact.sw_after, At::new(exact.t, &w.xp, p));
+        c += cw * (l_minus - l_plus);
+    }
+    c += w.c_fixed + w.vx.dot(&w.f_minus) - s.lam_plus.dot(&w.f_plus);
+    let ratio = c / gdot;
+    if !(ratio.is_finite() && gdot != 0.0) {
+        return;
+    }
+    r_lam.axpy(ratio, &s.gx, 1.0);
+    r_lam.axpy(-w.ratio, &w.gx, 1.0);
+    r_g.axpy(ratio, &s.gp, 1.0);
+    r_g.axpy(-w.ratio, &w.gp, 1.0);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::adjoint::record::{Item, Tape};
+    use crate::fixtures::Ball;
+    use crate::model::Switches;
+
+    /// The shift's share of the remainder is the secant of the full transposes at the
+    /// displaced and at the exact jump, T̃(λ⁺) − T(λ⁺), less the change of the reset's
+    /// derivatives it leaves out. For the ball, x⁺ = (h, −e v): R_x and R_t do not depend on
+    /// the state, R_θ does through ∂v⁺/∂e = −v⁻, so that entry of the secant has the extra
+    /// −λ⁺_v d_v and every other entry agrees to rounding (a displacement of v moves ġ = v⁻
+    /// and f±; one of h alone moves nothing, as ℓ⁻ − ℓ⁺ = h⁻ − h⁺ = 0).
+    #[test]
+    fn the_shift_is_the_secant_of_the_transposes_but_for_the_resets_derivatives() {
+        let model = Ball::new();
+        let p = model.default_params();
+        let e = p[Ball::E];
+        let sw = Switches::default();
+        let (t, xm, lam_plus) = (0.6, [0.0, -5.9], [0.7, -1.3]);
+        let xp = [xm[0], -e * xm[1]];
+        for (dm, dt) in [
+            ([0.0, 3e-3], 2e-4),
+            ([-1e-3, 1e-3], 0.0),
+            ([2e-4, -5e-4], -1e-4),
+        ] {
+            let dp = [dm[0], -e * dm[1]];
+            let (xm_rec, xp_rec) = (
+                [xm[0] + dm[0], xm[1] + dm[1]],
+                [xp[0] + dp[0], xp[1] + dp[1]],
+            );
+            let mut tape = Tape::new(2);
+            let kind = JumpKind::Event(0, 0);
+            let shift = Some((&dm[..], &dp[..], dt));
+            tape.jump(kind, t + dt, &xm_rec, &xp_rec, (0, 0), &sw, &sw, shift);
+            let Item::Jump(recorded) = &tape.items()[0] else {
+                panic!("a jump was recorded");
+            };
+            let mut exact = recorded.clone();
+            exact.t = t;
+            let mut w = JumpWork::new(&model);
+            // The secant of the full transposes.
+            let transposed = |jump: &Jump, states, w: &mut JumpWork<Ball>| {
+                let mut lam = OVector::<f64, Const<2>>::from_column_slice(&lam_plus);
+                let mut g = OVector::<f64, Const<4>>::zeros();
+                transpose_jump(&model, &p, 1.0, jump, states, &mut lam, &mut g, w)
+                    .expect("transversal");
+                (lam, g)
+            };
+            let (lam_rec, g_rec) = transposed(recorded, (&xm_rec[..], &xp_rec[..]), &mut w);
+            let (lam_ex, g_ex) = transposed(&exact, (&xm[..], &xp[..]), &mut w);
+            let (want_lam, mut want_g) = (lam_rec - lam_ex, g_rec - g_ex);
+            want_g[Ball::E] += lam_plus[1] * dm[1];
+            // The sweep's transpose with the estimate, from a zero remainder.
+            let mut ge = AdjointError::new(Const::<2>, Const::<4>);
+            let mut s = JumpErrorWork::new(&model);
+            let mut lam = OVector::<f64, Const<2>>::from_column_slice(&lam_plus);
+            let mut g = OVector::<f64, Const<4>>::zeros();
+            let states = tape.jump_states(recorded);
+            let shift = tape.jump_shift(recorded);
+            transpose_jump_with_error(
+                &model,
+                &p,
+                1.0,
+                recorded,
+                states,
+                shift,
+                (&mut lam, &mut g),
+                &mut ge,
+                &mut w,
+                &mut s,
+            )
+            .expect("transversal");
+            assert_eq!(
+                (lam, g),
+                (lam_rec, g_rec),
+                "the sweep's own transpose is untouched"
+            );
+            let (r_lam, r_g) = ge.remainder_mut();
+            let moved = want_lam.amax().max(want_g.amax());
+            assert!(
+                moved > 1e-4,
+                "the displacement moves the transpose: {moved:e}"
+            );
+            // The secant's rounding: ε times the transposes' size.
+            let scale = lam_rec.amax().max(g_rec.amax());
+            for (got, want) in r_lam
+                .iter()
+                .chain(r_g.iter())
+                .zip(want_lam.iter().chain(want_g.iter()))
+            {
+                assert!(
+                    (got - want).abs() <= 1e-14 * scale,
+                    "{r_lam:?} {r_g:?} against {want_lam:?} {want_g:?}"
+                );
+            }
+        }
     }
 }

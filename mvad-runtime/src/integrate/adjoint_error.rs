@@ -51,11 +51,15 @@
 //! - at a jump, which the primal applied at (t̃, x̃⁻, x̃⁺) = (t, x⁻, x⁺) + (δt, d⁻, d⁺) with
 //!   δt = −∇g·e_x⁻/ġ, d⁻ = e_x⁻ + f⁻δt, d⁺ = e_x⁺ + f⁺δt
 //!   ([`super::GlobalError::jump_shift`]), the difference of the transposes at the displaced
-//!   and the exact jump applied to λ⁺ (`adjoint::transpose::shift_error`).
+//!   and the exact jump applied to λ⁺ (`adjoint::transpose::shift_error`), with the reset's
+//!   and the event cost's products as the sweep formed them at the displaced jump: what
+//!   differs is the event-time term (c/ġ)(g_x, g_θ), through f±, ℓ± and the crossing's
+//!   gradient, and no reset is evaluated again (a reset with p parameters costs O(p)).
 //!
 //! Left out, as forward mode leaves them out: the error of locating events beyond the
-//! primal's own state error, and the sweep's segments changing at t̃ rather than t (a term
-//! (F⁻ − F⁺)·δt). Samples of observables add h_xᵀw to λ at x̃(t_s); their share of the primal
+//! primal's own state error, the change of the reset's and the event cost's derivatives
+//! along a jump's displacement (second derivatives of R and φ), and the sweep's segments
+//! changing at t̃ rather than t (a term (F⁻ − F⁺)·δt). Samples of observables add h_xᵀw to λ at x̃(t_s); their share of the primal
 //! error is left out too.
 
 use super::global_error::{sparse_product, substeps, EXPLICIT_SUBSTEPS};
