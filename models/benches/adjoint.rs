@@ -73,8 +73,67 @@ use mvad::interp::InterpretedModel;
 use mvad::solution::{GradientMode, Options, Solution};
 use mvad::solve::solve;
 use nalgebra::DVector;
+use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 use std::time::Instant;
+
+/// The system allocator, keeping the bytes live and their peak, for the heap a run adds
+/// at its peak ([`peak_heap`]).
+struct PeakHeap;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+fn grow(bytes: usize) {
+    let live = LIVE.fetch_add(bytes, Relaxed) + bytes;
+    PEAK.fetch_max(live, Relaxed);
+}
+
+// SAFETY: forwards every call to the system allocator; the counters are atomics (touching
+// them never allocates).
+unsafe impl GlobalAlloc for PeakHeap {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        grow(layout.size());
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        grow(layout.size());
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        LIVE.fetch_sub(layout.size(), Relaxed);
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if new_size >= layout.size() {
+            grow(new_size - layout.size());
+        } else {
+            LIVE.fetch_sub(layout.size() - new_size, Relaxed);
+        }
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: PeakHeap = PeakHeap;
+
+/// The most heap `f` holds at any moment beyond what was live when it started, in bytes
+/// (the run's buffers, its record and its solution; the model and θ exist before).
+fn peak_heap(f: impl FnOnce() -> Solution) -> usize {
+    let before = LIVE.load(Relaxed);
+    PEAK.store(before, Relaxed);
+    drop(black_box(f()));
+    PEAK.load(Relaxed) - before
+}
+
+/// The peak resident set size of this process so far (`VmHWM` of /proc/self/status, kB),
+/// where /proc has it.
+fn peak_rss_kb() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
 
 /// The parameter counts benchmarked by criterion.
 const PS: [usize; 4] = [1, 10, 100, 1000];
@@ -147,6 +206,9 @@ fn bench(c: &mut Criterion) {
         let of: Vec<&Case> = cases.iter().filter(|c| c.family == family).collect();
         summary(family, &of);
     }
+    if let Some(kb) = peak_rss_kb() {
+        println!("\npeak resident set of the whole bench process (VmHWM): {kb} kB");
+    }
 }
 
 /// Median of 9 timed runs, in ms.
@@ -166,8 +228,16 @@ fn median_ms(f: impl Fn() -> Solution) -> f64 {
 fn summary(family: &str, cases: &[&Case]) {
     println!("\n{family}:");
     println!(
-        "{:>5} {:>12} {:>12} {:>8} {:>8} {:>11} {:>10}",
-        "p", "forward ms", "adjoint ms", "fwd st.", "adj st.", "record B", "|Δ|/|g|"
+        "{:>5} {:>12} {:>12} {:>8} {:>8} {:>11} {:>11} {:>11} {:>10}",
+        "p",
+        "forward ms",
+        "adjoint ms",
+        "fwd st.",
+        "adj st.",
+        "record B",
+        "fwd heap B",
+        "adj heap B",
+        "|Δ|/|g|"
     );
     let mut t = vec![[0.0; 2]; cases.len()];
     for (row, &case) in t.iter_mut().zip(cases) {
@@ -175,18 +245,21 @@ fn summary(family: &str, cases: &[&Case]) {
         for (w, cell) in row.iter_mut().enumerate() {
             *cell = median_ms(|| run(case, w));
         }
+        let heap = [peak_heap(|| run(case, 0)), peak_heap(|| run(case, 1))];
         let scale = f.gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let diff = (a.gradient.iter().zip(&f.gradient))
             .map(|(x, y)| (x - y).abs())
             .fold(0.0f64, f64::max);
         println!(
-            "{:>5} {:>12.3} {:>12.3} {:>8} {:>8} {:>11} {:>10.1e}",
+            "{:>5} {:>12.3} {:>12.3} {:>8} {:>8} {:>11} {:>11} {:>11} {:>10.1e}",
             case.p,
             row[0],
             row[1],
             f.stats.steps,
             a.stats.steps,
             a.stats.record_bytes,
+            heap[0],
+            heap[1],
             diff / scale
         );
     }

@@ -339,6 +339,8 @@ where
         let y = integ.system().zeros();
         let aug_tmp = integ.system().zeros();
         let sp = if opts.sensitivities { np.value() } else { 0 };
+        // The sensitivities' buffers as wide as S (zero width in a primal run of a Dyn model).
+        let sw_p = y.s.shape_generic().1;
         Driver {
             model,
             p,
@@ -367,22 +369,22 @@ where
             gp: vp(),
             dt: vp(),
             rx: OMatrix::zeros_generic(n, n),
-            rp: OMatrix::zeros_generic(n, np),
-            s_plus: OMatrix::zeros_generic(n, np),
-            dtot: OMatrix::zeros_generic(n, np),
+            rp: OMatrix::zeros_generic(n, sw_p),
+            s_plus: OMatrix::zeros_generic(n, sw_p),
+            dtot: OMatrix::zeros_generic(n, sw_p),
             cx: vn(),
             cp: vp(),
             obs_minus: vec![0.0; nobs],
             obs_plus: vec![0.0; nobs],
             c_ev: CompensatedSum::default(),
-            g_ev: vp(),
+            g_ev: OVector::zeros_generic(sw_p, Const::<1>),
             fired: vec![None; nev],
             schedule: Schedule::new(model),
             nevents: 0,
             table_events: 0,
             diagnostics: Vec::new(),
             switch_crossings: 0,
-            zeno: Zeno::new(model),
+            zeno: Zeno::new(model, sw_p),
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),

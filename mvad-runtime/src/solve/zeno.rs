@@ -81,8 +81,10 @@ impl<M: HybridModel> Zeno<M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    pub(super) fn new(model: &M) -> Self {
-        let (n, p) = (model.nstates(), model.nparams());
+    /// Snapshots for `model` whose derivatives are `p` wide (0 without sensitivities, which
+    /// then are never recorded).
+    pub(super) fn new(model: &M, p: M::P) -> Self {
+        let n = model.nstates();
         let snap = || Snapshot {
             t: 0.0,
             dt: OVector::zeros_generic(p, Const::<1>),
