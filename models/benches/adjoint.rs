@@ -20,52 +20,20 @@
 //! quadrature added once per step at O(nnz f_θ) per stage value).
 //!
 //! After criterion, a table per model (medians of 9 runs in ms, for p = 1, 10, 20, 50, 100,
-//! 1000; steps; the forward record's memory; forward/adjoint agreement), the crossover p and
-//! the flatness ratio time(p = 1000)/time(p = 10) (target ≤ 3) are printed (not with
-//! `ADJOINT_BENCH_NO_TABLE` set, e.g. under a profiler with a criterion filter).
+//! 1000; steps; the adjoint's record in bytes; the peak heap of one run in each mode, from
+//! this binary's counting global allocator [`PeakHeap`]; forward/adjoint agreement), the
+//! crossover p and the flatness ratio time(p = 1000)/time(p = 10) (target ≤ 3) are printed,
+//! then the process's peak resident set (not with `ADJOINT_BENCH_NO_TABLE` set, e.g. under a
+//! profiler with a criterion filter).
 //!
-//! ## Figures (issue 8's flatness work; measured by the helper `adjflat`, 2 cores shared with
-//! other builds: load average 7.2–7.5 during the run, 4.0 during the "before" run)
+//! ## Figures
 //!
-//! `cargo bench -p models --bench adjoint`, release, AMD EPYC (2 vCPUs); the table's medians
-//! in ms (criterion's medians, taken first, are 2–3× the table's under this load and noisier:
-//! impact adjoint p = 1000 1.16 ms [1.05, 1.28], p = 10 0.20 ms [0.19, 0.22], a ratio of 5.7;
-//! the instruction counts below are the figure to trust):
-//!
-//! | p | impact fwd | impact adj | chain fwd | chain adj |
-//! |---|---|---|---|---|
-//! | 1 | 0.046 | 0.084 | 1.26 | 7.16 |
-//! | 10 | 0.070 | 0.093 | 6.17 | 8.43 |
-//! | 20 | 0.093 | 0.097 | 7.25 | 13.6 |
-//! | 50 | 0.153 | 0.104 | 12.4 | 20.8 |
-//! | 100 | 0.263 | 0.124 | 27.3 | 35.4 |
-//! | 1000 | 6.20 | 0.413 | 269 | 339 |
-//!
-//! Before (the quadrature g carried in the stepper's vectors; same bench, load 4.0): impact
-//! adjoint 0.090 / 0.093 / 0.099 / 0.114 / 0.140 / 0.654 ms, time(1000)/time(10) = 7.0.
-//!
-//! - impact: adjoint time(1000)/time(10) = 4.5 wall-clock (target ≤ 3: **not met** on the
-//!   clock at this load), forward 89; the adjoint is faster from p = 50 (20 is a tie), 15×
-//!   faster at p = 1000. Instruction counts are the steady figure (callgrind,
-//!   `examples/adjoint_profile.rs`, 11 runs minus 1, per solve): main 1.228 M (p = 10) and
-//!   11.37 M (p = 1000), 9.3×; now 1.216 M and 4.948 M, **4.07×**; with
-//!   `Options::global_error` off 1.129 M and 3.328 M, **2.95×**. Where p = 1000 goes now
-//!   (callgrind, inclusive): the gradient quadrature 1.4 % (it was ~45 %: g was p long in
-//!   every stage vector, combination, error norm and finiteness check); the model's own O(p)
-//!   reset at the impacts 29 % (its value in the primal run 8.7 %, its transpose `reset_vjp`
-//!   20.7 %); the primal run's global error estimate 32 % (the reset's full Jacobian through
-//!   each event 22.6 %, ℓ's gradient with its p-long ℓ_θ at each step 9.6 %); per-run
-//!   buffers of size p (`Driver::new`, `Zeno::new`, `JumpWork::new`) 11 %.
-//! - chain: f has p terms, so every evaluation is O(p) in both modes. The adjoint takes
-//!   1222 primal steps (at `PRIMAL_TOL_FACTOR` = 1/100 of the tolerances) and ~510 sweep
-//!   steps to forward mode's 249–489, and is not faster up to p = 1000 (1.3× slower there).
-//!   The sweep is not what holds it back: the primal tolerance is, and 1/10 fails the
-//!   thermostat's accuracy test at rtol 1e-12 (see `PRIMAL_TOL_FACTOR`).
-//! - Memory (`stats.record_bytes`, the forward record): impact 7.6–8.1 kB (77–89 steps, 3–4
-//!   impacts), chain 451 kB (n = 8, ~1200 steps), the same for every p: the record holds x,
-//!   never anything of size p.
-//! - Agreement forward/adjoint at the default rtol 1e-8: impact ≤ 2.2e-10, chain ≤ 3.7e-8 of
-//!   the gradient's scale.
+//! `docs/report/adjoint-scaling.md` has this bench's output, the instruction counts of
+//! `examples/adjoint_profile.rs` under callgrind (the steady figure on a shared machine), the
+//! crossover and the memory, with how each was measured. In short (helper `adjflat2`): the
+//! impact model's adjoint costs 2.71× at p = 1000 what it costs at p = 10 in instructions
+//! (forward mode 34.7×) and overtakes forward mode between p = 20 and 100; on chain, whose
+//! flow sums p terms, it does not overtake up to p = 1000 (1.8× slower there).
 
 use criterion::{criterion_group, Criterion};
 use models::generated::{chain, impact};

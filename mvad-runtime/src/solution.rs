@@ -61,8 +61,8 @@ pub enum GradientMode {
 impl GradientMode {
     /// `auto` picks the adjoint from this many parameters on: where the adjoint overtook
     /// forward mode in the `adjoint` benchmark (`models/benches/adjoint.rs`) on the model
-    /// whose flow does not grow with p (between p = 20 and 50 at rtol 1e-8; on a model whose
-    /// flow sums p terms it did not overtake up to p = 1000, where it is 1.1× slower).
+    /// whose flow does not grow with p (between p = 20 and 100 at rtol 1e-8; on a model whose
+    /// flow sums p terms it did not overtake up to p = 1000: `docs/report/adjoint-scaling.md`).
     pub const AUTO_ADJOINT_MIN_PARAMS: usize = 50;
 
     /// The name used on the command line and in `stats.mode`.
