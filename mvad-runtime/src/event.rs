@@ -269,7 +269,7 @@ impl Scanner {
     /// flow carries it into the firing side), except an event that just fired from the
     /// signed value v_f (`fired` = `Some(v_f)`), which is disarmed until v < min(v_f, 0)
     /// (armed at once if v⁺ already is); switches are always armed.
-    #[inline]
+    #[inline(always)]
     pub fn restart_one(&mut self, w: usize, v: f64, fired: Option<f64>) {
         if !self.active[w] {
             self.active[w] = true;

@@ -290,7 +290,8 @@ where
     /// running cost: F = (f(θ), f_θ(θ), 0, 0).
     #[inline]
     fn constant_rate(&self) -> bool {
-        !self.rhs.has_rc && self.rhs.model.flow_is_constant(self.rhs.mode)
+        // `rates` holds a slot exactly for the modes with !has_rc && flow_is_constant.
+        matches!(self.rates.get(self.rhs.mode), Some(Some(_)))
     }
 
     #[inline]

@@ -602,14 +602,30 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         if self.stats.steps + self.stats.rejected_steps >= self.max_steps {
             return Err(self.out_of_steps(h.abs()));
         }
-        self.exact_attempt(h);
+        // In place (no candidate state to swap in): y_prev ← Y, Y ← Y + h·F.
         self.quadrature_formed = false;
-        if !self.ynew.is_finite() {
+        self.y_prev.copy_from(&self.y);
+        let all = self.sys.all_parts();
+        self.y.axpy(h, &self.k[0], all);
+        if !self.y.is_finite() {
+            std::mem::swap(&mut self.y, &mut self.ynew);
+            self.y.copy_from(&self.y_prev);
             self.stats.rejected_steps += 1;
             let what = self.nonfinite_source();
             return Err(StepError::NonFinite { t: self.t, what });
         }
-        self.accept(h, true, t_stop);
+        self.t_prev = self.t;
+        self.t = t_stop;
+        self.dense_h = h;
+        self.truncated = false;
+        self.dense_scheme = Scheme::Exact;
+        self.stats.steps += 1;
+        // F is constant: k[0] stays the next step's first stage.
+        self.k0_valid = false;
+        self.fsal_slot = Some(0);
+        self.sys.invalidate();
+        self.dense_pending = false;
+        self.stats.rhs_evals = self.sys.evals();
         // Pending like any accepted step: `close_step` carries no global error over an
         // exact step but adds its quadrature (the adjoint's g += −h λᵀf_θ).
         self.carry_pending = Some(h);

@@ -671,7 +671,10 @@ where
         // heuristic would otherwise spend 3–4 growing steps on every segment.
         let h_seed = self.integ.last_step_size();
         self.restart(t)?;
-        self.integ.set_step_size(h_seed);
+        // An exact segment takes no seed (one step reaches its stop).
+        if self.integ.scheme() != Scheme::Exact {
+            self.integ.set_step_size(h_seed);
+        }
         Ok(false)
     }
 
