@@ -172,36 +172,45 @@ pub struct Crossing {
     pub t: f64,
 }
 
+/// The detection state of one watched function (one record per function, so a restart or
+/// a scan touches one place per function).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Track {
+    /// Watched in the current mode (switches: always).
+    pub active: bool,
+    /// Armed (switches: always).
+    pub armed: bool,
+    /// v was increasing at the end of the previous step (dip detection at t₀).
+    pub rising: bool,
+    /// The event fired at the last restart and this is the first step since (see
+    /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
+    pub fresh: bool,
+    /// A disarmed function re-arms once v < `rearm_below`: min(v_f, 0) for the event that
+    /// fired at the last restart from the value v_f, 0 for every other.
+    pub rearm_below: f64,
+    /// Signed value v at the start of the current step.
+    pub start_val: f64,
+    /// The bracket of the current step, if any.
+    bracket: Option<(f64, f64, f64, f64)>,
+}
+
 /// Per-run event-detection state: which functions are watched, armed flags, the values at
 /// the start of the current step, and scratch for the samples (all allocated once).
 #[derive(Clone, Debug)]
 pub struct Scanner {
     /// Number of user events; watched index w < nevents is event w, else switch w − nevents.
     pub nevents: usize,
-    /// Whether function w is watched in the current mode (switches: always).
-    pub active: Vec<bool>,
+    /// The state of function w.
+    pub tracks: Vec<Track>,
     /// The watched functions, in the order they were restarted (ascending w): every loop of
     /// a scan walks this list, never all functions (see [`Scanner::begin_restart`]).
     watched: Vec<usize>,
-    /// Armed flags (switches: always true).
-    pub armed: Vec<bool>,
-    /// A disarmed function re-arms once v < `rearm_below[w]`: min(v_f, 0) for the event
-    /// that fired at the last restart from the value v_f, 0 for every other.
-    pub rearm_below: Vec<f64>,
-    /// Signed value v_w at the start of the current step.
-    pub start_val: Vec<f64>,
-    /// Whether v_w was increasing at the end of the previous step (dip detection at t₀).
-    pub rising: Vec<bool>,
-    /// Event w fired at the last restart and this is the first step since (see
-    /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
-    pub fresh: Vec<bool>,
     /// Crossings on the current step, earliest first (filled by [`Scanner::scan`]).
     pub found: Vec<Crossing>,
     /// Samples per function: `vals[w][i]` at the i-th sample time of the step.
     vals: Vec<[f64; NSAMP]>,
     /// One sample of every function, as written by the caller.
     tmp: Vec<f64>,
-    brackets: Vec<Option<(f64, f64, f64, f64)>>,
 }
 
 impl Scanner {
@@ -210,28 +219,22 @@ impl Scanner {
         let nw = nevents + nswitches;
         Scanner {
             nevents,
-            active: vec![false; nw],
+            tracks: vec![Track::default(); nw],
             watched: Vec::with_capacity(nw),
-            armed: vec![false; nw],
-            rearm_below: vec![0.0; nw],
-            start_val: vec![0.0; nw],
-            rising: vec![false; nw],
-            fresh: vec![false; nw],
             found: Vec::with_capacity(nw),
             vals: vec![[0.0; NSAMP]; nw],
             tmp: vec![0.0; nw],
-            brackets: vec![None; nw],
         }
     }
 
     /// Number of watched functions.
     pub fn len(&self) -> usize {
-        self.active.len()
+        self.tracks.len()
     }
 
     /// Whether nothing is watched at all.
     pub fn is_empty(&self) -> bool {
-        self.active.is_empty()
+        self.tracks.is_empty()
     }
 
     /// What watched function `w` is.
@@ -254,7 +257,7 @@ impl Scanner {
     #[inline]
     pub fn begin_restart(&mut self) {
         for &w in &self.watched {
-            self.active[w] = false;
+            self.tracks[w].active = false;
         }
         self.watched.clear();
     }
@@ -271,17 +274,18 @@ impl Scanner {
     /// (armed at once if v⁺ already is); switches are always armed.
     #[inline(always)]
     pub fn restart_one(&mut self, w: usize, v: f64, fired: Option<f64>) {
-        if !self.active[w] {
-            self.active[w] = true;
+        let strict = self.strict(w);
+        let tr = &mut self.tracks[w];
+        if !tr.active {
+            tr.active = true;
             self.watched.push(w);
         }
-        self.start_val[w] = v;
-        self.rising[w] = false;
-        let strict = self.strict(w);
-        self.fresh[w] = fired.is_some() && !strict;
+        tr.start_val = v;
+        tr.rising = false;
+        tr.fresh = fired.is_some() && !strict;
         let below = fired.map_or(0.0, |vf| vf.min(0.0));
-        self.rearm_below[w] = below;
-        self.armed[w] = if strict {
+        tr.rearm_below = below;
+        tr.armed = if strict {
             true
         } else if fired.is_some() {
             v < below
@@ -336,12 +340,12 @@ impl Scanner {
             for i in 0..self.watched.len() {
                 let w = self.watched[i];
                 let v = &self.vals[w];
-                let below = self.rearm_below[w];
-                if !self.armed[w] && v.iter().any(|&x| x < below) {
-                    self.armed[w] = true;
+                let tr = &mut self.tracks[w];
+                if !tr.armed && v.iter().any(|&x| x < tr.rearm_below) {
+                    tr.armed = true;
                 }
-                self.start_val[w] = v[NSAMP - 1];
-                self.rising[w] = v[NSAMP - 1] > v[NSAMP - 2];
+                tr.start_val = v[NSAMP - 1];
+                tr.rising = v[NSAMP - 1] > v[NSAMP - 2];
             }
             return Ok(());
         }
@@ -349,7 +353,7 @@ impl Scanner {
         let mut earliest = f64::INFINITY;
         for i in 0..self.watched.len() {
             let w = self.watched[i];
-            if let Some((a, fa, b, fb)) = self.brackets[w] {
+            if let Some((a, fa, b, fb)) = self.tracks[w].bracket {
                 if a > first_right {
                     continue;
                 }
@@ -385,27 +389,29 @@ impl Scanner {
         let mut first_right = f64::INFINITY;
         for i in 0..self.watched.len() {
             let w = self.watched[i];
-            self.brackets[w] = None;
-            let (a, b) = (self.start_val[w], self.tmp[w]);
+            let strict = self.strict(w);
+            let b = self.tmp[w];
+            let tr = &mut self.tracks[w];
+            tr.bracket = None;
+            let a = tr.start_val;
             if a.is_nan() || b.is_nan() {
                 // Where the interpolated samples would first have been NaN.
                 let i = if a.is_nan() { 0 } else { 1 };
                 return Err((w, sample_times(t0, t1)[i]));
             }
-            let strict = self.strict(w);
             // A line that fired at t₀ and starts below its re-arming level was armed at the
             // restart; one that starts above it and falls re-arms only past t₁ (a line has
             // its minimum at an end).
-            self.fresh[w] = false;
-            if !(self.armed[w] && triggered(b, strict)) {
+            tr.fresh = false;
+            if !(tr.armed && triggered(b, strict)) {
                 // The line from v₀ to v₁: negative somewhere iff at an end; its last
                 // interior sample as `bracket_curve` would have interpolated it.
-                let below = self.rearm_below[w];
-                if !self.armed[w] && (a < below || b < below) {
-                    self.armed[w] = true;
+                let below = tr.rearm_below;
+                if !tr.armed && (a < below || b < below) {
+                    tr.armed = true;
                 }
-                self.start_val[w] = b;
-                self.rising[w] = b > line_sample(a, b, NSAMP - 2);
+                tr.start_val = b;
+                tr.rising = b > line_sample(a, b, NSAMP - 2);
                 continue;
             }
             let times = sample_times(t0, t1);
@@ -417,7 +423,7 @@ impl Scanner {
                     line_sample(a, b, i)
                 };
                 if triggered(vi, strict) {
-                    self.brackets[w] = Some((times[i - 1], prev, ti, vi));
+                    tr.bracket = Some((times[i - 1], prev, ti, vi));
                     first_right = first_right.min(ti);
                     break;
                 }
@@ -442,7 +448,7 @@ impl Scanner {
         E: FnMut(usize, f64) -> f64,
     {
         for &w in &self.watched {
-            self.vals[w][0] = self.start_val[w];
+            self.vals[w][0] = self.tracks[w].start_val;
         }
         for (i, &t) in times.iter().enumerate().skip(1) {
             sample(t, i == NSAMP - 1, &self.watched, &mut self.tmp);
@@ -453,14 +459,19 @@ impl Scanner {
         let mut first_right = f64::INFINITY;
         for wi in 0..self.watched.len() {
             let w = self.watched[wi];
-            self.brackets[w] = None;
+            self.tracks[w].bracket = None;
             let v = self.vals[w];
             if let Some(i) = v.iter().position(|x| x.is_nan()) {
                 return Err((w, times[i]));
             }
             let strict = self.strict(w);
-            let mut armed = self.armed[w];
-            let below = self.rearm_below[w];
+            let Track {
+                mut armed,
+                rearm_below: below,
+                rising,
+                fresh,
+                ..
+            } = self.tracks[w];
             let mut armed_from = if armed { Some(0) } else { None };
             let mut bracket = None;
             for i in 1..NSAMP {
@@ -477,8 +488,8 @@ impl Scanner {
             }
             if bracket.is_none() {
                 if let Some(i0) = armed_from {
-                    bracket = dip(&v, times, i0, self.rising[w], strict, |t| eval(w, t));
-                } else if self.fresh[w] {
+                    bracket = dip(&v, times, i0, rising, strict, |t| eval(w, t));
+                } else if fresh {
                     // The event fired at t₀ and no sample went below its re-arming level:
                     // the whole excursion to the negative side and back (a short hop of a
                     // ball after its bounce) may lie between t₀ and the first sample. Look
@@ -490,11 +501,12 @@ impl Scanner {
                     }
                 }
             }
-            self.fresh[w] = false;
             if let Some(b) = bracket {
                 first_right = first_right.min(b.2);
             }
-            self.brackets[w] = bracket;
+            let tr = &mut self.tracks[w];
+            tr.fresh = false;
+            tr.bracket = bracket;
         }
         Ok(first_right)
     }
@@ -672,7 +684,7 @@ mod tests {
         let f = |t: f64| t * (t - 0.6);
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, f(0.0), Some(0.0));
-        assert!(!sc.armed[0]);
+        assert!(!sc.tracks[0].armed);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1);
@@ -684,7 +696,7 @@ mod tests {
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
-        assert!(sc.armed[0]);
+        assert!(sc.tracks[0].armed);
         // And one that stays at zero and then goes up never fires either: v = 0 then t − 0.5
         // for t > 0.5 is positive: no negative excursion ⇒ stays disarmed.
         let k = |t: f64| (t - 0.5).max(0.0);
@@ -693,7 +705,7 @@ mod tests {
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
-        assert!(!sc.armed[0]);
+        assert!(!sc.tracks[0].armed);
     }
 
     /// A whole hop below zero between t₀ and the first sample (0.2) right after the event
@@ -704,7 +716,7 @@ mod tests {
         let f = |t: f64| t * (t - 0.05);
         let mut sc = Scanner::new(1, 0);
         sc.restart_one(0, f(0.0), Some(0.0));
-        assert!(sc.fresh[0] && !sc.armed[0]);
+        assert!(sc.tracks[0].fresh && !sc.tracks[0].armed);
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
             .unwrap();
         assert_eq!(sc.found.len(), 1);
@@ -717,7 +729,7 @@ mod tests {
         sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
             .unwrap();
         assert!(sc.found.is_empty());
-        assert!(!sc.fresh[0] && !sc.armed[0]);
+        assert!(!sc.tracks[0].fresh && !sc.tracks[0].armed);
         let mut evals = 0;
         sc.scan(
             1.0,
