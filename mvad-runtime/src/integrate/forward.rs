@@ -529,6 +529,16 @@ where
     /// In a constant-rate mode the first step's k₀ = F is the mode's F as first evaluated
     /// under the same switch bits (F does not depend on t or Y there), not a new evaluation.
     pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: &Switches) {
+        // Still in the same constant-rate mode under the same bits (a time event that
+        // changed neither): k₀ = F stays where the last exact step left it.
+        if self.scheme == Scheme::Exact
+            && self.dense_scheme == Scheme::Exact
+            && mode == self.sys.rhs.mode
+            && *sw == self.sys.rhs.sw
+        {
+            self.restart_exact_keeping_rate(t, y);
+            return;
+        }
         self.sys.rhs.mode = mode;
         self.sys.rhs.sw.clone_from(sw);
         self.restart_at(t, y);

@@ -395,6 +395,28 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.sys.invalidate();
     }
 
+    /// The restart after a jump inside a segment of exact steps that leaves F as it was (the
+    /// caller knows F is the same: a constant-rate system under the same mode and bits, F a
+    /// function of θ, the mode and the bits alone): closes the last step and restarts at
+    /// (t, y) like [`Integrator::restart_at`], keeping k[0] = F (an exact step and a
+    /// truncation of one leave it in place) instead of taking it again.
+    pub fn restart_exact_keeping_rate(&mut self, t: f64, y: &Sys::Vector) {
+        debug_assert!(self.scheme == Scheme::Exact && self.dense_scheme == Scheme::Exact);
+        self.close_step();
+        self.t = t;
+        self.t_prev = t;
+        self.dense_h = 0.0;
+        self.truncated = false;
+        self.h = 0.0;
+        self.seed_rate = None;
+        self.y.copy_from(y);
+        self.y_prev.copy_from(y);
+        self.k0_valid = true;
+        self.fsal_slot = None;
+        self.dense_pending = false;
+        self.sys.invalidate();
+    }
+
     /// Verner 9(8) only: with `on`, the nine interpolation stages of an accepted step beyond
     /// the FSAL one (a third of the step's work) are evaluated only when
     /// [`Integrator::ensure_dense`] asks for them (the driver does so when it samples guards
