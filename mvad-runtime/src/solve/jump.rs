@@ -338,13 +338,7 @@ where
     /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ; when the event is `still` (t' = 0,
     /// [`Approach::still`]) that is φ_x S⁺ + φ_θ and `self.dtot` is not written. Returns ℓ⁺
     /// (0 without a running cost).
-    fn event_costs(
-        &mut self,
-        k: usize,
-        j: usize,
-        t: f64,
-        still: bool,
-    ) -> Result<f64, SolveError> {
+    fn event_costs(&mut self, k: usize, j: usize, t: f64, still: bool) -> Result<f64, SolveError> {
         let (model, p, sens) = (self.model, self.p, self.sens);
         let info = model.info();
         let mut l_plus = 0.0;
