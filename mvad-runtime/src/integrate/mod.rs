@@ -378,6 +378,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         } else {
             self.adaptive
         };
+        self.restart_clock_and_state(t, y);
+        self.k0_valid = false;
+        self.ctrl.reset(self.scheme.error_order());
+        self.ctrl.last_rejected = false;
+        self.dense_scheme = self.scheme;
+    }
+
+    /// What every restart forgets: the clock and state restart at (t, y) with no step behind
+    /// them (no dense output, no step-size proposal or seed, no FSAL stage, no Jacobian).
+    fn restart_clock_and_state(&mut self, t: f64, y: &Sys::Vector) {
         self.t = t;
         self.t_prev = t;
         self.dense_h = 0.0;
@@ -386,11 +396,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.seed_rate = None;
         self.y.copy_from(y);
         self.y_prev.copy_from(y);
-        self.k0_valid = false;
         self.fsal_slot = None;
-        self.ctrl.reset(self.scheme.error_order());
-        self.ctrl.last_rejected = false;
-        self.dense_scheme = self.scheme;
         self.dense_pending = false;
         self.sys.invalidate();
     }
@@ -403,18 +409,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     pub fn restart_exact_keeping_rate(&mut self, t: f64, y: &Sys::Vector) {
         debug_assert!(self.scheme == Scheme::Exact && self.dense_scheme == Scheme::Exact);
         self.close_step();
-        self.t = t;
-        self.t_prev = t;
-        self.dense_h = 0.0;
-        self.truncated = false;
-        self.h = 0.0;
-        self.seed_rate = None;
-        self.y.copy_from(y);
-        self.y_prev.copy_from(y);
+        self.restart_clock_and_state(t, y);
         self.k0_valid = true;
-        self.fsal_slot = None;
-        self.dense_pending = false;
-        self.sys.invalidate();
     }
 
     /// Verner 9(8) only: with `on`, the nine interpolation stages of an accepted step beyond

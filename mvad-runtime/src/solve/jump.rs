@@ -132,15 +132,7 @@ where
             return self.time_event_approach(k, j, t);
         }
         let gt = model.guard_grad(k, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
-        {
-            model.rhs(
-                Point::new(self.mode, &self.sw, t, &self.y.x, p),
-                &mut self.f_minus,
-            );
-            self.nonfinite_x(t, &self.f_minus, || {
-                format!("flow of mode `{}`", info.modes[self.mode])
-            })?;
-        }
+        self.flow_before(t)?;
         let g = model.guard(k, At::new(t, &self.y.x, p));
         if !(gt.is_finite()
             && g.is_finite()
@@ -186,6 +178,18 @@ where
         Ok(approach)
     }
 
+    /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite.
+    fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
+        let info = self.model.info();
+        self.model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, self.p),
+            &mut self.f_minus,
+        );
+        self.nonfinite_x(t, &self.f_minus, || {
+            format!("flow of mode `{}`", info.modes[self.mode])
+        })
+    }
+
     /// The approach of time event k (occurrence j) at its time t: g = t − τ_kj(θ), so ∇g = 0,
     /// ∂g/∂θ = −∂τ/∂θ, ∂g/∂t = 1, the rate and the cosine are 1 (never grazing unless the
     /// tolerance exceeds 1), g = 0 at the state it fires from, and t' = −(∇g·S⁻ + ∂g/∂θ)/1 =
@@ -212,13 +216,7 @@ where
                 .global_error_mut()
                 .is_some_and(|ge| !ge.is_zero());
         if flows {
-            model.rhs(
-                Point::new(self.mode, &self.sw, t, &self.y.x, p),
-                &mut self.f_minus,
-            );
-            self.nonfinite_x(t, &self.f_minus, || {
-                format!("flow of mode `{}`", info.modes[self.mode])
-            })?;
+            self.flow_before(t)?;
         } else {
             self.f_minus.fill(0.0);
         }
