@@ -724,7 +724,7 @@ pub struct Program {
     /// T(θ), if declared.
     pub horizon: Option<ExprId>,
     /// Switching functions σ_j (pointwise expressions), any number: the tape reads the bits
-    /// past 64 through `eval_with`; the arena's own evaluator ([`Point::sw`]) sees bits 0..64.
+    /// past 64 from the words `Tape::run` is given; the arena's own evaluator ([`Point::sw`]) sees bits 0..64.
     pub switches: Vec<ExprId>,
     /// The qps, in declaration order; their variables are flattened in this order.
     pub qps: Vec<Qp>,
