@@ -28,13 +28,14 @@ impl Gen<'_> {
             None => quote!(::core::option::Option::None),
         };
         let events = k.event_meta.iter().map(|e| {
-            let name = &e.name;
-            let dir = match e.direction {
+            let d = &e.decl;
+            let name = &d.name;
+            let dir = match d.direction {
                 Direction::Down => quote!(#pr::Direction::Down),
                 Direction::Up => quote!(#pr::Direction::Up),
             };
-            let (mode, target) = (opt(e.mode), opt(e.target));
-            let (hr, hc) = (e.has_reset, e.has_cost);
+            let (mode, target) = (opt(d.mode), opt(d.target));
+            let (hr, hc) = (d.has_reset, e.has_cost);
             // `rows` is bound by the constructor of a model with tables.
             let trigger = match e.time {
                 None => quote!(#pr::Trigger::Guard),
