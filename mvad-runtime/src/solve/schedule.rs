@@ -138,6 +138,7 @@ impl Schedule {
 
     /// Moves event k on to its next occurrence (after it fired or was skipped); the times of a
     /// schedule must not decrease.
+    #[inline]
     pub(super) fn advance<M: HybridModel>(
         &mut self,
         model: &M,
