@@ -11,9 +11,10 @@ use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind};
 use nalgebra::DefaultAllocator;
 
-/// Step attempts each row of a data table adds to `Options::max_steps`, which is there to stop
-/// an explicit method crawling through a stiff segment, not a run over a long table.
-const STEPS_PER_TABLE_ROW: usize = 100;
+/// Step attempts each scheduled occurrence (a table row, a sample of an `every` event, an `at`
+/// event) adds to `Options::max_steps`, which is there to stop an explicit method crawling
+/// through a stiff segment, not a run over a long schedule.
+const STEPS_PER_SCHEDULED_EVENT: usize = 100;
 
 /// How the trajectory met the guard of the event being applied.
 #[derive(Clone, Copy, Debug)]
@@ -69,9 +70,9 @@ where
             self.zeno_verdict(t, l_plus, approach.grazing, approach.cosine)
         };
         self.emit_event(k, t, mode_before, approach, sink);
-        if matches!(info.events[k].trigger, crate::model::Trigger::Each { .. }) {
-            self.table_events += 1;
-            self.integ.extend_step_budget(STEPS_PER_TABLE_ROW);
+        if timed {
+            self.scheduled_events += 1;
+            self.integ.extend_step_budget(STEPS_PER_SCHEDULED_EVENT);
         }
         self.schedule.advance(self.model, self.p, k)?;
         let mode_after = self.mode;
