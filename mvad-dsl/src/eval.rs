@@ -50,7 +50,7 @@ impl Tape {
         }
     }
 
-    /// Whether the tape reads qp solutions (then they must be passed to [`Tape::run_inputs`]).
+    /// Whether the tape reads qp solutions (then they must be passed to [`Tape::run`] in its [`Inputs`]).
     pub fn reads_qp(&self) -> bool {
         self.reads_qp
     }
@@ -80,27 +80,11 @@ impl Tape {
         self.outputs.iter().map(|&(s, r)| (s as usize, r as usize))
     }
 
-    /// Runs the tape, filling `regs[..nregs]`. Returns false (and does nothing) when
-    /// `regs` is too short.
-    pub fn run(&self, at: &Point<'_>, regs: &mut [f64]) -> bool {
-        self.run_with(at, &[], regs)
-    }
-
-    /// [`Tape::run`] with switch bits beyond the first 64: `at.sw` holds bits 0..64 and
-    /// `hi` the rest (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent).
-    pub fn run_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> bool {
-        self.run_inputs(at, hi, &Inputs::NONE, regs)
-    }
-
-    /// [`Tape::run_with`] reading qp solutions, their derivatives and table columns from
-    /// `inputs`.
-    pub fn run_inputs(
-        &self,
-        at: &Point<'_>,
-        hi: &[u64],
-        inputs: &Inputs<'_>,
-        regs: &mut [f64],
-    ) -> bool {
+    /// Runs the tape, filling `regs[..nregs]`: switch bits 0..64 from `at.sw` and the rest
+    /// from `hi` (bit j ≥ 64 is bit (j − 64) % 64 of `hi[(j − 64) / 64]`, off when absent),
+    /// qp solutions, their derivatives and table columns from `inputs`. Returns false (and
+    /// does nothing) when `regs` is too short.
+    pub fn run(&self, at: &Point<'_>, hi: &[u64], inputs: &Inputs<'_>, regs: &mut [f64]) -> bool {
         if regs.len() < self.ops.len() {
             return false;
         }
@@ -110,20 +94,23 @@ impl Tape {
         true
     }
 
-    /// Runs the tape and writes the dense output (zeros included) into `out`; entries
-    /// beyond `out.len()` are dropped. Outputs are NaN if `regs` is too short.
-    pub fn eval(&self, at: &Point<'_>, regs: &mut [f64], out: &mut [f64]) {
-        self.eval_with(at, &[], regs, out);
+    /// Writes the dense output (zeros included) of a run into `out` from its registers, or
+    /// NaN in every slot when the run failed (`ran` false); entries beyond `out.len()` are
+    /// dropped.
+    pub fn write_output(&self, ran: bool, regs: &[f64], out: &mut [f64]) {
+        let fill = if ran { 0.0 } else { f64::NAN };
+        out.iter_mut().take(self.len).for_each(|o| *o = fill);
+        if ran {
+            for &(s, r) in &self.outputs {
+                if let Some(o) = out.get_mut(s as usize) {
+                    *o = regs[r as usize];
+                }
+            }
+        }
     }
 
-    /// [`Tape::eval`] with switch bits beyond the first 64 in `hi` (see [`Tape::run_with`]).
-    pub fn eval_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64], out: &mut [f64]) {
-        self.eval_inputs(at, hi, &Inputs::NONE, regs, out);
-    }
-
-    /// [`Tape::eval_with`] reading qp solutions, their derivatives and table columns from
-    /// `inputs`.
-    pub fn eval_inputs(
+    /// [`Tape::run`], then [`Tape::write_output`] into `out`.
+    pub fn eval(
         &self,
         at: &Point<'_>,
         hi: &[u64],
@@ -131,28 +118,8 @@ impl Tape {
         regs: &mut [f64],
         out: &mut [f64],
     ) {
-        if !self.run_inputs(at, hi, inputs, regs) {
-            out.iter_mut().take(self.len).for_each(|o| *o = f64::NAN);
-            return;
-        }
-        out.iter_mut().take(self.len).for_each(|o| *o = 0.0);
-        for &(s, r) in &self.outputs {
-            if let Some(o) = out.get_mut(s as usize) {
-                *o = regs[r as usize];
-            }
-        }
-    }
-
-    /// Runs the tape and returns slot 0 (a scalar kernel); NaN if `regs` is too short.
-    pub fn eval_scalar(&self, at: &Point<'_>, regs: &mut [f64]) -> f64 {
-        self.eval_scalar_with(at, &[], regs)
-    }
-
-    /// [`Tape::eval_scalar`] with switch bits beyond the first 64 in `hi`.
-    pub fn eval_scalar_with(&self, at: &Point<'_>, hi: &[u64], regs: &mut [f64]) -> f64 {
-        let mut out = [0.0];
-        self.eval_with(at, hi, regs, &mut out);
-        out[0]
+        let ran = self.run(at, hi, inputs, regs);
+        self.write_output(ran, regs, out);
     }
 }
 
@@ -189,7 +156,7 @@ mod tests {
                 p: &[1.5],
                 sw: bits,
             };
-            tape.eval(&at, &mut regs, &mut out);
+            tape.eval(&at, &[], &Inputs::NONE, &mut regs, &mut out);
             let want = ar.eval(&[sw, d], &at);
             assert_relative_eq!(out[0], want[0]);
             assert_eq!(out[1], 0.0);
@@ -204,6 +171,8 @@ mod tests {
                 p: &[],
                 sw: 0,
             },
+            &[],
+            &Inputs::NONE,
             &mut small,
             &mut out,
         );

@@ -589,9 +589,10 @@ pub enum Schedule {
     },
 }
 
-/// One event: guard (or schedule), reset, target and its event cost.
-#[derive(Clone, Debug)]
-pub struct Event {
+/// What the declaration of an event says about it besides its expressions: carried
+/// unchanged from the lowered [`Event`] into the kernels' `EventMeta`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventDecl {
     /// Declared name or `event_K`.
     pub name: String,
     /// Firing direction.
@@ -600,14 +601,21 @@ pub struct Event {
     pub mode: Option<usize>,
     /// Mode switched to after the reset.
     pub target: Option<usize>,
+    /// Whether the event has a reset block.
+    pub has_reset: bool,
+}
+
+/// One event: its declaration, guard (or schedule), reset and event cost.
+#[derive(Clone, Debug)]
+pub struct Event {
+    /// Name, direction, modes and whether it has a reset block.
+    pub decl: EventDecl,
     /// g = LHS − RHS of a state event; NaN for a time event (which has no guard).
     pub guard: ExprId,
     /// `Some` for a time event: when it fires.
     pub schedule: Option<Schedule>,
     /// x⁺ = R(t, x⁻, θ), one expression per state (x_i itself when not assigned).
     pub reset: Vec<ExprId>,
-    /// Whether the event has a reset block.
-    pub has_reset: bool,
     /// φ_k = Σ factor · `sum(EVENT, expr)` terms, evaluated after the reset, if any.
     pub cost: Option<ExprId>,
 }
@@ -716,7 +724,7 @@ pub struct Program {
     /// T(θ), if declared.
     pub horizon: Option<ExprId>,
     /// Switching functions σ_j (pointwise expressions), any number: the tape reads the bits
-    /// past 64 through `eval_with`; the arena's own evaluator ([`Point::sw`]) sees bits 0..64.
+    /// past 64 from the words `Tape::run` is given; the arena's own evaluator ([`Point::sw`]) sees bits 0..64.
     pub switches: Vec<ExprId>,
     /// The qps, in declaration order; their variables are flattened in this order.
     pub qps: Vec<Qp>,

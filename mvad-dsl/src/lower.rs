@@ -32,7 +32,8 @@ use std::collections::HashMap;
 use crate::ast::{self, BinOp, CmpOp, CostKind, ExprKind};
 use crate::diag::Diagnostic;
 use crate::ir::{
-    Cmp, Direction, Event, ExprArena, ExprId, Func, Mode, ModelNames, Node, Program, Schedule,
+    Cmp, Direction, Event, EventDecl, ExprArena, ExprId, Func, Mode, ModelNames, Node, Program,
+    Schedule,
 };
 use crate::span::Span;
 
@@ -297,14 +298,16 @@ impl<'a> Lowerer<'a> {
                 }
             }
             events.push(Event {
-                name,
-                direction,
-                mode,
-                target,
+                decl: EventDecl {
+                    name,
+                    direction,
+                    mode,
+                    target,
+                    has_reset: ev.resets.is_some(),
+                },
                 guard,
                 schedule,
                 reset,
-                has_reset: ev.resets.is_some(),
                 cost: None,
             });
         }

@@ -14,7 +14,7 @@
 //! method's ∂ₓ(G_x S + G_θ)·v and ∂ₜ(G_x S + G_θ)), all taken in the same arena.
 
 use crate::diff::{diff, Var};
-use crate::ir::{Direction, ExprArena, ExprId, ModelNames, Node, Program, QpKind, Schedule, Wrt};
+use crate::ir::{EventDecl, ExprArena, ExprId, ModelNames, Node, Program, QpKind, Schedule, Wrt};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -184,16 +184,8 @@ pub enum TimeKind {
 /// Static description of an event (mirrors the runtime's `EventInfo`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventMeta {
-    /// Declared name or `event_K`.
-    pub name: String,
-    /// Firing direction.
-    pub direction: Direction,
-    /// Mode the event is armed in (`None`: every mode).
-    pub mode: Option<usize>,
-    /// Target mode.
-    pub target: Option<usize>,
-    /// Whether it has a reset block.
-    pub has_reset: bool,
+    /// Name, direction, modes and whether it has a reset block, as lowered.
+    pub decl: EventDecl,
     /// Whether the cost has `sum` terms for it.
     pub has_cost: bool,
     /// `Some` for a time event.
@@ -663,11 +655,7 @@ pub fn kernels(program: &Program) -> ModelKernels {
         initial_mode: program.initial_mode,
         event_meta: (program.events.iter().zip(affine_guards))
             .map(|(e, affine_guard)| EventMeta {
-                name: e.name.clone(),
-                direction: e.direction,
-                mode: e.mode,
-                target: e.target,
-                has_reset: e.has_reset,
+                decl: e.decl.clone(),
                 has_cost: e.cost.is_some(),
                 time: e.schedule.map(|s| match s {
                     Schedule::At(_) => TimeKind::At,

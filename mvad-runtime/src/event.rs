@@ -172,36 +172,45 @@ pub struct Crossing {
     pub t: f64,
 }
 
+/// The detection state of one watched function (one record per function, so a restart or
+/// a scan touches one place per function).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Track {
+    /// Watched in the current mode (switches: always).
+    pub active: bool,
+    /// Armed (switches: always).
+    pub armed: bool,
+    /// v was increasing at the end of the previous step (dip detection at t₀).
+    pub rising: bool,
+    /// The event fired at the last restart and this is the first step since (see
+    /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
+    pub fresh: bool,
+    /// A disarmed function re-arms once v < `rearm_below`: min(v_f, 0) for the event that
+    /// fired at the last restart from the value v_f, 0 for every other.
+    pub rearm_below: f64,
+    /// Signed value v at the start of the current step.
+    pub start_val: f64,
+    /// The bracket of the current step, if any.
+    bracket: Option<(f64, f64, f64, f64)>,
+}
+
 /// Per-run event-detection state: which functions are watched, armed flags, the values at
 /// the start of the current step, and scratch for the samples (all allocated once).
 #[derive(Clone, Debug)]
 pub struct Scanner {
     /// Number of user events; watched index w < nevents is event w, else switch w − nevents.
     pub nevents: usize,
-    /// Whether function w is watched in the current mode (switches: always).
-    pub active: Vec<bool>,
+    /// The state of function w.
+    pub tracks: Vec<Track>,
     /// The watched functions, in the order they were restarted (ascending w): every loop of
     /// a scan walks this list, never all functions (see [`Scanner::begin_restart`]).
     watched: Vec<usize>,
-    /// Armed flags (switches: always true).
-    pub armed: Vec<bool>,
-    /// A disarmed function re-arms once v < `rearm_below[w]`: min(v_f, 0) for the event
-    /// that fired at the last restart from the value v_f, 0 for every other.
-    pub rearm_below: Vec<f64>,
-    /// Signed value v_w at the start of the current step.
-    pub start_val: Vec<f64>,
-    /// Whether v_w was increasing at the end of the previous step (dip detection at t₀).
-    pub rising: Vec<bool>,
-    /// Event w fired at the last restart and this is the first step since (see
-    /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
-    pub fresh: Vec<bool>,
     /// Crossings on the current step, earliest first (filled by [`Scanner::scan`]).
     pub found: Vec<Crossing>,
     /// Samples per function: `vals[w][i]` at the i-th sample time of the step.
     vals: Vec<[f64; NSAMP]>,
     /// One sample of every function, as written by the caller.
     tmp: Vec<f64>,
-    brackets: Vec<Option<(f64, f64, f64, f64)>>,
 }
 
 impl Scanner {
@@ -210,28 +219,22 @@ impl Scanner {
         let nw = nevents + nswitches;
         Scanner {
             nevents,
-            active: vec![false; nw],
+            tracks: vec![Track::default(); nw],
             watched: Vec::with_capacity(nw),
-            armed: vec![false; nw],
-            rearm_below: vec![0.0; nw],
-            start_val: vec![0.0; nw],
-            rising: vec![false; nw],
-            fresh: vec![false; nw],
             found: Vec::with_capacity(nw),
             vals: vec![[0.0; NSAMP]; nw],
             tmp: vec![0.0; nw],
-            brackets: vec![None; nw],
         }
     }
 
     /// Number of watched functions.
     pub fn len(&self) -> usize {
-        self.active.len()
+        self.tracks.len()
     }
 
     /// Whether nothing is watched at all.
     pub fn is_empty(&self) -> bool {
-        self.active.is_empty()
+        self.tracks.is_empty()
     }
 
     /// What watched function `w` is.
@@ -254,7 +257,7 @@ impl Scanner {
     #[inline]
     pub fn begin_restart(&mut self) {
         for &w in &self.watched {
-            self.active[w] = false;
+            self.tracks[w].active = false;
         }
         self.watched.clear();
     }
@@ -269,19 +272,20 @@ impl Scanner {
     /// flow carries it into the firing side), except an event that just fired from the
     /// signed value v_f (`fired` = `Some(v_f)`), which is disarmed until v < min(v_f, 0)
     /// (armed at once if v⁺ already is); switches are always armed.
-    #[inline]
+    #[inline(always)]
     pub fn restart_one(&mut self, w: usize, v: f64, fired: Option<f64>) {
-        if !self.active[w] {
-            self.active[w] = true;
+        let strict = self.strict(w);
+        let tr = &mut self.tracks[w];
+        if !tr.active {
+            tr.active = true;
             self.watched.push(w);
         }
-        self.start_val[w] = v;
-        self.rising[w] = false;
-        let strict = self.strict(w);
-        self.fresh[w] = fired.is_some() && !strict;
+        tr.start_val = v;
+        tr.rising = false;
+        tr.fresh = fired.is_some() && !strict;
         let below = fired.map_or(0.0, |vf| vf.min(0.0));
-        self.rearm_below[w] = below;
-        self.armed[w] = if strict {
+        tr.rearm_below = below;
+        tr.armed = if strict {
             true
         } else if fired.is_some() {
             v < below
@@ -336,12 +340,12 @@ impl Scanner {
             for i in 0..self.watched.len() {
                 let w = self.watched[i];
                 let v = &self.vals[w];
-                let below = self.rearm_below[w];
-                if !self.armed[w] && v.iter().any(|&x| x < below) {
-                    self.armed[w] = true;
+                let tr = &mut self.tracks[w];
+                if !tr.armed && v.iter().any(|&x| x < tr.rearm_below) {
+                    tr.armed = true;
                 }
-                self.start_val[w] = v[NSAMP - 1];
-                self.rising[w] = v[NSAMP - 1] > v[NSAMP - 2];
+                tr.start_val = v[NSAMP - 1];
+                tr.rising = v[NSAMP - 1] > v[NSAMP - 2];
             }
             return Ok(());
         }
@@ -349,7 +353,7 @@ impl Scanner {
         let mut earliest = f64::INFINITY;
         for i in 0..self.watched.len() {
             let w = self.watched[i];
-            if let Some((a, fa, b, fb)) = self.brackets[w] {
+            if let Some((a, fa, b, fb)) = self.tracks[w].bracket {
                 if a > first_right {
                     continue;
                 }
@@ -385,27 +389,29 @@ impl Scanner {
         let mut first_right = f64::INFINITY;
         for i in 0..self.watched.len() {
             let w = self.watched[i];
-            self.brackets[w] = None;
-            let (a, b) = (self.start_val[w], self.tmp[w]);
+            let strict = self.strict(w);
+            let b = self.tmp[w];
+            let tr = &mut self.tracks[w];
+            tr.bracket = None;
+            let a = tr.start_val;
             if a.is_nan() || b.is_nan() {
                 // Where the interpolated samples would first have been NaN.
                 let i = if a.is_nan() { 0 } else { 1 };
                 return Err((w, sample_times(t0, t1)[i]));
             }
-            let strict = self.strict(w);
             // A line that fired at t₀ and starts below its re-arming level was armed at the
             // restart; one that starts above it and falls re-arms only past t₁ (a line has
             // its minimum at an end).
-            self.fresh[w] = false;
-            if !(self.armed[w] && triggered(b, strict)) {
+            tr.fresh = false;
+            if !(tr.armed && triggered(b, strict)) {
                 // The line from v₀ to v₁: negative somewhere iff at an end; its last
                 // interior sample as `bracket_curve` would have interpolated it.
-                let below = self.rearm_below[w];
-                if !self.armed[w] && (a < below || b < below) {
-                    self.armed[w] = true;
+                let below = tr.rearm_below;
+                if !tr.armed && (a < below || b < below) {
+                    tr.armed = true;
                 }
-                self.start_val[w] = b;
-                self.rising[w] = b > line_sample(a, b, NSAMP - 2);
+                tr.start_val = b;
+                tr.rising = b > line_sample(a, b, NSAMP - 2);
                 continue;
             }
             let times = sample_times(t0, t1);
@@ -417,7 +423,7 @@ impl Scanner {
                     line_sample(a, b, i)
                 };
                 if triggered(vi, strict) {
-                    self.brackets[w] = Some((times[i - 1], prev, ti, vi));
+                    tr.bracket = Some((times[i - 1], prev, ti, vi));
                     first_right = first_right.min(ti);
                     break;
                 }
@@ -442,7 +448,7 @@ impl Scanner {
         E: FnMut(usize, f64) -> f64,
     {
         for &w in &self.watched {
-            self.vals[w][0] = self.start_val[w];
+            self.vals[w][0] = self.tracks[w].start_val;
         }
         for (i, &t) in times.iter().enumerate().skip(1) {
             sample(t, i == NSAMP - 1, &self.watched, &mut self.tmp);
@@ -453,14 +459,19 @@ impl Scanner {
         let mut first_right = f64::INFINITY;
         for wi in 0..self.watched.len() {
             let w = self.watched[wi];
-            self.brackets[w] = None;
+            self.tracks[w].bracket = None;
             let v = self.vals[w];
             if let Some(i) = v.iter().position(|x| x.is_nan()) {
                 return Err((w, times[i]));
             }
             let strict = self.strict(w);
-            let mut armed = self.armed[w];
-            let below = self.rearm_below[w];
+            let Track {
+                mut armed,
+                rearm_below: below,
+                rising,
+                fresh,
+                ..
+            } = self.tracks[w];
             let mut armed_from = if armed { Some(0) } else { None };
             let mut bracket = None;
             for i in 1..NSAMP {
@@ -477,8 +488,8 @@ impl Scanner {
             }
             if bracket.is_none() {
                 if let Some(i0) = armed_from {
-                    bracket = dip(&v, times, i0, self.rising[w], strict, |t| eval(w, t));
-                } else if self.fresh[w] {
+                    bracket = dip(&v, times, i0, rising, strict, |t| eval(w, t));
+                } else if fresh {
                     // The event fired at t₀ and no sample went below its re-arming level:
                     // the whole excursion to the negative side and back (a short hop of a
                     // ball after its bounce) may lie between t₀ and the first sample. Look
@@ -490,11 +501,12 @@ impl Scanner {
                     }
                 }
             }
-            self.fresh[w] = false;
             if let Some(b) = bracket {
                 first_right = first_right.min(b.2);
             }
-            self.brackets[w] = bracket;
+            let tr = &mut self.tracks[w];
+            tr.fresh = false;
+            tr.bracket = bracket;
         }
         Ok(first_right)
     }
@@ -581,214 +593,4 @@ fn peaks_before_end(v: &[f64; NSAMP]) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use approx::assert_relative_eq;
-
-    #[test]
-    fn root_of_a_parabola_to_machine_precision() {
-        // v(t) = t² − 2 on [1, 2]: root √2.
-        let mut n = 0;
-        let r = locate_root(
-            |t| {
-                n += 1;
-                t * t - 2.0
-            },
-            1.0,
-            -1.0,
-            2.0,
-            2.0,
-            false,
-        );
-        assert!((r - 2f64.sqrt()).abs() <= 4.0 * f64::EPSILON, "{r}");
-        assert!(r * r - 2.0 >= 0.0, "returned the triggered side");
-        // Superlinear: a handful of evaluations to reach the resolution of t.
-        assert!(n <= 10, "{n} evaluations");
-    }
-
-    #[test]
-    fn root_of_a_flat_function() {
-        // v(t) = (t − 0.3)³: a triple root, where secant steps converge only linearly.
-        let r = locate_root(|t| (t - 0.3f64).powi(3), 0.0, -0.027, 1.0, 0.343, false);
-        assert_relative_eq!(r, 0.3, max_relative = 1e-5);
-        let r = locate_root(|t| (t - 0.3f64).powi(3), 0.0, -0.027, 1.0, 0.343, true);
-        assert!((r - 0.3).abs() < 1e-5);
-    }
-
-    #[test]
-    fn golden_section_finds_max() {
-        let (t, v) = maximize(|t| -(t - 0.4) * (t - 0.4) + 1e-3, 0.0, 1.0);
-        assert!((t - 0.4).abs() < 1e-6);
-        assert_relative_eq!(v, 1e-3, max_relative = 1e-6);
-    }
-
-    /// A dip that crosses zero and comes back between two samples is found; its first root
-    /// is located.
-    #[test]
-    fn scanner_finds_double_crossing_between_samples() {
-        // v(t) = 1e-4 − (t − 0.5)²: up at 0.49, down at 0.51, between the samples 0.4 and 0.6.
-        let f = |t: f64| 1e-4 - (t - 0.5) * (t - 0.5);
-        let g = |t: f64| -1.0 + 0.0 * t;
-        let mut sc = Scanner::new(2, 0);
-        sc.restart_one(0, f(0.0), None);
-        sc.restart_one(1, g(0.0), None);
-        let vals = |t: f64, out: &mut [f64]| {
-            out[0] = f(t);
-            out[1] = g(t);
-        };
-        sc.scan(
-            0.0,
-            1.0,
-            false,
-            |t, _, _, o| vals(t, o),
-            |w, t| if w == 0 { f(t) } else { g(t) },
-            0.0,
-        )
-        .unwrap();
-        assert_eq!(sc.found.len(), 1);
-        assert_relative_eq!(sc.found[0].t, 0.49, max_relative = 1e-12);
-    }
-
-    /// A dip whose peak lies between the last interior sample and t₁ (the samples only see
-    /// v rise towards t₁) is found on this step: the next one starts past the peak.
-    #[test]
-    fn scanner_finds_a_dip_peaking_just_before_the_end_of_the_step() {
-        // v rises at every sample (0, 0.2, …, 1); its peak, at 0.95, lies between the last
-        // interior sample and t₁ (for any INTERIOR ≥ 1).
-        let f = |t: f64| 1e-10 - (t - 0.95) * (t - 0.95);
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, f(0.0), None);
-        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
-            .unwrap();
-        assert_eq!(sc.found.len(), 1, "the dip at 0.95 ± 1e-5 is missed");
-        assert_relative_eq!(sc.found[0].t, 0.95 - 1e-5, max_relative = 1e-12);
-    }
-
-    /// After firing, a function exactly at zero is disarmed; it re-arms once negative and the
-    /// next crossing fires.
-    #[test]
-    fn disarmed_until_it_leaves_zero() {
-        // v(0) = 0, v < 0 on (0, 0.6), crosses up at 0.6.
-        let f = |t: f64| t * (t - 0.6);
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, f(0.0), Some(0.0));
-        assert!(!sc.armed[0]);
-        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
-            .unwrap();
-        assert_eq!(sc.found.len(), 1);
-        assert_relative_eq!(sc.found[0].t, 0.6, max_relative = 1e-14);
-        // The same function without a crossing after the zero never fires: v = −t.
-        let g = |t: f64| -t;
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, 0.0, Some(0.0));
-        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
-            .unwrap();
-        assert!(sc.found.is_empty());
-        assert!(sc.armed[0]);
-        // And one that stays at zero and then goes up never fires either: v = 0 then t − 0.5
-        // for t > 0.5 is positive: no negative excursion ⇒ stays disarmed.
-        let k = |t: f64| (t - 0.5).max(0.0);
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, 0.0, Some(0.0));
-        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = k(t), |_, t| k(t), 0.0)
-            .unwrap();
-        assert!(sc.found.is_empty());
-        assert!(!sc.armed[0]);
-    }
-
-    /// A whole hop below zero between t₀ and the first sample (0.2) right after the event
-    /// fired: v = t (t − 0.05) re-arms on (0, 0.05) and fires at 0.05. Only on the first step
-    /// after the firing; later, or for an event that did not fire, samples decide.
-    #[test]
-    fn a_hop_before_the_first_sample_after_firing_is_found() {
-        let f = |t: f64| t * (t - 0.05);
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, f(0.0), Some(0.0));
-        assert!(sc.fresh[0] && !sc.armed[0]);
-        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = f(t), |_, t| f(t), 0.0)
-            .unwrap();
-        assert_eq!(sc.found.len(), 1);
-        assert_relative_eq!(sc.found[0].t, 0.05, max_relative = 1e-14);
-        // A hop that never goes below zero (v = t²) does not fire, and the next step is not
-        // searched again.
-        let g = |t: f64| t * t;
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, 0.0, Some(0.0));
-        sc.scan(0.0, 1.0, false, |t, _, _, o| o[0] = g(t), |_, t| g(t), 0.0)
-            .unwrap();
-        assert!(sc.found.is_empty());
-        assert!(!sc.fresh[0] && !sc.armed[0]);
-        let mut evals = 0;
-        sc.scan(
-            1.0,
-            2.0,
-            false,
-            |t, _, _, o| o[0] = f(t - 1.0),
-            |_, t| {
-                evals += 1;
-                f(t - 1.0)
-            },
-            0.0,
-        )
-        .unwrap();
-        assert!(sc.found.is_empty());
-        assert_eq!(evals, 0);
-    }
-
-    #[test]
-    fn simultaneous_crossings_are_grouped_and_ordered() {
-        let fs: [fn(f64) -> f64; 3] = [|t| t - 0.3, |t| t - 0.3 - 1e-15, |t| t - 0.7];
-        let mut sc = Scanner::new(3, 0);
-        for (w, fw) in fs.iter().enumerate() {
-            sc.restart_one(w, fw(0.0), None);
-        }
-        sc.scan(
-            0.0,
-            1.0,
-            false,
-            |t, _, _, o| {
-                for (w, fw) in fs.iter().enumerate() {
-                    o[w] = fw(t);
-                }
-            },
-            |w, t| fs[w](t),
-            1e-12,
-        )
-        .unwrap();
-        let ws: Vec<usize> = sc.found.iter().map(|c| c.w).collect();
-        assert_eq!(ws, vec![0, 1]);
-    }
-
-    /// On a linear step only the end is evaluated; a line that fired at t₀ and starts below
-    /// zero re-arms and is found wherever in the step it crosses.
-    #[test]
-    fn a_linear_step_evaluates_only_its_end_and_finds_the_crossing() {
-        let f = |t: f64| 3.0 * t - 0.3;
-        let mut sc = Scanner::new(1, 0);
-        sc.restart_one(0, f(0.0), Some(0.0));
-        let (mut samples, mut evals) = (0, 0);
-        sc.scan(
-            0.0,
-            1.0,
-            true,
-            |t, _, _, o| {
-                samples += 1;
-                o[0] = f(t);
-            },
-            |_, t| {
-                evals += 1;
-                f(t)
-            },
-            0.0,
-        )
-        .unwrap();
-        assert_eq!(samples, 1);
-        assert!(
-            evals <= 3,
-            "{evals} evaluations to locate the root of a line"
-        );
-        assert_eq!(sc.found.len(), 1);
-        assert_relative_eq!(sc.found[0].t, 0.1, max_relative = 1e-14);
-        assert!(f(sc.found[0].t) >= 0.0);
-    }
-}
+mod tests;

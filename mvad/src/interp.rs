@@ -127,14 +127,14 @@ impl InterpretedModel {
                 .event_meta
                 .iter()
                 .map(|e| EventInfo {
-                    name: e.name.clone(),
-                    direction: match e.direction {
+                    name: e.decl.name.clone(),
+                    direction: match e.decl.direction {
                         ir::Direction::Down => mvad_runtime::Direction::Down,
                         ir::Direction::Up => mvad_runtime::Direction::Up,
                     },
-                    mode: e.mode,
-                    target: e.target,
-                    has_reset: e.has_reset,
+                    mode: e.decl.mode,
+                    target: e.decl.target,
+                    has_reset: e.decl.has_reset,
                     has_cost: e.has_cost,
                     trigger: match e.time {
                         None => Trigger::Guard,
@@ -272,9 +272,9 @@ impl InterpretedModel {
         move |q, data, jac| {
             let mut regs = self.qp_regs.borrow_mut();
             let (dt, jt) = &self.qp_tapes[q];
-            dt.eval_with(&at.pt, at.hi, &mut regs, data);
+            dt.eval(&at.pt, at.hi, &Inputs::NONE, &mut regs, data);
             if let Some(jac) = jac {
-                jt.eval_with(&at.pt, at.hi, &mut regs, jac);
+                jt.eval(&at.pt, at.hi, &Inputs::NONE, &mut regs, jac);
             }
         }
     }
@@ -286,7 +286,7 @@ impl InterpretedModel {
                 qp: QpValues::NONE,
                 row: at.row,
             };
-            return tape.run_inputs(&at.pt, at.hi, &inputs, regs);
+            return tape.run(&at.pt, at.hi, &inputs, regs);
         }
         self.evaluate_qps(at, tape.reads_qp_derivs());
         let bank = self.qp_bank.borrow();
@@ -299,21 +299,13 @@ impl InterpretedModel {
             },
             row: at.row,
         };
-        tape.run_inputs(&at.pt, at.hi, &inputs, regs)
+        tape.run(&at.pt, at.hi, &inputs, regs)
     }
 
     /// Runs `tape` and writes its dense output (zeros included) into `out`; NaN on failure.
     fn eval(&self, tape: &Tape, at: &TapeAt<'_>, regs: &mut [f64], out: &mut [f64]) {
-        let ok = self.run(tape, at, regs);
-        let fill = if ok { 0.0 } else { f64::NAN };
-        out.iter_mut().take(tape.len()).for_each(|o| *o = fill);
-        if ok {
-            for (s, r) in tape.outputs() {
-                if let Some(o) = out.get_mut(s) {
-                    *o = regs[r];
-                }
-            }
-        }
+        let ran = self.run(tape, at, regs);
+        tape.write_output(ran, regs, out);
     }
 
     /// Runs `tape` and hands the registers and the dense output buffer to `f`.

@@ -289,6 +289,33 @@ fn table_events_stream_and_never_trip_the_event_budget() {
 }
 
 #[test]
+fn scheduled_events_never_trip_the_event_or_step_budget() {
+    // A sampled controller at 1 kHz: 1051 samples against a budget of 100 events and 500
+    // step attempts. Like a table's rows, an `every` event's occurrences are given by the
+    // model (T/period of them), not a flood: they count against neither budget.
+    let p = [2.0, 1e-3, 1.5];
+    let c = sampled_closed_form(p[0], p[1], p[2]);
+    let dgain = models::derivative(|v| sampled_closed_form(v, p[1], p[2]), p[0], 1e-2);
+    let opts = Options {
+        max_events: 100,
+        max_steps: 500,
+        ..tight()
+    };
+    let interp = loaded("sampled.hyb");
+    for sol in [run(&Sampled::new(), &p, &opts), run(&interp, &p, &opts)] {
+        assert_eq!(sol.stats.events, 1051);
+        assert_relative_eq!(sol.cost, c, max_relative = 1e-12);
+        assert_relative_eq!(sol.gradient[0], dgain, max_relative = 1e-9);
+    }
+    // What bounds such a run instead: a period so short that the event would fire more than
+    // 10⁹ times before T is bad input, not a run that never ends.
+    let pv = nalgebra::DVector::from_vec(vec![2.0, 1e-12, 1.5]);
+    let err = solve(&interp, &pv, &opts).unwrap_err();
+    assert!(err.is_bad_input(), "{err}");
+    assert!(err.to_string().contains("1.050e12 times"), "{err}");
+}
+
+#[test]
 fn bad_tables_are_located_errors() {
     let t = Table::parse_csv("q.csv", "t,s\n1,2\n0.5,1\n".to_string()).expect("parses");
     let err = queue::Queue::new(queue::QueueTables {

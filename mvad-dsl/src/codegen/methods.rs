@@ -28,13 +28,14 @@ impl Gen<'_> {
             None => quote!(::core::option::Option::None),
         };
         let events = k.event_meta.iter().map(|e| {
-            let name = &e.name;
-            let dir = match e.direction {
+            let d = &e.decl;
+            let name = &d.name;
+            let dir = match d.direction {
                 Direction::Down => quote!(#pr::Direction::Down),
                 Direction::Up => quote!(#pr::Direction::Up),
             };
-            let (mode, target) = (opt(e.mode), opt(e.target));
-            let (hr, hc) = (e.has_reset, e.has_cost);
+            let (mode, target) = (opt(d.mode), opt(d.target));
+            let (hr, hc) = (d.has_reset, e.has_cost);
             // `rows` is bound by the constructor of a model with tables.
             let trigger = match e.time {
                 None => quote!(#pr::Trigger::Guard),
@@ -361,6 +362,7 @@ impl Gen<'_> {
         let #pr::Point { mode, sw, t, x, p } = pt; #sens }
         };
         let core = quote! {
+            #[inline]
             fn info(&self) -> &#pr::ModelInfo { &self.info }
             fn nstates(&self) -> Self::N { #pr::Const }
             fn nparams(&self) -> Self::P { #pr::Const }
@@ -378,15 +380,20 @@ impl Gen<'_> {
             fn rhs_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, ft: &mut #xv) {
         let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
+            #[inline]
             fn flow_is_constant(&self, mode: usize) -> bool { #constant }
             fn guard_is_affine(&self, event: usize) -> bool { #affine }
             #[inline]
             fn guard(&self, event: usize, #at) -> f64 { #let_at #guard }
             #[inline]
             fn guard_grad(&self, event: usize, #at, gx: &mut #xv, gp: &mut #pv) -> f64 { #let_at #guard_grad }
+            #[inline]
             fn reset(&self, #occ, #at, xplus: &mut #xv) { #let_occ #let_at #row #reset }
+            #[inline]
             fn reset_jac(&self, #occ, #at, rx: &mut #mnn, rp: &mut #mnp, rt: &mut #xv) { #let_occ #let_at #row #reset_jac }
+            #[inline]
             fn event_time(&self, #occ, p: &#pv) -> f64 { #let_occ #row #etime }
+            #[inline]
             fn event_time_grad(&self, #occ, p: &#pv, dtau: &mut #pv) { #let_occ #row #etime_grad }
             #[inline]
             fn switch_value(&self, j: usize, #at) -> f64 { #let_at #swv }
@@ -398,7 +405,9 @@ impl Gen<'_> {
             fn running_cost(&self, sw: &#sw_t, #at) -> f64 { #let_at #rc }
             #[inline]
             fn running_cost_value_grad(&self, sw: &#sw_t, #at, lx: &mut #xv, lp: &mut #pv) -> f64 { #let_at #rcg }
+            #[inline]
             fn event_cost(&self, #occ, #at) -> f64 { #let_occ #let_at #row #ecost }
+            #[inline]
             fn event_cost_grad(&self, #occ, #at, cx: &mut #xv, cp: &mut #pv) -> f64 { #let_occ #let_at #row #ecost_grad }
             fn final_cost(&self, #at) -> f64 { #let_at #fc }
             fn final_cost_grad(&self, #at, cx: &mut #xv, cp: &mut #pv) -> f64 { #let_at #fcg }

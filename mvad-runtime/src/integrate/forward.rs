@@ -289,7 +289,8 @@ where
     /// running cost: F = (f(θ), f_θ(θ), 0, 0).
     #[inline]
     fn constant_rate(&self) -> bool {
-        !self.rhs.has_rc && self.rhs.model.flow_is_constant(self.rhs.mode)
+        // `rates` holds a slot exactly for the modes with !has_rc && flow_is_constant.
+        matches!(self.rates.get(self.rhs.mode), Some(Some(_)))
     }
 
     #[inline]
@@ -522,6 +523,16 @@ where
     /// In a constant-rate mode the first step's k₀ = F is the mode's F as first evaluated
     /// under the same switch bits (F does not depend on t or Y there), not a new evaluation.
     pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: &Switches) {
+        // Still in the same constant-rate mode under the same bits (a time event that
+        // changed neither): k₀ = F stays where the last exact step left it.
+        if self.scheme == Scheme::Exact
+            && self.dense_scheme == Scheme::Exact
+            && mode == self.sys.rhs.mode
+            && *sw == self.sys.rhs.sw
+        {
+            self.restart_exact_keeping_rate(t, y);
+            return;
+        }
         self.sys.rhs.mode = mode;
         self.sys.rhs.sw.clone_from(sw);
         self.restart_at(t, y);

@@ -36,7 +36,7 @@
 //!   h·ρ(f_x) from a power iteration on the Jacobian (this catches steps held near 1/ρ by
 //!   something other than stability, e.g. sensitivity error control); after repeated stiff
 //!   steps it switches to Rodas5P, and back when h·ρ(f_x) < 0.4 shows the explicit method
-//!   would be stable again.
+//!   would be stable again (`stiffness.rs`).
 //!
 //! ## Error control and step size
 //! The local error estimate e of the embedded pair is measured in the system's weighted RMS
@@ -63,6 +63,9 @@ mod forward;
 mod global_error;
 mod quadrature;
 mod rosenbrock;
+mod scheme;
+mod step_error;
+mod stiffness;
 pub mod system;
 mod tsit5;
 mod verner;
@@ -73,174 +76,19 @@ pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
 pub use global_error::{GlobalError, ResetSecant, Saltation};
+pub use scheme::Scheme;
+pub use step_error::StepError;
 pub use system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 
 use crate::solution::{Method, Options, Stats};
 use control::Controller;
-use std::fmt;
 use tsit5::TSIT5;
 use verner::VERNER9;
 
-/// Why a step could not be taken.
-#[derive(Clone, Debug, PartialEq)]
-pub enum StepError {
-    /// The step size fell below what the floating-point resolution of t allows.
-    StepSizeUnderflow {
-        /// Time at which the integrator is stuck.
-        t: f64,
-        /// The step size it would need.
-        h: f64,
-        /// The largest |entry| of the integrated state there (a solution that blows up
-        /// shows here).
-        largest: f64,
-    },
-    /// A NaN or infinity appeared and shrinking the step did not remove it.
-    NonFinite {
-        /// Time of the step start (for a flow that is undefined beyond some t*, the last
-        /// step creeps up to t* before giving up, so this is t* to rounding).
-        t: f64,
-        /// The expression it came from: `flow of mode `m``, `sensitivity equation of the
-        /// flow of mode `m``, `running cost`, `running-cost gradient`, or `state x` when
-        /// every evaluated stage was finite but their combination overflowed.
-        what: String,
-    },
-    /// `Options::max_steps` step attempts (accepted + rejected) were used up.
-    MaxSteps {
-        /// Time reached.
-        t: f64,
-        /// The limit that was hit.
-        steps: usize,
-        /// The step size the integrator had come down to.
-        h: f64,
-        /// Whether stiffness is ruled out as the cause: the implicit scheme was in use, or
-        /// `auto` was (its stiffness test did not switch). Suggesting an implicit method
-        /// would then mislead.
-        not_stiff: bool,
-        /// The largest |entry| of the integrated state there.
-        largest: f64,
-    },
-}
-
-impl fmt::Display for StepError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            StepError::StepSizeUnderflow { t, h, largest } => write!(
-                f,
-                "step size underflow at t = {t:e} (h = {h:e}, largest |state| {largest:e})"
-            ),
-            StepError::NonFinite { t, what } => write!(f, "non-finite {what} at t = {t:e}"),
-            StepError::MaxSteps {
-                t,
-                steps,
-                h,
-                not_stiff,
-                largest,
-            } => write!(
-                f,
-                "gave up after {steps} steps at t = {t:e} (max_steps; last step {h:e}, \
-                 largest |state| {largest:e}{})",
-                if *not_stiff {
-                    ", not for stiffness"
-                } else {
-                    ""
-                }
-            ),
-        }
-    }
-}
-
-impl std::error::Error for StepError {}
-
-/// The scheme taking the steps (what [`Method::Auto`] is using at the moment). Everything that
-/// differs between schemes is looked up here or dispatched in `attempt`/`dense`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Scheme {
-    /// Tsitouras 5(4).
-    Tsit5,
-    /// Verner 9(8).
-    Verner9,
-    /// Rodas5P (linearly implicit).
-    Rodas5P,
-    /// Y + h·F for a constant F: exact, one step to the stop time (see the module doc).
-    Exact,
-}
-
-impl Scheme {
-    /// The scheme a run of `method` starts with.
-    pub fn initial(method: Method) -> Scheme {
-        match method {
-            Method::Auto | Method::Tsit5 => Scheme::Tsit5,
-            Method::Verner9 => Scheme::Verner9,
-            Method::Rosenbrock => Scheme::Rodas5P,
-        }
-    }
-
-    /// The method that names this scheme.
-    pub fn method(self) -> Method {
-        match self {
-            Scheme::Tsit5 => Method::Tsit5,
-            Scheme::Verner9 => Method::Verner9,
-            Scheme::Rodas5P => Method::Rosenbrock,
-            // Exact steps stand in for whatever method was asked for.
-            Scheme::Exact => Method::Auto,
-        }
-    }
-
-    /// (order of the error estimate + 1, stage slots, stages evaluated by an attempt, slot
-    /// left holding F(t + h, Y₁) after an accepted step).
-    const fn info(self) -> (f64, usize, usize, Option<usize>) {
-        match self {
-            Scheme::Tsit5 => (
-                TSIT5.error_order,
-                tsit5::STAGES,
-                tsit5::STAGES,
-                Some(TSIT5.fsal_slot()),
-            ),
-            Scheme::Verner9 => (
-                VERNER9.error_order,
-                verner::STAGES_WITH_DENSE,
-                verner::STAGES,
-                Some(VERNER9.fsal_slot()),
-            ),
-            Scheme::Rodas5P => (5.0, rosenbrock::STAGES, rosenbrock::STAGES, None),
-            // F is constant: the next step's first stage is this one's.
-            Scheme::Exact => (1.0, 1, 1, Some(0)),
-        }
-    }
-
-    /// Order of the error estimate + 1 (the exponent base of the controller).
-    pub fn error_order(self) -> f64 {
-        self.info().0
-    }
-
-    /// Stage slots a run of `method` needs (for every scheme it may use).
-    pub fn slots(method: Method) -> usize {
-        match method {
-            Method::Auto => Scheme::Tsit5.info().1.max(Scheme::Rodas5P.info().1),
-            m => Scheme::initial(m).info().1,
-        }
-    }
-}
-
-/// Real-axis stability boundary of Tsit5 used by the stiffness test (|hλ| beyond it is
-/// unstable; the test fires slightly inside it).
-const TSIT5_STIFF_BOUND: f64 = 3.25;
-/// Accepted stiff-looking Tsit5 steps (with fewer than 6 non-stiff ones in between) before
-/// `auto` switches to Rodas5P.
-const STIFF_STEPS_TO_SWITCH: usize = 15;
-/// Accepted Tsit5 steps between two Jacobian-based stiffness checks under `auto`.
-const JAC_CHECK_EVERY: usize = 20;
-/// |h|·ρ(f_x) above which a Tsit5 step counts as stiff in the Jacobian check (three checks in
-/// a row switch to Rodas5P).
-const JAC_STIFF_HRHO: f64 = 0.8;
-/// |h|·ρ(f_x) below which a Rodas5P step counts as non-stiff.
-const JAC_NONSTIFF_HRHO: f64 = 0.4;
 /// The rate after a restart, against the rate before it, beyond which a seeded step gives
 /// way to Hairer's heuristic ([`Integrator::set_step_size`]); within it (the controller's own
 /// growth limit) the seed stands.
 const SEED_RATE_JUMP: f64 = 10.0;
-/// Consecutive non-stiff Rodas5P steps before `auto` switches back to Tsit5.
-const NONSTIFF_STEPS_TO_SWITCH: usize = 20;
 
 /// An adaptive one-step integrator of the system `Sys` (see the module doc); for the forward
 /// augmented flow of a model, `Integrator<Forward<'_, M>>` built by [`Integrator::new`].
@@ -378,6 +226,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         } else {
             self.adaptive
         };
+        self.restart_clock_and_state(t, y);
+        self.k0_valid = false;
+        self.ctrl.reset(self.scheme.error_order());
+        self.ctrl.last_rejected = false;
+        self.dense_scheme = self.scheme;
+    }
+
+    /// What every restart forgets: the clock and state restart at (t, y) with no step behind
+    /// them (no dense output, no step-size proposal or seed, no FSAL stage, no Jacobian).
+    fn restart_clock_and_state(&mut self, t: f64, y: &Sys::Vector) {
         self.t = t;
         self.t_prev = t;
         self.dense_h = 0.0;
@@ -386,13 +244,21 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.seed_rate = None;
         self.y.copy_from(y);
         self.y_prev.copy_from(y);
-        self.k0_valid = false;
         self.fsal_slot = None;
-        self.ctrl.reset(self.scheme.error_order());
-        self.ctrl.last_rejected = false;
-        self.dense_scheme = self.scheme;
         self.dense_pending = false;
         self.sys.invalidate();
+    }
+
+    /// The restart after a jump inside a segment of exact steps that leaves F as it was (the
+    /// caller knows F is the same: a constant-rate system under the same mode and bits, F a
+    /// function of θ, the mode and the bits alone): closes the last step and restarts at
+    /// (t, y) like [`Integrator::restart_at`], keeping k[0] = F (an exact step and a
+    /// truncation of one leave it in place) instead of taking it again.
+    pub fn restart_exact_keeping_rate(&mut self, t: f64, y: &Sys::Vector) {
+        debug_assert!(self.scheme == Scheme::Exact && self.dense_scheme == Scheme::Exact);
+        self.close_step();
+        self.restart_clock_and_state(t, y);
+        self.k0_valid = true;
     }
 
     /// Verner 9(8) only: with `on`, the nine interpolation stages of an accepted step beyond
@@ -602,14 +468,30 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         if self.stats.steps + self.stats.rejected_steps >= self.max_steps {
             return Err(self.out_of_steps(h.abs()));
         }
-        self.exact_attempt(h);
+        // In place (no candidate state to swap in): y_prev ← Y, Y ← Y + h·F.
         self.quadrature_formed = false;
-        if !self.ynew.is_finite() {
+        self.y_prev.copy_from(&self.y);
+        let all = self.sys.all_parts();
+        self.y.axpy(h, &self.k[0], all);
+        if !self.y.is_finite() {
+            std::mem::swap(&mut self.y, &mut self.ynew);
+            self.y.copy_from(&self.y_prev);
             self.stats.rejected_steps += 1;
             let what = self.nonfinite_source();
             return Err(StepError::NonFinite { t: self.t, what });
         }
-        self.accept(h, true, t_stop);
+        self.t_prev = self.t;
+        self.t = t_stop;
+        self.dense_h = h;
+        self.truncated = false;
+        self.dense_scheme = Scheme::Exact;
+        self.stats.steps += 1;
+        // F is constant: k[0] stays the next step's first stage.
+        self.k0_valid = false;
+        self.fsal_slot = Some(0);
+        self.sys.invalidate();
+        self.dense_pending = false;
+        self.stats.rhs_evals = self.sys.evals();
         // Pending like any accepted step: `close_step` carries no global error over an
         // exact step but adds its quadrature (the adjoint's g += −h λᵀf_θ).
         self.carry_pending = Some(h);
@@ -786,66 +668,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             self.accepted_interp_stages(&VERNER9, h);
         }
         self.stats.rhs_evals = self.sys.evals();
-    }
-
-    /// Auto switching between Tsit5 and Rodas5P after an accepted step.
-    fn update_stiffness(&mut self) {
-        if self.requested != Method::Auto || self.scheme == Scheme::Exact {
-            return;
-        }
-        match self.scheme {
-            Scheme::Tsit5 => {
-                if self.stiff_ratio > TSIT5_STIFF_BOUND {
-                    self.stiff_count += 1;
-                    self.nonstiff_count = 0;
-                } else {
-                    self.nonstiff_count += 1;
-                    if self.nonstiff_count >= 6 {
-                        self.stiff_count = 0;
-                    }
-                }
-                // Second test (for steps held small by something other than the stability
-                // bound, where Hairer's ratio stays low): every JAC_CHECK_EVERY steps compare
-                // h with the spectral radius of the Jacobian.
-                self.jac_check_count += 1;
-                if self.jac_check_count >= JAC_CHECK_EVERY {
-                    self.jac_check_count = 0;
-                    let rho = self.sys.spectral_radius_at(self.t, &self.y);
-                    self.stats.jac_evals += 1;
-                    if self.dense_h.abs() * rho > JAC_STIFF_HRHO {
-                        self.jac_stiff_count += 1;
-                    } else {
-                        self.jac_stiff_count = 0;
-                    }
-                }
-                if self.stiff_count >= STIFF_STEPS_TO_SWITCH || self.jac_stiff_count >= 3 {
-                    self.jac_stiff_count = 0;
-                    self.jac_check_count = 0;
-                    self.scheme = Scheme::Rodas5P;
-                    self.stiff_count = 0;
-                    self.nonstiff_count = 0;
-                    // The FSAL stage is F(t, y) and stays valid for Rodas5P's first stage.
-                    self.ctrl.reset(self.scheme.error_order());
-                }
-            }
-            Scheme::Rodas5P => {
-                // Back to explicit when the step Rodas5P proposes is well inside Tsit5's
-                // stability region (hysteresis against the forward tests).
-                let rho = self.sys.jac_spectral_radius();
-                if self.h * rho < JAC_NONSTIFF_HRHO {
-                    self.nonstiff_count += 1;
-                } else {
-                    self.nonstiff_count = 0;
-                }
-                if self.nonstiff_count >= NONSTIFF_STEPS_TO_SWITCH {
-                    self.scheme = Scheme::Tsit5;
-                    self.nonstiff_count = 0;
-                    self.stiff_count = 0;
-                    self.ctrl.reset(self.scheme.error_order());
-                }
-            }
-            Scheme::Verner9 | Scheme::Exact => {}
-        }
     }
 
     /// The system's weighted RMS norm of `yerr` relative to y (start) and ynew (end).

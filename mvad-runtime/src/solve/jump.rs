@@ -11,9 +11,10 @@ use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind};
 use nalgebra::DefaultAllocator;
 
-/// Step attempts each row of a data table adds to `Options::max_steps`, which is there to stop
-/// an explicit method crawling through a stiff segment, not a run over a long table.
-const STEPS_PER_TABLE_ROW: usize = 100;
+/// Step attempts each scheduled occurrence (a table row, a sample of an `every` event, an `at`
+/// event) adds to `Options::max_steps`, which is there to stop an explicit method crawling
+/// through a stiff segment, not a run over a long schedule.
+const STEPS_PER_SCHEDULED_EVENT: usize = 100;
 
 /// How the trajectory met the guard of the event being applied.
 #[derive(Clone, Copy, Debug)]
@@ -36,6 +37,9 @@ struct Approach {
     /// with θ (t' = 0) skips both when nothing else reads them (no global error estimate
     /// to carry): every term they enter is multiplied by t' = 0, so they are zero instead.
     flows: bool,
+    /// With sensitivities, t' = 0 exactly (a time event whose time does not move with θ):
+    /// every term multiplied by t' is left out (S⁺ = R_x S⁻ + R_θ, dx⁺/dθ = S⁺).
+    still: bool,
 }
 
 impl<M: HybridModel> Driver<'_, M>
@@ -57,7 +61,7 @@ where
         let approach = self.event_approach(k, j, t)?;
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
-        let l_plus = self.event_costs(k, j, t)?;
+        let l_plus = self.event_costs(k, j, t, approach.still)?;
         self.error_through_event(k, j, t, approach.rate, l_plus);
         // Time events neither accumulate nor get stuck: their times are given.
         let zeno_stop = if timed {
@@ -66,9 +70,9 @@ where
             self.zeno_verdict(t, l_plus, approach.grazing, approach.cosine)
         };
         self.emit_event(k, t, mode_before, approach, sink);
-        if matches!(info.events[k].trigger, crate::model::Trigger::Each { .. }) {
-            self.table_events += 1;
-            self.integ.extend_step_budget(STEPS_PER_TABLE_ROW);
+        if timed {
+            self.scheduled_events += 1;
+            self.integ.extend_step_budget(STEPS_PER_SCHEDULED_EVENT);
         }
         self.schedule.advance(self.model, self.p, k)?;
         let mode_after = self.mode;
@@ -125,25 +129,12 @@ where
         let info = model.info();
         let name = &info.events[k].name;
         self.nonfinite_x(t, &self.y.x, || "state at event".into())?;
-        let timed = info.events[k].is_time_event();
-        let gt = sens::event_guard_grad(model, k, j, t, &self.y.x, p, &mut self.gx, &mut self.gp);
-        let flows = !timed || self.flows_matter_at_time_event();
-        if flows {
-            model.rhs(
-                Point::new(self.mode, &self.sw, t, &self.y.x, p),
-                &mut self.f_minus,
-            );
-            self.nonfinite_x(t, &self.f_minus, || {
-                format!("flow of mode `{}`", info.modes[self.mode])
-            })?;
-        } else {
-            self.f_minus.fill(0.0);
+        if info.events[k].is_time_event() {
+            return self.time_event_approach(k, j, t);
         }
-        let g = if timed {
-            0.0
-        } else {
-            model.guard(k, At::new(t, &self.y.x, p))
-        };
+        let gt = model.guard_grad(k, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
+        self.flow_before(t)?;
+        let g = model.guard(k, At::new(t, &self.y.x, p));
         if !(gt.is_finite()
             && g.is_finite()
             && self.gx.iter().all(|v| v.is_finite())
@@ -154,21 +145,14 @@ where
                 what: format!("guard of event `{name}`"),
             });
         }
-        // A time event's g = t − τ has ∇g = 0: its rate is ∂g/∂t = 1 and so is its cosine.
-        let (rate, scale) = if timed {
-            (gt, gt.abs())
-        } else {
-            (
-                self.gx.dot(&self.f_minus) + gt,
-                self.gx.norm() * self.f_minus.norm() + gt.abs(),
-            )
-        };
+        let rate = self.gx.dot(&self.f_minus) + gt;
+        let scale = self.gx.norm() * self.f_minus.norm() + gt.abs();
         let cosine = sens::cosine_of(rate, scale);
         let grazing = sens::is_grazing_cosine(cosine, self.opts.grazing_tol);
-        let g = if !timed && !grazing {
-            self.snap_onto_guard(k, t, g, rate)
-        } else {
+        let g = if grazing {
             g
+        } else {
+            self.snap_onto_guard(k, t, g, rate)
         };
         let approach = Approach {
             rate,
@@ -177,7 +161,8 @@ where
             scale,
             grazing,
             signed_guard: info.events[k].direction.sign() * g,
-            flows,
+            flows: true,
+            still: false,
         };
         if !self.sens {
             return Ok(approach);
@@ -194,15 +179,59 @@ where
         Ok(approach)
     }
 
-    /// Whether a time event must evaluate f⁻ and f⁺ (∂τ/∂θ = −∂g/∂θ already in `gp`): they
-    /// enter the saltation jump and the cost terms only through t' = ∂τ/∂θ, and the global
-    /// error estimate's jump (nothing while it is zero).
-    fn flows_matter_at_time_event(&mut self) -> bool {
-        (self.sens && self.gp.iter().any(|&v| v != 0.0))
+    /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite.
+    fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
+        let info = self.model.info();
+        self.model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, self.p),
+            &mut self.f_minus,
+        );
+        self.nonfinite_x(t, &self.f_minus, || {
+            format!("flow of mode `{}`", info.modes[self.mode])
+        })
+    }
+
+    /// The approach of time event k (occurrence j) at its time t: g = t − τ_kj(θ), so ∇g = 0,
+    /// ∂g/∂θ = −∂τ/∂θ, ∂g/∂t = 1, the rate and the cosine are 1 (never grazing unless the
+    /// tolerance exceeds 1), g = 0 at the state it fires from, and t' = −(∇g·S⁻ + ∂g/∂θ)/1 =
+    /// ∂τ/∂θ, written straight into `self.dt` (`gp` = −t', `gx` = 0 as the error estimate
+    /// reads them). f⁻ is evaluated only when something reads it (see
+    /// [`Approach::flows`]); when t' = 0 the event is `still`.
+    fn time_event_approach(&mut self, k: usize, j: usize, t: f64) -> Result<Approach, SolveError> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        model.event_time_grad(Occurrence::new(k, j), p, &mut self.dt);
+        if !self.dt.iter().all(|v| v.is_finite()) {
+            return Err(SolveError::NonFinite {
+                t,
+                what: format!("guard of event `{}`", info.events[k].name),
+            });
+        }
+        self.gx.fill(0.0);
+        self.gp.copy_from(&self.dt);
+        self.gp.neg_mut();
+        let still = !self.dt.iter().any(|&v| v != 0.0);
+        let flows = (self.sens && !still)
             || self
                 .integ
                 .global_error_mut()
-                .is_some_and(|ge| !ge.is_zero())
+                .is_some_and(|ge| !ge.is_zero());
+        if flows {
+            self.flow_before(t)?;
+        } else {
+            self.f_minus.fill(0.0);
+        }
+        let cosine = sens::cosine_of(1.0, 1.0);
+        Ok(Approach {
+            rate: 1.0,
+            gt: 1.0,
+            cosine,
+            scale: 1.0,
+            grazing: sens::is_grazing_cosine(cosine, self.opts.grazing_tol),
+            signed_guard: 0.0,
+            flows,
+            still: self.sens && still,
+        })
     }
 
     /// Moves x⁻ along the flow onto the guard of event k: x⁻ ← x⁻ − f⁻·g/(∇g·f⁻ + ∂g/∂t), one
@@ -305,8 +334,10 @@ where
 
     /// The cost terms event k moves: the running-cost jump (ℓ⁻ − ℓ⁺)·t' into q_θ, the total
     /// derivative S⁺ + f⁺t' of the post-event state into `self.dtot`, and the event cost φ_k
-    /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ. Returns ℓ⁺ (0 without a running cost).
-    fn event_costs(&mut self, k: usize, j: usize, t: f64) -> Result<f64, SolveError> {
+    /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ; when the event is `still` (t' = 0,
+    /// [`Approach::still`]) that is φ_x S⁺ + φ_θ and `self.dtot` is not written. Returns ℓ⁺
+    /// (0 without a running cost).
+    fn event_costs(&mut self, k: usize, j: usize, t: f64, still: bool) -> Result<f64, SolveError> {
         let (model, p, sens) = (self.model, self.p, self.sens);
         let info = model.info();
         let mut l_plus = 0.0;
@@ -323,7 +354,7 @@ where
                 self.y.qp.axpy(l_minus - l_plus, &self.dt, 1.0);
             }
         }
-        if sens {
+        if sens && !still {
             sens::post_event_total(&self.s_plus, &self.f_plus, &self.dt, &mut self.dtot);
         }
         let ev = &info.events[k];
@@ -343,9 +374,14 @@ where
                     &mut self.cx,
                     &mut self.cp,
                 );
-                self.g_ev.gemv_tr(1.0, &self.dtot, &self.cx, 1.0);
-                self.g_ev += &self.cp;
-                self.g_ev.axpy(phi_t, &self.dt, 1.0);
+                if still {
+                    self.g_ev.gemv_tr(1.0, &self.s_plus, &self.cx, 1.0);
+                    self.g_ev += &self.cp;
+                } else {
+                    self.g_ev.gemv_tr(1.0, &self.dtot, &self.cx, 1.0);
+                    self.g_ev += &self.cp;
+                    self.g_ev.axpy(phi_t, &self.dt, 1.0);
+                }
             }
         }
         Ok(l_plus)

@@ -295,8 +295,9 @@ where
     schedule: Schedule,
     /// User events applied so far.
     nevents: usize,
-    /// Of those, the `at each` events (which never count towards `max_events`).
-    table_events: usize,
+    /// Of those, the time events (`at`, `every`, `at each`), which never count towards
+    /// `max_events`: their number is the model's, T/period or a table's rows.
+    scheduled_events: usize,
     diagnostics: Vec<Diagnostic>,
     switch_crossings: usize,
     zeno: Zeno<M>,
@@ -381,7 +382,7 @@ where
             fired: vec![None; nev],
             schedule: Schedule::new(model),
             nevents: 0,
-            table_events: 0,
+            scheduled_events: 0,
             diagnostics: Vec::new(),
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
@@ -533,7 +534,7 @@ where
         }
         self.switch_bits(0.0, false, false);
         std::mem::swap(&mut self.sw, &mut self.sw_next);
-        self.schedule.start(model, p)?;
+        self.schedule.start(model, p, self.t_end)?;
         self.restart(0.0)?;
         let nev = info.events.len();
         loop {
@@ -655,11 +656,11 @@ where
         if user > 1 {
             self.report_simultaneous(t);
         }
-        // Events from a table never count: their number is the table's, not a flood. Nor
-        // does one state event (or switch crossing) per table row: a queue drains once per
-        // arrival at most. A flood is many more than that.
-        let total = self.nevents - self.table_events + self.switch_crossings;
-        if total > self.opts.max_events.saturating_add(self.table_events) {
+        // Time events never count: their number is the schedule's (a table's rows, T/period),
+        // not a flood. Nor does one state event (or switch crossing) per scheduled occurrence:
+        // a queue drains once per arrival at most. A flood is many more than that.
+        let total = self.nevents - self.scheduled_events + self.switch_crossings;
+        if total > self.opts.max_events.saturating_add(self.scheduled_events) {
             return Err(SolveError::MaxEvents {
                 t,
                 count: self.opts.max_events,
@@ -673,7 +674,10 @@ where
         // heuristic would otherwise spend 3–4 growing steps on every segment.
         let h_seed = self.integ.last_step_size();
         self.restart(t)?;
-        self.integ.set_step_size(h_seed);
+        // An exact segment takes no seed (one step reaches its stop).
+        if self.integ.scheme() != Scheme::Exact {
+            self.integ.set_step_size(h_seed);
+        }
         Ok(false)
     }
 

@@ -12,6 +12,12 @@ use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc, Occurrence, Trigger};
 use nalgebra::{DefaultAllocator, OVector};
 
+/// The most occurrences an `every` event may have before T. Scheduled occurrences are the
+/// model's own (T/period of them, like a table's rows), so they count against neither
+/// `max_events` nor `max_steps`; this bound keeps a period typed too short (1e-12 over
+/// T = 1) from becoming a run that never ends.
+pub(super) const MAX_PERIODIC_OCCURRENCES: f64 = 1e9;
+
 /// Occurrence indices and next times of a run's events (allocated once).
 #[derive(Clone, Debug)]
 pub(super) struct Schedule {
@@ -70,11 +76,14 @@ impl Schedule {
     }
 
     /// First occurrences of every time event at or after t = 0; checks that periods are
-    /// positive and times finite.
+    /// positive, times finite, and that no `every` event fires more than
+    /// [`MAX_PERIODIC_OCCURRENCES`] times before `t_end` (scheduled occurrences count against
+    /// neither the event nor the step budget, so this bounds the run).
     pub(super) fn start<M: HybridModel>(
         &mut self,
         model: &M,
         p: &OVector<f64, M::P>,
+        t_end: f64,
     ) -> Result<(), SolveError>
     where
         DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -95,6 +104,16 @@ impl Schedule {
                         what: format!(
                             "its period is {period} and its first time {t0}; the period must be \
                              positive and both finite"
+                        ),
+                    });
+                }
+                let count = ((t_end - t0.max(0.0)) / period).floor() + 1.0;
+                if count > MAX_PERIODIC_OCCURRENCES {
+                    return Err(SolveError::BadSchedule {
+                        event: ev.name.clone(),
+                        what: format!(
+                            "with period {period:e} it would fire {count:.3e} times before the \
+                             horizon {t_end}, more than {MAX_PERIODIC_OCCURRENCES:.0e}"
                         ),
                     });
                 }
@@ -138,6 +157,7 @@ impl Schedule {
 
     /// Moves event k on to its next occurrence (after it fired or was skipped); the times of a
     /// schedule must not decrease.
+    #[inline]
     pub(super) fn advance<M: HybridModel>(
         &mut self,
         model: &M,

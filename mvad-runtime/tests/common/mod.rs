@@ -252,8 +252,9 @@ impl<T: Spec> AdModel<T> {
     fn np(&self) -> usize {
         self.info.params.len()
     }
-    /// Seeds t (direction 0), x (1..=n), p (n+1..).
-    fn seed(&self, t: f64, x: &[f64], p: &[f64]) -> (D, Vec<D>, Vec<D>) {
+    /// Seeds t (direction 0), x (1..=n), p (n+1..) at the point `at`.
+    fn seed(&self, at: At<'_, Dyn, Dyn>) -> (D, Vec<D>, Vec<D>) {
+        let (t, x, p) = slices(at);
         let n = x.len();
         let td = D::var(t, 0);
         let xd = x
@@ -268,23 +269,21 @@ impl<T: Spec> AdModel<T> {
             .collect();
         (td, xd, pd)
     }
-    /// ∂/∂x and ∂/∂p of the scalar `f` at (t, x, p) into `gx`, `gp`; returns (f, ∂f/∂t).
+    /// ∂/∂x and ∂/∂p of the scalar `f` at `at` into `gx`, `gp`; returns (f, ∂f/∂t).
     fn scalar_grad(
         &self,
-        t: f64,
-        x: &V,
-        p: &V,
+        at: At<'_, Dyn, Dyn>,
         gx: &mut V,
         gp: &mut V,
         f: impl Fn(D, &[D], &[D]) -> D,
     ) -> (f64, f64) {
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let (td, xd, pd) = self.seed(at);
         let d = f(td, &xd, &pd);
         (d.v, self.split(&d, gx.as_mut_slice(), gp.as_mut_slice()))
     }
     /// The flow at `pt` in dual numbers seeded at (t, x, p).
     fn flow(&self, pt: Pt<'_>) -> Vec<D> {
-        let (td, xd, pd) = self.seed(pt.t, pt.x.as_slice(), pt.p.as_slice());
+        let (td, xd, pd) = self.seed(pt.at());
         let mut f = vec![D::c(0.0); self.n()];
         self.spec
             .rhs(pt.mode, pt.sw.low_word(), td, &xd, &pd, &mut f);
@@ -334,7 +333,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.x0(p.as_slice(), x0.as_mut_slice());
     }
     fn initial_state_jac(&self, p: &V, dx0: &mut Mx) {
-        let pd: Vec<D> = p.iter().enumerate().map(|(i, &v)| D::var(v, i)).collect();
+        let pd = params_dual(p);
         let mut x = vec![D::c(0.0); self.n()];
         self.spec.x0(&pd, &mut x);
         partials(&x, 0, dx0);
@@ -343,7 +342,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.spec.horizon(p.as_slice())
     }
     fn horizon_grad(&self, p: &V, dt: &mut V) {
-        let pd: Vec<D> = p.iter().enumerate().map(|(i, &v)| D::var(v, i)).collect();
+        let pd = params_dual(p);
         dt.fill(0.0);
         if let Some(h) = self.spec.horizon(&pd) {
             for c in 0..self.np() {
@@ -352,14 +351,10 @@ impl<T: Spec> HybridModel for AdModel<T> {
         }
     }
     fn rhs(&self, pt: Pt<'_>, f: &mut V) {
-        self.spec.rhs(
-            pt.mode,
-            pt.sw.low_word(),
-            pt.t,
-            pt.x.as_slice(),
-            pt.p.as_slice(),
-            f.as_mut_slice(),
-        );
+        on_slices(pt.at(), |t, x, p| {
+            self.spec
+                .rhs(pt.mode, pt.sw.low_word(), t, x, p, f.as_mut_slice())
+        });
     }
     fn rhs_jac_x(&self, pt: Pt<'_>, fx: &mut Mx) {
         partials(&self.flow(pt), 1, fx);
@@ -377,19 +372,16 @@ impl<T: Spec> HybridModel for AdModel<T> {
         true
     }
     fn guard(&self, k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
-        let At { t, x, p } = at;
-        self.spec.guard(k, t, x.as_slice(), p.as_slice())
+        on_slices(at, |t, x, p| self.spec.guard(k, t, x, p))
     }
     fn guard_grad(&self, k: usize, at: At<'_, Self::N, Self::P>, gx: &mut V, gp: &mut V) -> f64 {
-        let At { t, x, p } = at;
-        self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
+        self.scalar_grad(at, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
             .1
     }
     fn reset(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>, xp: &mut V) {
-        let Occurrence { event: k, .. } = occ;
-        let At { t, x, p } = at;
-        self.spec
-            .reset(k, t, x.as_slice(), p.as_slice(), xp.as_mut_slice());
+        on_slices(at, |t, x, p| {
+            self.spec.reset(occ.event, t, x, p, xp.as_mut_slice())
+        });
     }
     fn reset_jac(
         &self,
@@ -399,11 +391,9 @@ impl<T: Spec> HybridModel for AdModel<T> {
         rp: &mut Mx,
         rt: &mut V,
     ) {
-        let Occurrence { event: k, .. } = occ;
-        let At { t, x, p } = at;
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let (td, xd, pd) = self.seed(at);
         let mut r = vec![D::c(0.0); self.n()];
-        self.spec.reset(k, td, &xd, &pd, &mut r);
+        self.spec.reset(occ.event, td, &xd, &pd, &mut r);
         for (rti, ri) in rt.iter_mut().zip(&r) {
             *rti = ri.g[0];
         }
@@ -411,21 +401,17 @@ impl<T: Spec> HybridModel for AdModel<T> {
         partials(&r, 1 + self.n(), rp);
     }
     fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64 {
-        let At { t, x, p } = at;
-        self.spec.switch(j, t, x.as_slice(), p.as_slice())
+        on_slices(at, |t, x, p| self.spec.switch(j, t, x, p))
     }
     fn switch_grad(&self, j: usize, at: At<'_, Self::N, Self::P>, gx: &mut V, gp: &mut V) -> f64 {
-        let At { t, x, p } = at;
-        self.scalar_grad(t, x, p, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
+        self.scalar_grad(at, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
             .1
     }
     fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
-        let At { t, x, p } = at;
-        self.spec.observe(t, x.as_slice(), p.as_slice(), y);
+        on_slices(at, |t, x, p| self.spec.observe(t, x, p, y));
     }
     fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
-        let At { t, x, p } = at;
-        let (td, xd, pd) = self.seed(t, x.as_slice(), p.as_slice());
+        let (td, xd, pd) = self.seed(at);
         let no = self.info.observables.len();
         let mut y = vec![D::c(0.0); no];
         self.spec.observe(td, &xd, &pd, &mut y);
@@ -436,9 +422,7 @@ impl<T: Spec> HybridModel for AdModel<T> {
         }
     }
     fn running_cost(&self, sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64 {
-        let At { t, x, p } = at;
-        self.spec
-            .running(sw.low_word(), t, x.as_slice(), p.as_slice())
+        on_slices(at, |t, x, p| self.spec.running(sw.low_word(), t, x, p))
     }
     fn running_cost_value_grad(
         &self,
@@ -447,16 +431,13 @@ impl<T: Spec> HybridModel for AdModel<T> {
         lx: &mut V,
         lp: &mut V,
     ) -> f64 {
-        let At { t, x, p } = at;
-        self.scalar_grad(t, x, p, lx, lp, |t, x, p| {
+        self.scalar_grad(at, lx, lp, |t, x, p| {
             self.spec.running(sw.low_word(), t, x, p)
         })
         .0
     }
     fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64 {
-        let Occurrence { event: k, .. } = occ;
-        let At { t, x, p } = at;
-        self.spec.event_cost(k, t, x.as_slice(), p.as_slice())
+        on_slices(at, |t, x, p| self.spec.event_cost(occ.event, t, x, p))
     }
     fn event_cost_grad(
         &self,
@@ -465,20 +446,34 @@ impl<T: Spec> HybridModel for AdModel<T> {
         cx: &mut V,
         cp: &mut V,
     ) -> f64 {
-        let Occurrence { event: k, .. } = occ;
-        let At { t, x, p } = at;
-        self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.event_cost(k, t, x, p))
-            .1
+        self.scalar_grad(at, cx, cp, |t, x, p| {
+            self.spec.event_cost(occ.event, t, x, p)
+        })
+        .1
     }
     fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64 {
-        let At { t, x, p } = at;
-        self.spec.final_cost(t, x.as_slice(), p.as_slice())
+        on_slices(at, |t, x, p| self.spec.final_cost(t, x, p))
     }
     fn final_cost_grad(&self, at: At<'_, Self::N, Self::P>, cx: &mut V, cp: &mut V) -> f64 {
-        let At { t, x, p } = at;
-        self.scalar_grad(t, x, p, cx, cp, |t, x, p| self.spec.final_cost(t, x, p))
+        self.scalar_grad(at, cx, cp, |t, x, p| self.spec.final_cost(t, x, p))
             .1
     }
+}
+
+/// θ in dual numbers, θ_i seeded in direction i.
+fn params_dual(p: &V) -> Vec<D> {
+    p.iter().enumerate().map(|(i, &v)| D::var(v, i)).collect()
+}
+
+/// The point `at` as the plain (t, x, θ) a [`Spec`] formula reads.
+fn slices<'a>(at: At<'a, Dyn, Dyn>) -> (f64, &'a [f64], &'a [f64]) {
+    (at.t, at.x.as_slice(), at.p.as_slice())
+}
+
+/// `f` of the point `at` as plain (t, x, θ): a [`Spec`] formula evaluated in `f64`.
+fn on_slices<R>(at: At<'_, Dyn, Dyn>, f: impl FnOnce(f64, &[f64], &[f64]) -> R) -> R {
+    let (t, x, p) = slices(at);
+    f(t, x, p)
 }
 
 /// Builds a `ModelInfo` quickly: running cost and horizon, no final cost.

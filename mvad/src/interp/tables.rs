@@ -42,7 +42,7 @@ impl Tables {
             times: k
                 .bare_time_columns()
                 .into_iter()
-                .map(|(c, e)| (c, k.event_meta[e].name.clone()))
+                .map(|(c, e)| (c, k.event_meta[e].decl.name.clone()))
                 .collect(),
             each: k
                 .event_meta

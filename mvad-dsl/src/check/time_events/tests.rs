@@ -2,11 +2,13 @@ use crate::testing::{assert_errors, front_errors as errors, Expected};
 
 const HEAD: &str = "model M { param k = 1; param p = 0.5; state x = 0; table arr = \"a.csv\";\n";
 
-/// Each case: a model body after [`HEAD`] and its one expected error.
+/// Each case: a model body after [`HEAD`] (so on line 2) and the column and message of its
+/// one expected error.
 #[track_caller]
-fn expect_each_with_head(cases: &[(&str, Expected)]) {
-    for &(body, want) in cases {
+fn expect_each_with_head(cases: &[(&str, usize, &'static str)]) {
+    for &(body, column, message) in cases {
         let src = format!("{HEAD}{body}");
+        let want: Expected = (2, column, message);
         assert_errors(&src, errors(&src), &[want]);
     }
 }
@@ -38,42 +40,41 @@ fn every_trigger_parses_and_names_may_be_keywords_of_triggers() {
 
 #[test]
 fn time_and_table_rules_report_located_errors() {
-    let cases: &[(&str, Expected)] = &[
+    let cases: &[(&str, usize, &str)] = &[
         (
             "flow { der(x) = 1; } event at x { x = 0; } }",
-            (2, 31, "the time of an event cannot depend on state `x`"),
+            31,
+            "the time of an event cannot depend on state `x`",
         ),
         (
             "flow { der(x) = 1; } event e every t; }",
-            (2, 36, "the time of event `e` cannot depend on the time `t`"),
+            36,
+            "the time of event `e` cannot depend on the time `t`",
         ),
         (
             "flow { der(x) = arr.s; } }",
-            (
-                2,
-                17,
-                "table column `arr.s` is read where no row is current",
-            ),
+            17,
+            "table column `arr.s` is read where no row is current",
         ),
         (
             "flow { der(x) = 1; } event e at each arq.t; }",
-            (2, 38, "unknown table `arq`"),
+            38,
+            "unknown table `arq`",
         ),
         (
             "flow { der(x) = 1; } event e at each k * p; }",
-            (2, 38, "the times of event `e` read no table column"),
+            38,
+            "the times of event `e` read no table column",
         ),
         (
             "flow { der(x) = 1; } event e at 1 { x = arr.s; } }",
-            (
-                2,
-                41,
-                "table column `arr.s` is read where no row is current",
-            ),
+            41,
+            "table column `arr.s` is read where no row is current",
         ),
         (
             "table arr = \"b.csv\"; flow { der(x) = 1; } }",
-            (2, 7, "duplicate table `arr`"),
+            7,
+            "duplicate table `arr`",
         ),
     ];
     expect_each_with_head(cases);
@@ -108,30 +109,30 @@ fn dotted_names_resolve_to_a_table_column_or_a_qp_variable() {
         vec![(0, "t".to_string()), (0, "s".to_string())]
     );
     assert_eq!(m.qps.len(), 1);
-    let cases: &[(&str, Expected)] = &[
+    let cases: &[(&str, usize, &str)] = &[
         // A name that is neither: the message names both kinds the model declares.
         (
             "qp q(u) { minimize u^2; } flow { der(x) = 1; } event e at each arr.t { x = r.s; } }",
-            (2, 76, "unknown table or qp `r`"),
+            76,
+            "unknown table or qp `r`",
         ),
         // A name that is both.
         (
             "qp arr(u) { minimize u^2; } flow { der(x) = 1; } event e at each arr.t; }",
-            (2, 66, "`arr.t` is ambiguous: `arr` is a table and a qp"),
+            66,
+            "`arr.t` is ambiguous: `arr` is a table and a qp",
         ),
         // A param is neither.
         (
             "flow { der(x) = 1; } event e at each arr.t { x = k.s; } }",
-            (2, 50, "param `k` is not a table: `k.s` names nothing"),
+            50,
+            "param `k` is not a table: `k.s` names nothing",
         ),
         // A qp's solution is not a row value: an event time cannot read it.
         (
             "qp q(u) { minimize (u - k)^2; } flow { der(x) = 1; } event e at each arr.t + q.u; }",
-            (
-                2,
-                78,
-                "the time of event `e` cannot depend on the solution of qp `q`",
-            ),
+            78,
+            "the time of event `e` cannot depend on the solution of qp `q`",
         ),
     ];
     expect_each_with_head(cases);
