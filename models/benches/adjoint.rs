@@ -31,8 +31,8 @@
 //! `docs/report/adjoint-scaling.md` has this bench's output, the instruction counts of
 //! `examples/adjoint_profile.rs` under callgrind (the steady figure on a shared machine), the
 //! crossover and the memory, with how each was measured. In short (helper `adjflat2`): the
-//! impact model's adjoint costs 2.71× at p = 1000 what it costs at p = 10 in instructions
-//! (forward mode 34.7×) and overtakes forward mode between p = 20 and 100; on chain, whose
+//! impact model's adjoint costs 2.65× at p = 1000 what it costs at p = 10 in instructions
+//! (forward mode 34×) and overtakes forward mode between p = 20 and 100; on chain, whose
 //! flow sums p terms, it does not overtake up to p = 1000 (1.8× slower there).
 
 use criterion::{criterion_group, Criterion};
