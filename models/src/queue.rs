@@ -7,7 +7,7 @@
 //! - [`lindley_ipa`]: the hand-written baseline, the Lindley recursion of the workload just
 //!   after arrival i, u_i = max(u_{i−1} − (A_i − A_{i−1}), 0) + s_i/μ, with its IPA derivatives
 //!   du_i/dμ = [u_{i−1} > A_i − A_{i−1}]·du_{i−1}/dμ − s_i/μ² and
-//!   du_i/dscale = [busy]·(du_{i−1}/dscale − (t_i − t_{i−1})) (DESIGN.md, E4), in `f64`;
+//!   du_i/dscale = \[busy\]·(du_{i−1}/dscale − (t_i − t_{i−1})) (DESIGN.md, E4), in `f64`;
 //! - [`exact`]: the same recursion in exact integer arithmetic on the same `f64` data (every
 //!   quantity an integer multiple of one fixed tiny unit), rounded to `f64` once at the end.
 //!

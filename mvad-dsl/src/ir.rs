@@ -207,7 +207,7 @@ pub enum Node {
     State(u32),
     /// Parameter θ_i.
     Param(u32),
-    /// Column c of the program's [`Program::columns`] at the current row of its table (a
+    /// Column c of the program's `Program::columns` at the current row of its table (a
     /// datum, never differentiated; read only by `at each` events).
     Column(u32),
     /// a + b (operands sorted by id).
@@ -345,7 +345,7 @@ impl QpValues<'_> {
 pub struct Inputs<'a> {
     /// The qp solutions and their derivatives.
     pub qp: QpValues<'a>,
-    /// The current row's value of every column of [`Program::columns`] (empty outside the
+    /// The current row's value of every column of `Program::columns` (empty outside the
     /// methods of `at each` events).
     pub row: &'a [f64],
 }
@@ -582,7 +582,7 @@ pub enum Schedule {
     },
     /// `at each τ`: at t = τ(θ, row j) for every row j of table `table`.
     Each {
-        /// Index into [`Program::tables`].
+        /// Index into `Program::tables`.
         table: usize,
         /// τ, reading [`Node::Column`]s of that table.
         time: ExprId,

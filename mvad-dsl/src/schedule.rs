@@ -174,7 +174,7 @@ pub enum TimeKind {
     At,
     /// `every PERIOD from START`.
     Every,
-    /// `at each EXPR` over the rows of table `table` (index into [`ModelKernels::tables`]).
+    /// `at each EXPR` over the rows of table `table` (index into `ModelKernels::tables`).
     Each {
         /// The table.
         table: usize,

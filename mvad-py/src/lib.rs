@@ -1,11 +1,11 @@
 //! `mvad._mvad`, the native half of the Python package `mvad` (PyO3).
 //!
-//! [`load`] and [`from_source`] turn `.hyb` text into a [`model::Model`]; its methods return
+//! `load` and `from_source` turn `.hyb` text into a `model::Model`; its methods return
 //! the JSON object of `mvad grad --json` as a dict (built by `mvad::json`, the builder the
 //! command line prints), trajectories and measures as numpy arrays, and the batched kernels
 //! the `mvad.jax` and `mvad.torch` layers call. Every solve runs with the GIL released, and
 //! batches run across cores (`mvad::batch::par_map`). Errors become Python exceptions
-//! ([`errors`]); a panic is caught and raised as `mvad.SolveError`, never unwound into the
+//! (`errors`); a panic is caught and raised as `mvad.SolveError`, never unwound into the
 //! interpreter.
 
 mod convert;

@@ -4,7 +4,7 @@
 //! S = ∂x/∂θ through every jump and returns the parameter derivative of a trajectory
 //! as a measure — a density on the smooth segments plus Dirac atoms at the events —
 //! and reduced to dC/dθ for the model's cost; or computes dC/dθ and vector–Jacobian
-//! products by one backward (adjoint) sweep ([`adjoint`], [`vjp`]). Knows nothing of
+//! products by one backward (adjoint) sweep ([`adjoint`], [`vjp`](mod@vjp)). Knows nothing of
 //! parsing: models come in through the [`HybridModel`] trait.
 
 #[cfg(any(test, feature = "test-fixtures"))]

@@ -5,7 +5,7 @@
 //!   ∂yᵢ/∂θ = h_x(tᵢ) S(tᵢ) + h_θ(tᵢ),
 //! ```
 //!
-//! the density of the measure μ_y at tᵢ ([`crate::measure`]): a sample at a fixed time tᵢ that
+//! the density of the measure μ_y at tᵢ ([`crate::measure`](mod@crate::measure)): a sample at a fixed time tᵢ that
 //! is not an event time sees no atom, since the event moves past it only when θ moves by a
 //! finite amount. Like the record, a sample is right-continuous: at an event time it reads
 //! the post-event state x(t_k⁺).

@@ -13,7 +13,7 @@
 //! with the primal values. **Sampling is right-continuous**, as the trajectory record
 //! (`Trajectory::sample`, what `simulate` and the measure sample) is: at an event time t_k
 //! the sample is y(t_k⁺), after every jump at t_k, and its derivative is the density
-//! h_x S(t_k⁺) + h_θ of the observable's measure ([`crate::sample`]); the atom −J_k t_k' that
+//! h_x S(t_k⁺) + h_θ of the observable's measure ([`crate::sample`](mod@crate::sample)); the atom −J_k t_k' that
 //! the measure puts there is not part of it (y(t_k) itself jumps as t_k moves with θ: it has
 //! no derivative, only one-sided ones). At T the sample is x(T) after any event at T.
 //!

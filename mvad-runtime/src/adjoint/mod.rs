@@ -8,8 +8,8 @@
 //! 1. runs the event loop without sensitivities (x and q only, O(n) per step) and keeps the
 //!    forward record ([`record::Tape`]: every step's dense output, every jump with its states,
 //!    modes and switch bits; the memory is stated there);
-//! 2. sweeps backwards from T to 0 ([`sweep`]): λ̇ = −f_xᵀλ − ℓ_xᵀ on each segment with
-//!    ∫ (λᵀf_θ + ℓ_θ) dt accumulated, the transpose of every jump ([`transpose`]), and at the
+//! 2. sweeps backwards from T to 0 (`sweep`): λ̇ = −f_xᵀλ − ℓ_xᵀ on each segment with
+//!    ∫ (λᵀf_θ + ℓ_θ) dt accumulated, the transpose of every jump (`transpose`), and at the
 //!    ends the final and initial terms.
 //!
 //! Both converge to the same exact dC/dθ; they differ by the integrators' errors (the primal
@@ -31,7 +31,7 @@
 //!
 //! [`crate::vjp::vjp`] is the entry point for reverse-mode callers (a JAX `custom_vjp`, a
 //! torch `autograd.Function`): cotangents of C and of observables at sample times in, dθ out;
-//! in adjoint mode it calls [`pull_back`].
+//! in adjoint mode it calls `pull_back`.
 //!
 //! ## qp layers
 //! A qp read by a flow is solved on the active set its switch bits freeze, so on a segment the

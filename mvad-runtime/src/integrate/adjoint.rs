@@ -434,7 +434,7 @@ where
         self.rhs.evals
     }
 
-    /// [`WeightedRms`] over λ with weight 1 (g is a quadrature outside the vector; see the
+    /// `WeightedRms` over λ with weight 1 (g is a quadrature outside the vector; see the
     /// module doc).
     #[inline]
     fn error_norm(
@@ -528,8 +528,8 @@ where
         }
     }
 
-    /// [`WeightedRms`] over the support of the error of Δg against g and g + Δg, entry j
-    /// weighted by [`gradient_weight`]`(θ_j)`: g is a running sum, held relative to its own
+    /// `WeightedRms` over the support of the error of Δg against g and g + Δg, entry j
+    /// weighted by `gradient_weight``(θ_j)`: g is a running sum, held relative to its own
     /// size as forward mode holds S.
     fn quadrature_error_norm(&self, atol: f64, rtol: f64) -> f64 {
         let q = &self.quad;
@@ -633,7 +633,7 @@ where
         }
     }
 
-    /// [`AdjointError::carry`] with J = −f_xᵀ and the sparse product f_θᵀv at the step start
+    /// `AdjointError::carry` with J = −f_xᵀ and the sparse product f_θᵀv at the step start
     /// (t₀, x(t₀)), evaluated here: the step's own Rosenbrock Jacobian is gone by the time it
     /// is carried (see [`super::Forward`]'s). g's own local error is added by the quadrature
     /// (`QuadratureSum::Error`).

@@ -439,7 +439,7 @@ where
         ok_x && ok_s
     }
 
-    /// [`GlobalError::carry`] with f_x and ℓ_x at (t₀, x₀). The step's own
+    /// `GlobalError::carry` with f_x and ℓ_x at (t₀, x₀). The step's own
     /// Rosenbrock Jacobian is gone by the time a step is carried (the step is carried once it
     /// is known where it ends: at the next step, at a truncation, or at the end of the run), so
     /// f_x and ℓ_x are evaluated here.

@@ -252,7 +252,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// The restart after a jump inside a segment of exact steps that leaves F as it was (the
     /// caller knows F is the same: a constant-rate system under the same mode and bits, F a
     /// function of θ, the mode and the bits alone): closes the last step and restarts at
-    /// (t, y) like [`Integrator::restart_at`], keeping k[0] = F (an exact step and a
+    /// (t, y) like [`Integrator::restart_at`], keeping `k[0]` = F (an exact step and a
     /// truncation of one leave it in place) instead of taking it again.
     pub fn restart_exact_keeping_rate(&mut self, t: f64, y: &Sys::Vector) {
         debug_assert!(self.scheme == Scheme::Exact && self.dense_scheme == Scheme::Exact);
@@ -327,8 +327,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// finite and positive restores the heuristic.
     ///
     /// The seed belongs to the rate before the restart: when the rate after it, ‖F(t, y)‖ in
-    /// the error norm's scaling, is more than [`SEED_RATE_JUMP`] times the rate at the start
-    /// of the last step before it (k[0], still in its slot), the state's time scale has
+    /// the error norm's scaling, is more than `SEED_RATE_JUMP` times the rate at the start
+    /// of the last step before it (`k[0]`, still in its slot), the state's time scale has
     /// shrunk by as much and the seed says nothing about it: the first step comes from
     /// Hairer's heuristic, as at t₀. The error estimate cannot refuse a seed on its own when
     /// an L-stable step strides over a fast transient the jump started (a stiff lag's new set
@@ -529,7 +529,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// it is known where it ends: when the next step starts, when [`Integrator::truncate`]
     /// cuts it (over the cut length), at a restart, or when the caller asks before reading
     /// the estimate or the quadrature (at the end of a run or a segment). Until then t_prev,
-    /// y_prev, the stages k (k[0] = F(t_prev, y_prev)) and the local error estimate are the
+    /// y_prev, the stages k (`k[0]` = F(t_prev, y_prev)) and the local error estimate are the
     /// step's. An exact step makes no error, and its flow (a function of θ alone) moves none:
     /// it carries nothing, but adds its quadrature.
     pub fn close_step(&mut self) {

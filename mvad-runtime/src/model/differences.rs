@@ -69,7 +69,7 @@ where
 }
 
 /// d/dε (λᵀf_x, λᵀf_θ)(t + ε, x + εv) at ε = 0 by a central difference with the step of
-/// [`flow_points`] (the default of [`super::ModelAdjoint::rhs_vjp_dir`]).
+/// `flow_points` (the default of [`super::ModelAdjoint::rhs_vjp_dir`]).
 pub fn rhs_vjp_dir<M: HybridModel + ?Sized>(
     m: &M,
     pt: Point<'_, M::N, M::P>,
@@ -101,7 +101,7 @@ pub fn rhs_vjp_dir<M: HybridModel + ?Sized>(
 }
 
 /// d/dε (ℓ_x, ℓ_θ)(t + ε, x + εv) at ε = 0 into `lx`, `lp`, returning dℓ/dε, by central
-/// differences with the step of [`flow_points`] (the default of
+/// differences with the step of `flow_points` (the default of
 /// [`super::ModelAdjoint::running_cost_grad_dir`]).
 pub fn running_cost_grad_dir<M: HybridModel + ?Sized>(
     m: &M,

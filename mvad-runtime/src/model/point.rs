@@ -116,7 +116,7 @@ impl Switches {
 
 /// One evaluation point of the flow: mode m, frozen branches, t, x and θ.
 ///
-/// The flow-side methods ([`HybridModel::rhs`] and its derivatives, and the capability
+/// The flow-side methods ([`HybridModel::rhs`](crate::HybridModel::rhs) and its derivatives, and the capability
 /// products) take one `Point` instead of five arguments, so every source of flow
 /// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
 /// words, passed by value.

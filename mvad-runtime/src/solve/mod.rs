@@ -17,11 +17,11 @@
 //! 4. At T the final terms (see [`crate::reduce`]).
 //!
 //! Zeno accumulations and resets that leave the state on its guard end the run at the limit
-//! (see [`zeno`]).
+//! (see `zeno`).
 //!
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
-//! earliest crossing, apply, restart); [`jump`] what happens at an event or switch crossing;
-//! [`zeno`] accumulations; [`record`] the trajectory record; [`finish`] the end of the run.
+//! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
+//! `zeno` accumulations; `record` the trajectory record; `finish` the end of the run.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
 mod conditioning;
