@@ -106,15 +106,22 @@ pub struct Options {
     pub t_end: Option<f64>,
     /// τ of the grazing test |g_x f⁻| < τ |g_x| |f⁻|.
     pub grazing_tol: f64,
-    /// The run stops with a `max_events` diagnostic after this many events (events of an `at
-    /// each` table, and one state event or switch crossing per such event, not counted).
+    /// The run stops with a `max_events` diagnostic after this many events (time events, and
+    /// one state event or switch crossing per time event, not counted: their number is the
+    /// schedule's, bounded by `max_periodic_occurrences` and the tables' rows).
     pub max_events: usize,
     /// The run stops with a `max_steps` error after this many step attempts (accepted and
     /// rejected, over the whole run): an explicit method on a stiff model would otherwise
     /// take ~10⁸ steps. The default, 10⁶, is ~700× the most any example model needs at
     /// rtol 1e-12 (`stiff_relay.hyb` under `auto`: ~1,500 attempts). Each event of an `at each`
-    /// table adds 100 attempts, so a run over a long table is not cut short.
+    /// table, `every` sample or `at` event adds 100 attempts, so a run over a long schedule is
+    /// not cut short.
     pub max_steps: usize,
+    /// An `every` event with more occurrences than this before T is bad input
+    /// ([`crate::error::SolveError::BadSchedule`]): time events count against neither
+    /// `max_events` nor `max_steps`, so this bounds a run whose period was given far too short
+    /// (the default 10⁹; the fuzz target sets a small one).
+    pub max_periodic_occurrences: usize,
     /// Put the sensitivities (and cost quadratures) under error control too, column j
     /// weighted by |θ_j| (on by default: a step size chosen for x alone can leave S wrong
     /// at every tolerance, e.g. a stiff lag whose S_τ ~ 1/τ is resolved only near events).
@@ -146,6 +153,7 @@ impl Default for Options {
             grazing_tol: 1e-3,
             max_events: 100_000,
             max_steps: 1_000_000,
+            max_periodic_occurrences: 1_000_000_000,
             sens_error_control: true,
             global_error: true,
             sensitivities: true,

@@ -534,7 +534,8 @@ where
         }
         self.switch_bits(0.0, false, false);
         std::mem::swap(&mut self.sw, &mut self.sw_next);
-        self.schedule.start(model, p, self.t_end)?;
+        self.schedule
+            .start(model, p, (self.t_end, self.opts.max_periodic_occurrences))?;
         self.restart(0.0)?;
         let nev = info.events.len();
         loop {

@@ -12,12 +12,6 @@ use crate::error::SolveError;
 use crate::model::{HybridModel, ModelAlloc, Occurrence, Trigger};
 use nalgebra::{DefaultAllocator, OVector};
 
-/// The most occurrences an `every` event may have before T. Scheduled occurrences are the
-/// model's own (T/period of them, like a table's rows), so they count against neither
-/// `max_events` nor `max_steps`; this bound keeps a period typed too short (1e-12 over
-/// T = 1) from becoming a run that never ends.
-pub(super) const MAX_PERIODIC_OCCURRENCES: f64 = 1e9;
-
 /// Occurrence indices and next times of a run's events (allocated once).
 #[derive(Clone, Debug)]
 pub(super) struct Schedule {
@@ -76,14 +70,14 @@ impl Schedule {
     }
 
     /// First occurrences of every time event at or after t = 0; checks that periods are
-    /// positive, times finite, and that no `every` event fires more than
-    /// [`MAX_PERIODIC_OCCURRENCES`] times before `t_end` (scheduled occurrences count against
+    /// positive, times finite, and that no `every` event fires more than `limit` times before
+    /// `t_end` (`Options::max_periodic_occurrences`: scheduled occurrences count against
     /// neither the event nor the step budget, so this bounds the run).
     pub(super) fn start<M: HybridModel>(
         &mut self,
         model: &M,
         p: &OVector<f64, M::P>,
-        t_end: f64,
+        (t_end, limit): (f64, usize),
     ) -> Result<(), SolveError>
     where
         DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -108,12 +102,12 @@ impl Schedule {
                     });
                 }
                 let count = ((t_end - t0.max(0.0)) / period).floor() + 1.0;
-                if count > MAX_PERIODIC_OCCURRENCES {
+                if count > limit as f64 {
                     return Err(SolveError::BadSchedule {
                         event: ev.name.clone(),
                         what: format!(
                             "with period {period:e} it would fire {count:.3e} times before the \
-                             horizon {t_end}, more than {MAX_PERIODIC_OCCURRENCES:.0e}"
+                             horizon {t_end}, more than {limit} (max_periodic_occurrences)"
                         ),
                     });
                 }
