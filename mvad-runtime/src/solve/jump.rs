@@ -374,12 +374,11 @@ where
                     &mut self.cx,
                     &mut self.cp,
                 );
-                if still {
-                    self.g_ev.gemv_tr(1.0, &self.s_plus, &self.cx, 1.0);
-                    self.g_ev += &self.cp;
-                } else {
-                    self.g_ev.gemv_tr(1.0, &self.dtot, &self.cx, 1.0);
-                    self.g_ev += &self.cp;
+                // dx⁺/dθ is S⁺ + f⁺t', or S⁺ itself for a still event (t' = 0).
+                let total = if still { &self.s_plus } else { &self.dtot };
+                self.g_ev.gemv_tr(1.0, total, &self.cx, 1.0);
+                self.g_ev += &self.cp;
+                if !still {
                     self.g_ev.axpy(phi_t, &self.dt, 1.0);
                 }
             }
