@@ -100,7 +100,8 @@ where
 
     /// The `zeno` diagnostic of an accumulation of event k's occurrences at t* (`stuck`: at
     /// a single instant, the state stuck on the guard), held at its limit on [t*, T] or, when
-    /// `released_at` is τ, until a time event at τ moved it off (the run went on from there).
+    /// `released_at` is τ, until a time event at τ moved it off (the run went on from there);
+    /// `frozen` names the states held although the accumulation does not constrain them.
     pub(super) fn report_accumulation(
         &mut self,
         k: usize,
@@ -108,6 +109,7 @@ where
         t_star: f64,
         ratio: f64,
         released_at: Option<f64>,
+        frozen: &[String],
     ) {
         let n = self.nevents;
         let name = self.event_name(k);
@@ -127,6 +129,16 @@ where
                 "events of `{name}` accumulate (dwell-time ratio {ratio:.4} over the last \
                  {ZENO_RATIOS} dwells) at the estimated accumulation time t* = {t_star} after {n} \
                  events; the tail was extrapolated (Aitken) and the state held at its limit on {held}"
+            )
+        };
+        let message = if frozen.is_empty() {
+            message
+        } else {
+            format!(
+                "{message}; states {} take no part in the accumulation and have a non-zero flow \
+                 at t*, yet were held too: their values after t*, and what reads them, are \
+                 those of a frozen state, not of their flow",
+                frozen.join(", ")
             )
         };
         self.diagnostics.push(Diagnostic {

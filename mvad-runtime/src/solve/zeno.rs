@@ -37,10 +37,10 @@
 
 use super::Driver;
 use crate::error::SolveError;
-use crate::model::{At, HybridModel, ModelAlloc, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::reduce::{aitken_iterated_weights, CompensatedSum, GL8};
 use crate::sink::EventSink;
-use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// How many dwell ratios must agree before a Zeno accumulation is declared.
 pub(super) const ZENO_RATIOS: usize = 6;
@@ -328,6 +328,7 @@ where
         let stuck = self.stuck.take();
         let k = stuck.unwrap_or(self.zeno.event);
         let (t_star, dt_star) = self.take_limit(k, stuck.is_some(), t_star_geo)?;
+        let frozen = self.frozen_free_states(k, t_star);
         self.zeno.holding = true;
         self.zeno.passed += 1;
         let mut from = t_star;
@@ -342,7 +343,7 @@ where
                 rec.hold(until, &self.y.x, &self.y.s, self.mode, &self.sw);
             }
             if tau > t_end {
-                self.report_accumulation(k, stuck.is_some(), t_star, ratio, None);
+                self.report_accumulation(k, stuck.is_some(), t_star, ratio, None, &frozen);
                 return Ok(true);
             }
             // The time events due at τ fire from the held state; fire_at restarts there.
@@ -358,7 +359,7 @@ where
                 &mut self.f_plus,
             );
             if !(armed && self.flows_back_through(k, tau, mode, false)) {
-                self.report_accumulation(k, stuck.is_some(), t_star, ratio, Some(tau));
+                self.report_accumulation(k, stuck.is_some(), t_star, ratio, Some(tau), &frozen);
                 self.zeno.holding = false;
                 self.zeno.count = 0;
                 return Ok(false);
@@ -488,5 +489,50 @@ where
             }
         }
         self.y.q += sum.value();
+    }
+
+    /// The states the accumulation of event k does not constrain yet held with the rest,
+    /// although their flow at (t*, x*) is not zero (their values after t* are then those of
+    /// a frozen state, not of their flow). Constrained: the states k's guard reads (∇g ≠ 0),
+    /// those its reset writes (a row of R_x that is not the identity's) and, transitively,
+    /// those the flow of a constrained state reads (f_x ≠ 0). Evaluated at the held limit
+    /// `self.y.x` (the structure of the Jacobians at one point).
+    fn frozen_free_states(&mut self, k: usize, t: f64) -> Vec<String> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        let (n, np) = (model.nstates(), model.nparams());
+        let x = &self.y.x;
+        let mut constrained: Vec<bool> = vec![false; n.value()];
+        model.guard_grad(k, At::new(t, x, p), &mut self.gx, &mut self.gp);
+        let mut rx = OMatrix::<f64, M::N, M::N>::zeros_generic(n, n);
+        let mut rp = OMatrix::<f64, M::N, M::P>::zeros_generic(n, np);
+        let mut rt = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        let occ = Occurrence::new(k, self.schedule.occurrence(k));
+        model.reset_jac(occ, At::new(t, x, p), &mut rx, &mut rp, &mut rt);
+        for (i, c) in constrained.iter_mut().enumerate() {
+            let written = (0..n.value()).any(|j| rx[(i, j)] != if i == j { 1.0 } else { 0.0 })
+                || rp.row(i).iter().any(|&v| v != 0.0);
+            *c = self.gx[i] != 0.0 || written;
+        }
+        let mut fx = OMatrix::<f64, M::N, M::N>::zeros_generic(n, n);
+        model.rhs_jac_x(Point::new(self.mode, &self.sw, t, x, p), &mut fx);
+        let mut grew = true;
+        while grew {
+            grew = false;
+            for i in 0..n.value() {
+                for j in 0..n.value() {
+                    if constrained[i] && !constrained[j] && fx[(i, j)] != 0.0 {
+                        constrained[j] = true;
+                        grew = true;
+                    }
+                }
+            }
+        }
+        let mut f = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
+        model.rhs(Point::new(self.mode, &self.sw, t, x, p), &mut f);
+        (0..n.value())
+            .filter(|&i| !constrained[i] && f[i] != 0.0)
+            .map(|i| format!("`{}`", info.states[i]))
+            .collect()
     }
 }
