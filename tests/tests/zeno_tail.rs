@@ -159,11 +159,36 @@ fn a_time_event_after_the_accumulation_fires_and_the_run_goes_on() {
 }
 
 #[test]
+fn a_kick_far_in_time_gives_the_answer_of_a_kick_at_eight() {
+    // With T = τ + 2 the answer does not depend on τ (the ball rests from t* to τ, and what
+    // follows the kick only on T − τ): the reference is the closed form at τ = 8, T = 10.
+    // At τ = 10⁶ event times are quantised to ulp(10⁶) = 1.2e-10, which leaves ~1e-8 in C.
+    let interp = loaded("zeno_kick.hyb");
+    let p8 = [0.8, 9.81, 2.0, 3.0, 8.0];
+    let (c, grad) = (kick_cost(&p8), fd(kick_cost, &p8, 1e-3));
+    for (tau, rel) in [(1e3, 1e-8), (1e6, 1e-7)] {
+        let p = [0.8, 9.81, 2.0, 3.0, tau];
+        let o = Options {
+            t_end: Some(tau + 2.0),
+            ..opts(GradientMode::Forward)
+        };
+        for (door, sol) in [
+            ("macro", run(&ZenoKick::new(), &p, &o)),
+            ("loaded", run(&interp, &p, &o)),
+        ] {
+            let sol = sol.expect("runs");
+            assert_solution(&sol, c, &grad, rel, &format!("{door} τ = {tau}"));
+        }
+    }
+}
+
+#[test]
 fn the_held_limit_does_not_depend_on_how_far_the_horizon_lies() {
     let interp = loaded("zeno_kick.hyb");
     // Without a kick before T: C = ∫₀^{t*} h dt + 0 whatever T > t*.
     let cost = |p: &[f64]| ball(p[2], 0.0, 0.0, 20.0, p[1], p[0]).0;
-    let p = [0.8, 9.81, 2.0, 3.0, 1e30];
+    // The kick lies beyond every T (occurrences after T never fire).
+    let p = [0.8, 9.81, 2.0, 3.0, 1e305];
     let pe = [p[0], p[1], p[2]];
     let (c, g3) = (cost(&pe), fd(cost, &pe, 1e-3));
     assert_near(c, 2.6379478019205, 1e-12, "the probe's reference");
@@ -278,7 +303,7 @@ fn a_convergent_event_sum_over_the_accumulation_is_summed() {
         horizon 10;
     }";
     let m = InterpretedModel::from_source(src).expect("loads");
-    let (e, g, h0) = (0.8, 9.81, 2.0);
+    let (e, g, h0): (f64, f64, f64) = (0.8, 9.81, 2.0);
     let c = 2.0 * g * h0 * e * e / (1.0 - e * e);
     let grad = [
         2.0 * g * h0 * 2.0 * e / (1.0 - e * e).powi(2),

@@ -31,9 +31,17 @@
 //! with da_i/dθ what the run carries at event i: t_i', d x_i⁺/dθ = S⁺ + f⁺ t_i' and dC_i/dθ.
 //! This is exact whenever a_k is exactly geometric; extrapolating the sequence da_k/dθ
 //! instead is not, since da_k/dθ − da_∞/dθ = (B' + B k ρ'/ρ) ρᵏ has the factor k (for the
-//! ball, d/de of ∫v dt came out −3e-4 instead of 0 that way). If T > t* the state is held at its limit x*
-//! on [t*, T] with ∂x/∂θ = dx*/dθ, and ∫_{t*}^T ℓ(t, x*, θ) dt is added with its derivative
-//! −ℓ(t*, x*) dt*/dθ + ∫ (ℓ_x dx*/dθ + ℓ_θ) dt.
+//! ball, d/de of ∫v dt came out −3e-4 instead of 0 that way).
+//!
+//! ## After the accumulation
+//! The limit x* lies on the accumulating guard (x_k⁻ is on it and x_k⁺ − x_k⁻ → 0); it is
+//! snapped there, and dx*/dθ onto the guard's tangent, so that no rounding of the
+//! extrapolation is integrated over [t*, T]. The state is then held at x* (∂x/∂θ = dx*/dθ,
+//! flow zero) and ∫ ℓ(t, x*, θ) dt added with its derivative −ℓ(t*, x*) dt*/dθ +
+//! ∫ (ℓ_x dx*/dθ + ℓ_θ) dt, up to T or to the next time event τ ≤ T. That event fires from the
+//! held state (f⁻ = 0); if the state it leaves flows straight back through the guard the hold
+//! goes on, otherwise the event loop resumes at τ. A cost whose increments per event do not
+//! shrink (an event sum whose term does not vanish at the limit) diverges: an error.
 
 use super::Driver;
 use crate::error::SolveError;
@@ -50,6 +58,10 @@ const ZENO_MAX_RATIO: f64 = 0.999;
 
 /// Cosine below which an event of an established Zeno sequence ends the run.
 const ZENO_GRAZE: f64 = 1e-3;
+
+/// The length of the stuck-state probe, in units of the time resolution (16 ulp of t): a
+/// crossing due within it could not be resolved as a new event.
+const STUCK_PROBE: f64 = 1e3;
 
 /// Post-event snapshots kept for the Zeno limit: five, so Aitken's Δ² can be applied twice
 /// (per-bounce terms of the form (a + bk)ρᵏ, as derivatives w.r.t. a restitution give,
@@ -284,9 +296,13 @@ where
 
     /// The Heun probe of the state x (x⁺ when `at_plus`, under the bits `sw_next`; else
     /// `self.y.x` under `sw`) whose flow f is in `self.f_plus`: x + δ/2 (f + f(x + δ f)),
-    /// δ = 1e-6·max(|t|, 1), lands on the firing side of event k's guard, further in than x
-    /// itself. δ is relative to t (the time resolution there), not to the horizon T: the
-    /// verdict must be the same whether T lies just past t or 10⁶ times beyond it.
+    /// δ = [`STUCK_PROBE`] times the resolution of t, lands on the firing side of event k's
+    /// guard, further in than x itself: the flow would carry the state back through the guard
+    /// sooner than the event loop can resolve a new crossing (a reset that leaves the ball on
+    /// the floor at rest, v⁺ = 0, or at a speed within rounding of it). δ is relative to t,
+    /// not to the horizon T (the verdict must be the same whether T lies just past t or 10⁶
+    /// times beyond it), and short: a bounce that flies for longer than δ is simulated and
+    /// left to the Zeno test (1e-6·t, as before, called a flight of 0.5 stuck at t = 10⁶).
     fn flows_back_through(&mut self, k: usize, t: f64, mode: usize, at_plus: bool) -> bool {
         let (model, p) = (self.model, self.p);
         let d = model.info().events[k].direction.sign();
@@ -295,7 +311,7 @@ where
         } else {
             (&self.y.x, &self.sw)
         };
-        let delta = 1e-6 * t.abs().max(1.0);
+        let delta = STUCK_PROBE * super::time_resolution(t);
         let v_plus = d * model.guard(k, At::new(t, x, p));
         self.xs.copy_from(x);
         self.xs.axpy(delta, &self.f_plus, 1.0);
@@ -311,8 +327,9 @@ where
     /// event just applied): the run's state becomes the limit (see [`Driver::take_limit`]) and
     /// is held there (flow zero, running cost ℓ(t, x*) integrated) until T or the next time
     /// event armed in the mode, whichever comes first. A time event due by T fires from the
-    /// held state (f⁻ = 0: S⁺ = R_x S* + R_θ − f⁺t'); if its reset leaves the state where the
-    /// flow carries it straight back through k's guard (a sampler that only reads the state)
+    /// held state (f⁻ = 0: S⁺ = R_x S* + R_θ − f⁺t'); if its reset leaves the states the
+    /// accumulation constrains ([`Driver::constrained_states`]) as they were and the flow
+    /// carries them straight back through k's guard (a sampler that only reads the state)
     /// the hold goes on, S being the total derivative dx⁺/dθ = S⁺ + f⁺t'; otherwise (a kick)
     /// the run resumes from there with the event loop, the Zeno detector starting afresh.
     /// Returns true when the run ends (held to T), false when it resumes at a time event's
@@ -328,7 +345,9 @@ where
         let stuck = self.stuck.take();
         let k = stuck.unwrap_or(self.zeno.event);
         let (t_star, dt_star) = self.take_limit(k, stuck.is_some(), t_star_geo)?;
-        let frozen = self.frozen_free_states(k, t_star);
+        let constrained = self.constrained_states(k, t_star);
+        let frozen = self.frozen_free_states(&constrained, t_star);
+        let mut x_held = self.y.x.clone();
         self.zeno.holding = true;
         self.zeno.passed += 1;
         let mut from = t_star;
@@ -358,7 +377,10 @@ where
                 Point::new(mode, &self.sw, tau, &self.y.x, p),
                 &mut self.f_plus,
             );
-            if !(armed && self.flows_back_through(k, tau, mode, false)) {
+            // Held on only if the event left the states the accumulation constrains as they
+            // were (its limit is theirs) and the flow still carries them through k's guard.
+            let kept = (0..constrained.len()).all(|i| !constrained[i] || self.y.x[i] == x_held[i]);
+            if !(kept && armed && self.flows_back_through(k, tau, mode, false)) {
                 self.report_accumulation(k, stuck.is_some(), t_star, ratio, Some(tau), &frozen);
                 self.zeno.holding = false;
                 self.zeno.count = 0;
@@ -368,7 +390,8 @@ where
                 // Held: x no longer moves with the flow, so its sensitivity is dx⁺/dθ.
                 self.y.s.ger(1.0, &self.f_plus, &self.dt, 1.0);
             }
-            from = tau;
+            x_held.copy_from(&self.y.x);
+            from = from.max(tau);
         }
     }
 
@@ -491,29 +514,27 @@ where
         self.y.q += sum.value();
     }
 
-    /// The states the accumulation of event k does not constrain yet held with the rest,
-    /// although their flow at (t*, x*) is not zero (their values after t* are then those of
-    /// a frozen state, not of their flow). Constrained: the states k's guard reads (∇g ≠ 0),
-    /// those its reset writes (a row of R_x that is not the identity's) and, transitively,
-    /// those the flow of a constrained state reads (f_x ≠ 0). Evaluated at the held limit
-    /// `self.y.x` (the structure of the Jacobians at one point).
-    fn frozen_free_states(&mut self, k: usize, t: f64) -> Vec<String> {
+    /// The states the accumulation of event k constrains: those k's guard reads (∇g ≠ 0),
+    /// those its reset writes (a row of R_x or R_θ that is not the identity's) and,
+    /// transitively, those the flow of a constrained state reads (f_x ≠ 0). Evaluated at the
+    /// held limit `self.y.x` (the structure of the Jacobians at one point).
+    fn constrained_states(&mut self, k: usize, t: f64) -> Vec<bool> {
         let (model, p) = (self.model, self.p);
-        let info = model.info();
         let (n, np) = (model.nstates(), model.nparams());
         let x = &self.y.x;
-        let mut constrained: Vec<bool> = vec![false; n.value()];
         model.guard_grad(k, At::new(t, x, p), &mut self.gx, &mut self.gp);
         let mut rx = OMatrix::<f64, M::N, M::N>::zeros_generic(n, n);
         let mut rp = OMatrix::<f64, M::N, M::P>::zeros_generic(n, np);
         let mut rt = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
         let occ = Occurrence::new(k, self.schedule.occurrence(k));
         model.reset_jac(occ, At::new(t, x, p), &mut rx, &mut rp, &mut rt);
-        for (i, c) in constrained.iter_mut().enumerate() {
-            let written = (0..n.value()).any(|j| rx[(i, j)] != if i == j { 1.0 } else { 0.0 })
-                || rp.row(i).iter().any(|&v| v != 0.0);
-            *c = self.gx[i] != 0.0 || written;
-        }
+        let mut constrained: Vec<bool> = (0..n.value())
+            .map(|i| {
+                let written = (0..n.value()).any(|j| rx[(i, j)] != if i == j { 1.0 } else { 0.0 })
+                    || rp.row(i).iter().any(|&v| v != 0.0);
+                self.gx[i] != 0.0 || written
+            })
+            .collect();
         let mut fx = OMatrix::<f64, M::N, M::N>::zeros_generic(n, n);
         model.rhs_jac_x(Point::new(self.mode, &self.sw, t, x, p), &mut fx);
         let mut grew = true;
@@ -528,10 +549,21 @@ where
                 }
             }
         }
-        let mut f = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
-        model.rhs(Point::new(self.mode, &self.sw, t, x, p), &mut f);
-        (0..n.value())
-            .filter(|&i| !constrained[i] && f[i] != 0.0)
+        constrained
+    }
+
+    /// The names of the states outside `constrained` whose flow at (t, `self.y.x`) is not
+    /// zero: held with the rest although the accumulation does not hold them, so their values
+    /// after t* are those of a frozen state, not of their flow.
+    fn frozen_free_states(&mut self, constrained: &[bool], t: f64) -> Vec<String> {
+        let (model, p) = (self.model, self.p);
+        let info = model.info();
+        model.rhs(
+            Point::new(self.mode, &self.sw, t, &self.y.x, p),
+            &mut self.work,
+        );
+        (0..constrained.len())
+            .filter(|&i| !constrained[i] && self.work[i] != 0.0)
             .map(|i| format!("`{}`", info.states[i]))
             .collect()
     }
