@@ -211,7 +211,7 @@ where
         let d: [f64; ZENO_SNAPS - 1] = std::array::from_fn(|i| c[i + 1] - c[i]);
         let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let last = d[ZENO_SNAPS - 2];
-        if !(last.abs() > 64.0 * f64::EPSILON * scale) {
+        if last.is_nan() || last.abs() <= 64.0 * f64::EPSILON * scale {
             return None;
         }
         let grows = |i: usize| (d[i + 1] / d[i]).abs() >= ZENO_MAX_RATIO;
