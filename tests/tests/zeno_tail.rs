@@ -12,10 +12,9 @@
 use mvad::interp::InterpretedModel;
 use mvad::runtime::error::SolveError;
 use mvad::runtime::solution::{GradientMode, Options, Solution};
-use mvad::runtime::solve::solve;
 use mvad::{DiagnosticKind, HybridModel, ModelAlloc};
-use mvad_tests::assert_near;
-use nalgebra::{DefaultAllocator, OVector};
+use mvad_tests::{assert_near, solve_at};
+use nalgebra::DefaultAllocator;
 
 mvad::hybrid!(include "tests/zeno_kick.hyb");
 mvad::hybrid!(include "tests/zeno_sampled.hyb");
@@ -80,12 +79,7 @@ fn run<M: HybridModel>(m: &M, p: &[f64], opts: &Options) -> Result<Solution, Sol
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let pv = OVector::<f64, M::P>::from_iterator_generic(
-        m.nparams(),
-        nalgebra::Const::<1>,
-        p.iter().copied(),
-    );
-    solve(m, &pv, opts)
+    solve_at(m, p, opts)
 }
 
 fn loaded(file: &str) -> InterpretedModel {
