@@ -30,7 +30,7 @@
 use super::record::{FinalState, Item, Tape};
 use super::transpose::{transpose_jump, transpose_jump_with_error, JumpErrorWork, JumpWork};
 use crate::error::SolveError;
-use crate::integrate::Integrator;
+use crate::integrate::{Backward, Integrator};
 use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
@@ -163,7 +163,7 @@ where
         x: OVector::zeros_generic(n, Const::<1>),
     };
     // g lives in the backward system, which adds each step's quadrature to it.
-    let mut integ = Integrator::backward(model, p, tape, opts, cw);
+    let mut integ = Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts);
     terminal(
         model,
         p,

@@ -61,8 +61,8 @@
 
 use super::adjoint_error::AdjointError;
 use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
-use super::rosenbrock::WMatrix;
-use super::system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
+use super::rosenbrock::{Linearisation, WMatrix};
+use super::system::{HermiteStep, ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
@@ -115,9 +115,13 @@ where
     }
 
     #[inline]
-    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, _all: bool) {
-        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.as_slice());
-        hermite_slice(self.as_mut_slice(), a, b, g0, g1, h, th);
+    fn hermite(&mut self, step: &HermiteStep<'_, Self>, th: f64, _all: bool) {
+        hermite_slice(
+            self.as_mut_slice(),
+            step.parts(|v| v.as_slice()),
+            step.h,
+            th,
+        );
     }
 
     #[inline]
@@ -244,19 +248,16 @@ struct AdjImplicit<N: Dim, P: Dim>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    /// J_λλ = −f_xᵀ and the factors of W = I − hγ J_λλ.
-    w: WMatrix<N>,
+    /// J_λλ = −f_xᵀ and the factors of W = I − hγ J_λλ, and F_t at the step start.
+    lin: Linearisation<N, OVector<f64, N>>,
     /// x and f at the step start.
     x0: OVector<f64, N>,
     f0: OVector<f64, N>,
-    /// F_t at the step start.
-    dt: OVector<f64, N>,
     /// G_t at the step start `dt_at` (local time), and ℓ's directional-derivative scratch.
     dt_g: OVector<f64, P>,
     dt_at: Option<f64>,
     lx: OVector<f64, N>,
     lp: OVector<f64, P>,
-    prepared: bool,
 }
 
 impl<M: HybridModel> AdjRhs<'_, M>
@@ -292,7 +293,8 @@ where
 {
     /// The backward system of `model` at `p` over the record `tape`, with cost cotangent
     /// `cw` and g = 0; allocates its buffers once (the Rodas5P ones only when `opts.method`
-    /// may use it).
+    /// may use it). Its integrator is `Integrator::with_system(Backward::new(..), opts)`;
+    /// call [`Integrator::restart_segment`] before each segment.
     pub fn new(
         model: &'a M,
         p: &'a OVector<f64, M::P>,
@@ -328,15 +330,13 @@ where
                 x: vn(),
             },
             imp: AdjImplicit {
-                w: WMatrix::new(n, used),
+                lin: Linearisation::new(WMatrix::new(n, used), vn()),
                 x0: vn(),
                 f0: vn(),
-                dt: vn(),
                 dt_g: OVector::zeros_generic(stiff_np, Const::<1>),
                 dt_at: None,
                 lx: vn(),
                 lp: OVector::zeros_generic(stiff_np, Const::<1>),
-                prepared: false,
             },
             g: OVector::zeros_generic(np, Const::<1>),
             quad: StepQuadrature {
@@ -356,11 +356,9 @@ where
         }
     }
 
+    /// Name of the current mode (or its index if the model names fewer modes).
     fn mode_name(&self) -> String {
-        match self.rhs.model.info().modes.get(self.rhs.mode) {
-            Some(name) => name.clone(),
-            None => self.rhs.mode.to_string(),
-        }
+        self.rhs.model.info().mode_name(self.rhs.mode)
     }
 
     /// x₀ = x(t0), f₀ = f(t₀, x₀), F_t = −d(λᵀf_x) − w dℓ_x and G_t = −d(λᵀf_θ) − w dℓ_θ
@@ -372,16 +370,16 @@ where
         let pt = rhs.point(t0, &imp.x0);
         rhs.model.rhs(pt, &mut imp.f0);
         rhs.model
-            .rhs_vjp_dir(pt, y0, &imp.f0, &mut imp.dt, &mut imp.dt_g);
+            .rhs_vjp_dir(pt, y0, &imp.f0, &mut imp.lin.dt, &mut imp.dt_g);
         if rhs.w != 0.0 {
             let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
             let (lx, lp) = (&mut imp.lx, &mut imp.lp);
             rhs.model
                 .running_cost_grad_dir(sw, At::new(t, &imp.x0, p), &imp.f0, lx, lp);
-            imp.dt.axpy(rhs.w, &imp.lx, 1.0);
+            imp.lin.dt.axpy(rhs.w, &imp.lx, 1.0);
             imp.dt_g.axpy(rhs.w, &imp.lp, 1.0);
         }
-        imp.dt.neg_mut();
+        imp.lin.dt.neg_mut();
         imp.dt_g.neg_mut();
         imp.dt_at = Some(t0);
     }
@@ -561,32 +559,24 @@ impl<M: HybridModel> ImplicitSystem for Backward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    type Linear = Linearisation<M::N, OVector<f64, M::N>>;
+
     /// J_λλ = −f_xᵀ (and its spectral radius), F_t and G_t at the step start.
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         self.time_derivatives(t0, y0);
         let Backward { rhs, imp, .. } = self;
-        let pt = rhs.point(t0, &imp.x0);
-        rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
-        imp.w.jac.transpose_mut();
-        imp.w.jac.neg_mut();
-        imp.w.power_iteration();
-        imp.prepared = true;
+        let w = &mut imp.lin.w;
+        adjoint_jacobian(rhs.model, rhs.point(t0, &imp.x0), w);
+        w.power_iteration();
+        imp.lin.prepared = true;
     }
 
-    fn prepared(&self) -> bool {
-        self.imp.prepared
+    fn linearisation(&self) -> &Self::Linear {
+        &self.imp.lin
     }
 
-    fn time_derivative(&self) -> &Self::Vector {
-        &self.imp.dt
-    }
-
-    fn factorise(&mut self, hg: f64) -> bool {
-        self.imp.w.factorise(hg)
-    }
-
-    fn factorised_for(&self) -> Option<f64> {
-        self.imp.w.factorised_for()
+    fn linearisation_mut(&mut self) -> &mut Self::Linear {
+        &mut self.imp.lin
     }
 
     /// K_λ = W⁻¹ hγ R_λ (see the module doc).
@@ -598,12 +588,7 @@ where
         r: &Self::Vector,
         k: &mut Self::Vector,
     ) -> bool {
-        if self.imp.w.factorised_for().is_none() {
-            return false;
-        }
-        k.copy_from(r);
-        *k *= hg;
-        self.imp.w.solve_mut(k)
+        self.imp.lin.w.solve_scaled(hg, r, k)
     }
 
     /// `sum` += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
@@ -620,7 +605,7 @@ where
     fn quadrature_dt_add(&mut self, t0: f64, y0: &Self::Vector, a: f64, sum: QuadratureSum) {
         if self.imp.dt_at != Some(t0) {
             self.time_derivatives(t0, y0);
-            self.imp.prepared = false;
+            self.imp.lin.prepared = false;
         }
         let dt_g = &self.imp.dt_g;
         let q = &mut self.quad;
@@ -687,51 +672,38 @@ where
                 }
             }
         }
-        model.rhs_jac_x(pt, &mut imp.w.jac);
-        imp.w.jac.transpose_mut();
-        imp.w.jac.neg_mut();
+        adjoint_jacobian(model, pt, &mut imp.lin.w);
         // J now holds the carried step's start, not the next step's.
-        imp.prepared = false;
+        imp.lin.prepared = false;
         let pattern = &model.info().jacobian_sparsity[rhs.mode];
-        ge.carry(le, forcing, &mut imp.w, pattern, h, |v, a, g| {
+        ge.carry(le, forcing, &mut imp.lin.w, pattern, h, |v, a, g| {
             model.adjoint_quadrature_add(pt, v, 0.0, a, g)
         });
-    }
-
-    fn invalidate(&mut self) {
-        self.imp.prepared = false;
-        self.imp.w.invalidate();
     }
 
     fn spectral_radius_at(&mut self, t: f64, _y: &Self::Vector) -> f64 {
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t);
-        let pt = rhs.point(t, &hist.x);
-        rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
-        imp.w.power_iteration()
+        let w = &mut imp.lin.w;
+        rhs.model.rhs_jac_x(rhs.point(t, &hist.x), &mut w.jac);
+        w.power_iteration()
     }
+}
 
-    fn jac_spectral_radius(&self) -> f64 {
-        self.imp.w.rho
-    }
+/// J_λλ = −f_xᵀ at `pt` into `w.jac`.
+fn adjoint_jacobian<M: HybridModel>(model: &M, pt: Point<'_, M::N, M::P>, w: &mut WMatrix<M::N>)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    model.rhs_jac_x(pt, &mut w.jac);
+    w.jac.transpose_mut();
+    w.jac.neg_mut();
 }
 
 impl<'a, M: HybridModel> Integrator<Backward<'a, M>>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// An integrator of the backward system over `tape` (see [`Backward::new`]); allocates
-    /// every buffer once. Call [`Integrator::restart_segment`] before each segment.
-    pub fn backward(
-        model: &'a M,
-        p: &'a OVector<f64, M::P>,
-        tape: &'a Tape,
-        opts: &Options,
-        cw: f64,
-    ) -> Self {
-        Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts)
-    }
-
     /// Forget all history and restart at (s, λ) on segment `seg` (its mode, switch bits and
     /// recorded steps), in the segment's local time s = t − t_start (see
     /// [`crate::adjoint::record`]); then `step(s_stop)` with s_stop < s integrates backwards.

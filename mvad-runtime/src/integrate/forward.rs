@@ -41,7 +41,7 @@
 
 use super::aug::{weighted_rms, AugState};
 use super::global_error::GlobalError;
-use super::rosenbrock::WMatrix;
+use super::rosenbrock::{Linearisation, WMatrix};
 use super::system::{ImplicitSystem, OdeSystem};
 use super::{Integrator, Scheme};
 #[cfg(doc)]
@@ -112,17 +112,13 @@ struct ImplicitWork<N: Dim, P: Dim>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    /// f_x and the factors of W.
-    w: WMatrix<N>,
+    /// f_x and the factors of W, and F_t at the step start.
+    lin: Linearisation<N, AugState<N, P>>,
     /// ℓ_x at the step start (zeros without running cost).
     lx0: OVector<f64, N>,
     /// A zero S and its q̇_θ_t, full width, for ∂ₜℓ in a narrow primal run (else empty).
     s0: OMatrix<f64, N, P>,
     qp0: OVector<f64, P>,
-    /// F_t at the step start.
-    dt: AugState<N, P>,
-    /// (f_x, ℓ_x, F_t) belong to the current step start.
-    base_valid: bool,
 }
 
 impl<'a, M: HybridModel> Forward<'a, M>
@@ -180,12 +176,10 @@ where
             sens_err: opts.sens_error_control && opts.sensitivities,
             sp,
             imp: ImplicitWork {
-                w: WMatrix::new(n, used),
+                lin: Linearisation::new(WMatrix::new(n, used), AugState::zeros(rn, rsp)),
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 s0: OMatrix::zeros_generic(n, s0p),
                 qp0: OVector::zeros_generic(s0p, Const::<1>),
-                dt: AugState::zeros(rn, rsp),
-                base_valid: false,
             },
             global: opts.global_error.then(|| GlobalError::new(n, sp)),
             atol: opts.atol,
@@ -206,10 +200,7 @@ where
 
     /// Name of the current mode (or its index if the model names fewer modes).
     fn mode_name(&self) -> String {
-        match self.rhs.model.info().modes.get(self.rhs.mode) {
-            Some(name) => name.clone(),
-            None => self.rhs.mode.to_string(),
-        }
+        self.rhs.model.info().mode_name(self.rhs.mode)
     }
 }
 
@@ -349,49 +340,44 @@ impl<M: HybridModel> ImplicitSystem for Forward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    type Linear = Linearisation<M::N, AugState<M::N, M::P>>;
+
     /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0), all exact.
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         let Forward { rhs, imp: w, .. } = self;
         let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
         let pt = Point::new(mode, &rhs.sw, t0, &y0.x, p);
-        model.rhs_jac_x(pt, &mut w.w.jac);
-        w.w.power_iteration();
-        model.rhs_dt(pt, &mut w.dt.x);
+        let lin = &mut w.lin;
+        model.rhs_jac_x(pt, &mut lin.w.jac);
+        lin.w.power_iteration();
+        model.rhs_dt(pt, &mut lin.dt.x);
         if rhs.sens && model.rhs_depends_on_t(mode) {
-            model.rhs_sens_dt(pt, &y0.s, &mut w.dt.s);
+            model.rhs_sens_dt(pt, &y0.s, &mut lin.dt.s);
         } else {
-            w.dt.s.fill(0.0);
+            lin.dt.s.fill(0.0);
         }
         if rhs.has_rc {
             model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut w.lx0);
-            w.dt.q = if y0.s.ncols() == p.len() {
-                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &y0.s, &mut w.dt.qp)
+            lin.dt.q = if y0.s.ncols() == p.len() {
+                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &y0.s, &mut lin.dt.qp)
             } else {
                 // A narrow primal run: ∂ₜℓ alone, from the full-width zero S.
                 model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &w.s0, &mut w.qp0)
             };
         } else {
             w.lx0.fill(0.0);
-            w.dt.q = 0.0;
-            w.dt.qp.fill(0.0);
+            lin.dt.q = 0.0;
+            lin.dt.qp.fill(0.0);
         }
-        w.base_valid = true;
+        lin.prepared = true;
     }
 
-    fn prepared(&self) -> bool {
-        self.imp.base_valid
+    fn linearisation(&self) -> &Self::Linear {
+        &self.imp.lin
     }
 
-    fn time_derivative(&self) -> &Self::Vector {
-        &self.imp.dt
-    }
-
-    fn factorise(&mut self, hg: f64) -> bool {
-        self.imp.w.factorise(hg)
-    }
-
-    fn factorised_for(&self) -> Option<f64> {
-        self.imp.w.factorised_for()
+    fn linearisation_mut(&mut self) -> &mut Self::Linear {
+        &mut self.imp.lin
     }
 
     /// K = hγ (I − hγ J)⁻¹ R by block forward substitution (see the module doc).
@@ -404,12 +390,10 @@ where
         k: &mut Self::Vector,
     ) -> bool {
         let Forward { rhs, imp: w, .. } = self;
-        if w.w.factorised_for().is_none() {
+        if w.lin.w.factorised_for().is_none() {
             return false;
         }
-        k.x.copy_from(&r.x);
-        k.x *= hg;
-        let ok_x = w.w.solve_mut(&mut k.x);
+        let ok_x = w.lin.w.solve_scaled(hg, &r.x, &mut k.x);
         let lxk = w.lx0.dot(&k.x);
         k.q = hg * (r.q + lxk);
         if !rhs.sens {
@@ -430,7 +414,7 @@ where
             k.qp += &r.qp;
         }
         k.s *= hg;
-        let ok_s = w.w.solve_mut(&mut k.s);
+        let ok_s = w.lin.w.solve_mut(&mut k.s);
         if rhs.has_rc {
             k.qp.gemv_tr(hg, &k.s, &w.lx0, hg);
         } else {
@@ -463,36 +447,35 @@ where
         };
         let (model, p) = (rhs.model, rhs.p);
         let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, p);
-        model.rhs_jac_x(pt, &mut imp.w.jac);
+        model.rhs_jac_x(pt, &mut imp.lin.w.jac);
         if rhs.has_rc {
             model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
         }
         // f_x and ℓ_x now hold the carried step's start, not the next step's.
-        imp.base_valid = false;
+        imp.lin.prepared = false;
         let tols = (self.atol, self.rtol);
         let autonomous = !model.rhs_depends_on_t(rhs.mode);
         let pattern = &model.info().jacobian_sparsity[rhs.mode];
         ge.carry(
-            le, f0, y0, tols, &mut imp.w, pattern, &imp.lx0, h, *sens_err, autonomous,
+            le,
+            f0,
+            y0,
+            tols,
+            &mut imp.lin.w,
+            pattern,
+            &imp.lx0,
+            h,
+            *sens_err,
+            autonomous,
         );
-    }
-
-    fn invalidate(&mut self) {
-        self.imp.base_valid = false;
-        self.imp.w.invalidate();
     }
 
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
-        rhs.model.rhs_jac_x(
-            Point::new(rhs.mode, &rhs.sw, t, &y.x, rhs.p),
-            &mut self.imp.w.jac,
-        );
-        self.imp.w.power_iteration()
-    }
-
-    fn jac_spectral_radius(&self) -> f64 {
-        self.imp.w.rho
+        let w = &mut self.imp.lin.w;
+        rhs.model
+            .rhs_jac_x(Point::new(rhs.mode, &rhs.sw, t, &y.x, rhs.p), &mut w.jac);
+        w.power_iteration()
     }
 }
 
