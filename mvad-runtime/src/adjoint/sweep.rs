@@ -28,7 +28,9 @@
 //! time s = t − t_start (see [`super::record`]).
 
 use super::record::{FinalState, Item, Tape};
-use super::transpose::{transpose_jump, transpose_jump_with_error, JumpErrorWork, JumpWork};
+use super::transpose::{
+    transpose_jump, transpose_jump_with_error, JumpErrorWork, JumpSite, JumpWork,
+};
 use crate::error::SolveError;
 use crate::integrate::{Backward, Integrator};
 use crate::model::{At, HybridModel, ModelAlloc, Point};
@@ -188,16 +190,20 @@ where
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
+                let site = JumpSite {
+                    model,
+                    p,
+                    cw,
+                    jump: j,
+                };
                 let (g, ge) = integ.gradient_and_error_mut();
                 match (ge, &mut error_work) {
                     (Some(ge), Some(ew)) => {
                         let shift = tape.jump_shift(j);
                         let y = (&mut lam, g);
-                        transpose_jump_with_error(
-                            model, p, cw, j, states, shift, y, ge, &mut work, ew,
-                        )?;
+                        transpose_jump_with_error(site, states, shift, y, ge, &mut work, ew)?;
                     }
-                    _ => transpose_jump(model, p, cw, j, states, &mut lam, g, &mut work)?,
+                    _ => transpose_jump(site, states, &mut lam, g, &mut work)?,
                 }
                 continue;
             }
