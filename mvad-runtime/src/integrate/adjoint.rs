@@ -61,11 +61,12 @@
 
 use super::adjoint_error::AdjointError;
 use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
+use super::forward::ModeFlow;
 use super::rosenbrock::{Linearisation, WMatrix};
 use super::system::{HermiteStep, ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
-use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Method, Options};
 use nalgebra::{allocator::Allocator, Const, DefaultAllocator, Dim, OVector};
 
@@ -219,17 +220,12 @@ struct AdjRhs<'a, M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    model: &'a M,
-    p: &'a OVector<f64, M::P>,
-    mode: usize,
-    sw: Switches,
+    flow: ModeFlow<'a, M>,
     /// Absolute time of the segment's start: the integrator runs in local time s = t − t_start.
     t_start: f64,
     /// The cotangent w of the cost (0 when the model has no running cost: ℓ is never
     /// evaluated then).
     w: f64,
-    has_rc: bool,
-    evals: usize,
 }
 
 /// x(t) from the record, on the segment being swept.
@@ -267,7 +263,7 @@ where
     /// The model's point at local time s and state x.
     #[inline]
     fn point<'b>(&'b self, s: f64, x: &'b OVector<f64, M::N>) -> Point<'b, M::N, M::P> {
-        Point::new(self.mode, &self.sw, self.t_start + s, x, self.p)
+        self.flow.point(self.t_start + s, x)
     }
 }
 
@@ -311,17 +307,15 @@ where
         } else {
             M::P::from_usize(0)
         };
-        let has_rc = model.info().has_running_cost;
         Backward {
             rhs: AdjRhs {
-                model,
-                p,
-                mode: model.info().initial_mode,
-                sw: Switches::new(model.info().switches),
+                flow: ModeFlow::new(model, p),
                 t_start: 0.0,
-                w: if has_rc { cw } else { 0.0 },
-                has_rc,
-                evals: 0,
+                w: if model.info().has_running_cost {
+                    cw
+                } else {
+                    0.0
+                },
             },
             hist: History {
                 tape,
@@ -356,11 +350,6 @@ where
         }
     }
 
-    /// Name of the current mode (or its index if the model names fewer modes).
-    fn mode_name(&self) -> String {
-        self.rhs.model.info().mode_name(self.rhs.mode)
-    }
-
     /// x₀ = x(t0), f₀ = f(t₀, x₀), F_t = −d(λᵀf_x) − w dℓ_x and G_t = −d(λᵀf_θ) − w dℓ_θ
     /// along (1, f₀) at fixed λ = y0 (local time t0).
     fn time_derivatives(&mut self, t0: f64, y0: &OVector<f64, M::N>) {
@@ -368,13 +357,15 @@ where
         hist.at(t0);
         imp.x0.copy_from(&hist.x);
         let pt = rhs.point(t0, &imp.x0);
-        rhs.model.rhs(pt, &mut imp.f0);
-        rhs.model
+        rhs.flow.model.rhs(pt, &mut imp.f0);
+        rhs.flow
+            .model
             .rhs_vjp_dir(pt, y0, &imp.f0, &mut imp.lin.dt, &mut imp.dt_g);
         if rhs.w != 0.0 {
-            let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
+            let (sw, t, p) = (&rhs.flow.sw, rhs.t_start + t0, rhs.flow.p);
             let (lx, lp) = (&mut imp.lx, &mut imp.lp);
-            rhs.model
+            rhs.flow
+                .model
                 .running_cost_grad_dir(sw, At::new(t, &imp.x0, p), &imp.f0, lx, lp);
             imp.lin.dt.axpy(rhs.w, &imp.lx, 1.0);
             imp.dt_g.axpy(rhs.w, &imp.lp, 1.0);
@@ -392,7 +383,7 @@ where
     type Vector = OVector<f64, M::N>;
 
     fn zeros(&self) -> Self::Vector {
-        OVector::zeros_generic(self.rhs.model.nstates(), Const::<1>)
+        OVector::zeros_generic(self.rhs.flow.model.nstates(), Const::<1>)
     }
 
     #[inline]
@@ -415,21 +406,21 @@ where
     fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector) {
         self.hist.at(t);
         let rhs = &mut self.rhs;
-        rhs.evals += 1;
+        rhs.flow.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
-        rhs.model.adjoint_rate(pt, y, rhs.w, out);
+        rhs.flow.model.adjoint_rate(pt, y, rhs.w, out);
     }
 
     /// A mode whose flow is a function of θ alone and no running cost: f_x = 0, so λ is
     /// constant and ġ = −f_θᵀλ too (the segment is one exact step backwards).
     #[inline]
     fn constant_rate(&self) -> bool {
-        !self.rhs.has_rc && self.rhs.model.flow_is_constant(self.rhs.mode)
+        !self.rhs.flow.has_rc && self.rhs.flow.model.flow_is_constant(self.rhs.flow.mode)
     }
 
     #[inline]
     fn evals(&self) -> usize {
-        self.rhs.evals
+        self.rhs.flow.evals
     }
 
     /// `WeightedRms` over λ with weight 1 (g is a quadrature outside the vector; see the
@@ -454,7 +445,10 @@ where
 
     /// `adjoint of the flow of mode `m``.
     fn flow_name(&self) -> String {
-        format!("adjoint of the flow of mode `{}`", self.mode_name())
+        format!(
+            "adjoint of the flow of mode `{}`",
+            self.rhs.flow.mode_name()
+        )
     }
 
     fn stage_source(&self, _k: &Self::Vector) -> String {
@@ -500,21 +494,24 @@ where
     fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64, e: f64) {
         self.hist.at(t);
         let rhs = &mut self.rhs;
-        rhs.evals += 1;
+        rhs.flow.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
         let q = &mut self.quad;
         match (a != 0.0, e != 0.0) {
             (true, false) => rhs
+                .flow
                 .model
                 .adjoint_quadrature_add(pt, y, rhs.w, a, &mut q.step),
             (false, true) => rhs
+                .flow
                 .model
                 .adjoint_quadrature_add(pt, y, rhs.w, e, &mut q.err),
             (true, true) => {
                 for &k in &q.support {
                     q.stage[k] = 0.0;
                 }
-                rhs.model
+                rhs.flow
+                    .model
                     .adjoint_quadrature_add(pt, y, rhs.w, 1.0, &mut q.stage);
                 for &k in &q.support {
                     let gk = q.stage[k];
@@ -534,7 +531,7 @@ where
         let mut rms = WeightedRms::new(atol, rtol);
         for &k in &q.support {
             let g0 = self.g[k];
-            let w = gradient_weight(self.rhs.p[k]);
+            let w = gradient_weight(self.rhs.flow.p[k]);
             rms.add_entry(q.err[k], g0, g0 + q.step[k], w);
         }
         rms.norm()
@@ -566,7 +563,7 @@ where
         self.time_derivatives(t0, y0);
         let Backward { rhs, imp, .. } = self;
         let w = &mut imp.lin.w;
-        adjoint_jacobian(rhs.model, rhs.point(t0, &imp.x0), w);
+        adjoint_jacobian(rhs.flow.model, rhs.point(t0, &imp.x0), w);
         w.power_iteration();
         imp.lin.prepared = true;
     }
@@ -597,7 +594,7 @@ where
         let rhs = &mut self.rhs;
         let pt = rhs.point(t0, &self.hist.x);
         let target = self.quad.sum_mut(sum);
-        rhs.model.adjoint_quadrature_add(pt, v, 0.0, a, target);
+        rhs.flow.model.adjoint_quadrature_add(pt, v, 0.0, a, target);
     }
 
     /// `sum` += a·G_t at the step start (from `prepare`, recomputed if it was for another
@@ -648,7 +645,7 @@ where
             return;
         };
         hist.at(t0);
-        let model = rhs.model;
+        let model = rhs.flow.model;
         let pt = rhs.point(t0, &hist.x);
         let (_, r_g) = ge.remainder_mut();
         let mut forcing = None;
@@ -675,7 +672,7 @@ where
         adjoint_jacobian(model, pt, &mut imp.lin.w);
         // J now holds the carried step's start, not the next step's.
         imp.lin.prepared = false;
-        let pattern = &model.info().jacobian_sparsity[rhs.mode];
+        let pattern = &model.info().jacobian_sparsity[rhs.flow.mode];
         ge.carry(le, forcing, &mut imp.lin.w, pattern, h, |v, a, g| {
             model.adjoint_quadrature_add(pt, v, 0.0, a, g)
         });
@@ -685,7 +682,7 @@ where
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t);
         let w = &mut imp.lin.w;
-        rhs.model.rhs_jac_x(rhs.point(t, &hist.x), &mut w.jac);
+        rhs.flow.model.rhs_jac_x(rhs.point(t, &hist.x), &mut w.jac);
         w.power_iteration()
     }
 }
@@ -713,12 +710,12 @@ where
         let sys = &mut self.sys;
         sys.hist.seg = Some(seg);
         sys.hist.cursor = seg.steps.end.saturating_sub(1);
-        sys.rhs.mode = seg.mode;
-        sys.rhs.sw.clone_from(&seg.sw);
+        sys.rhs.flow.mode = seg.mode;
+        sys.rhs.flow.sw.clone_from(&seg.sw);
         sys.rhs.t_start = seg.t_start;
         let q = &mut sys.quad;
         q.support.clear();
-        match sys.rhs.model.gradient_support(seg.mode) {
+        match sys.rhs.flow.model.gradient_support(seg.mode) {
             Some(support) => q.support.extend_from_slice(support),
             None => q.support.extend(0..sys.g.len()),
         }

@@ -86,24 +86,63 @@ where
     f: AugState<N, P>,
 }
 
+/// One mode's flow of `model` at θ with frozen switch bits, as both systems evaluate it (the
+/// forward [`Rhs`] and the adjoint's), and the count of their evaluations.
+pub(super) struct ModeFlow<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    pub(super) model: &'a M,
+    pub(super) p: &'a OVector<f64, M::P>,
+    pub(super) mode: usize,
+    pub(super) sw: Switches,
+    /// The model has a running cost ℓ.
+    pub(super) has_rc: bool,
+    /// Evaluations of F (and of the adjoint's quadrature G).
+    pub(super) evals: usize,
+}
+
+impl<'a, M: HybridModel> ModeFlow<'a, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// `model` at `p` in its initial mode with its initial switch bits.
+    pub(super) fn new(model: &'a M, p: &'a OVector<f64, M::P>) -> Self {
+        let info = model.info();
+        ModeFlow {
+            model,
+            p,
+            mode: info.initial_mode,
+            sw: Switches::new(info.switches),
+            has_rc: info.has_running_cost,
+            evals: 0,
+        }
+    }
+
+    /// The model's point (m, sw, t, x, θ).
+    #[inline]
+    pub(super) fn point<'b>(&'b self, t: f64, x: &'b OVector<f64, M::N>) -> Point<'b, M::N, M::P> {
+        Point::new(self.mode, &self.sw, t, x, self.p)
+    }
+
+    /// Name of the current mode (or its index if the model names fewer modes).
+    pub(super) fn mode_name(&self) -> String {
+        self.model.info().mode_name(self.mode)
+    }
+}
+
 /// Everything F needs, apart from the Rosenbrock buffers so both can be borrowed at once.
 struct Rhs<'a, M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    model: &'a M,
-    p: &'a OVector<f64, M::P>,
-    mode: usize,
-    sw: Switches,
+    flow: ModeFlow<'a, M>,
     /// S and q_θ are integrated.
     sens: bool,
-    has_rc: bool,
     /// ℓ_x scratch.
     lx: OVector<f64, M::N>,
     /// ℓ_θ scratch.
     lp: OVector<f64, M::P>,
-    /// Evaluations of F.
-    evals: usize,
 }
 
 /// The Rodas5P buffers of the forward system (allocated once; empty for `Dyn` sizes when the
@@ -163,15 +202,10 @@ where
         let rsp = if used { sp } else { rp };
         Forward {
             rhs: Rhs {
-                model,
-                p,
-                mode: model.info().initial_mode,
-                sw: Switches::new(model.info().switches),
+                flow: ModeFlow::new(model, p),
                 sens: opts.sensitivities,
-                has_rc: model.info().has_running_cost,
                 lx: OVector::zeros_generic(n, Const::<1>),
                 lp: OVector::zeros_generic(np, Const::<1>),
-                evals: 0,
             },
             sens_err: opts.sens_error_control && opts.sensitivities,
             sp,
@@ -197,11 +231,6 @@ where
                 .collect(),
         }
     }
-
-    /// Name of the current mode (or its index if the model names fewer modes).
-    fn mode_name(&self) -> String {
-        self.rhs.model.info().mode_name(self.rhs.mode)
-    }
 }
 
 impl<M: HybridModel> Rhs<'_, M>
@@ -211,34 +240,33 @@ where
     /// out = F(t, y): (f, f_x S + f_θ, ℓ, ℓ_x S + ℓ_θ).
     #[inline]
     fn eval(&mut self, t: f64, y: &AugState<M::N, M::P>, out: &mut AugState<M::N, M::P>) {
-        self.evals += 1;
+        self.flow.evals += 1;
         if self.sens {
-            self.model.rhs_sens(
-                Point::new(self.mode, &self.sw, t, &y.x, self.p),
-                &y.s,
-                &mut out.x,
-                &mut out.s,
-            );
+            self.flow
+                .model
+                .rhs_sens(self.flow.point(t, &y.x), &y.s, &mut out.x, &mut out.s);
         } else {
-            self.model
-                .rhs(Point::new(self.mode, &self.sw, t, &y.x, self.p), &mut out.x);
+            self.flow.model.rhs(self.flow.point(t, &y.x), &mut out.x);
         }
-        if !self.has_rc {
+        if !self.flow.has_rc {
             out.q = 0.0;
             if self.sens {
                 out.qp.fill(0.0);
             }
         } else if self.sens {
-            out.q = self.model.running_cost_value_grad(
-                &self.sw,
-                At::new(t, &y.x, self.p),
+            out.q = self.flow.model.running_cost_value_grad(
+                &self.flow.sw,
+                At::new(t, &y.x, self.flow.p),
                 &mut self.lx,
                 &mut self.lp,
             );
             out.qp.copy_from(&self.lp);
             out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
         } else {
-            out.q = self.model.running_cost(&self.sw, At::new(t, &y.x, self.p));
+            out.q = self
+                .flow
+                .model
+                .running_cost(&self.flow.sw, At::new(t, &y.x, self.flow.p));
         }
     }
 }
@@ -251,7 +279,7 @@ where
 
     /// (x, S, q, q_θ) with S n×p, or n×0 in a primal run of a `Dyn`-parameter model.
     fn zeros(&self) -> Self::Vector {
-        AugState::zeros(self.rhs.model.nstates(), self.sp)
+        AugState::zeros(self.rhs.flow.model.nstates(), self.sp)
     }
 
     #[inline]
@@ -281,12 +309,12 @@ where
     #[inline]
     fn constant_rate(&self) -> bool {
         // `rates` holds a slot exactly for the modes with !has_rc && flow_is_constant.
-        matches!(self.rates.get(self.rhs.mode), Some(Some(_)))
+        matches!(self.rates.get(self.rhs.flow.mode), Some(Some(_)))
     }
 
     #[inline]
     fn evals(&self) -> usize {
-        self.rhs.evals
+        self.rhs.flow.evals
     }
 
     /// `weighted_rms`: x, q (with a running cost) and, under sensitivity error control, S and
@@ -306,9 +334,9 @@ where
             y1,
             atol,
             rtol,
-            self.rhs.has_rc,
+            self.rhs.flow.has_rc,
             self.sens_err,
-            self.rhs.p,
+            self.rhs.flow.p,
         )
     }
 
@@ -318,12 +346,12 @@ where
 
     /// `flow of mode `m``.
     fn flow_name(&self) -> String {
-        format!("flow of mode `{}`", self.mode_name())
+        format!("flow of mode `{}`", self.rhs.flow.mode_name())
     }
 
     /// `flow of mode `m``, its sensitivity equation, the running cost or its gradient.
     fn stage_source(&self, k: &Self::Vector) -> String {
-        let mode = self.mode_name();
+        let mode = self.rhs.flow.mode_name();
         if !k.x.iter().all(|v| v.is_finite()) {
             format!("flow of mode `{mode}`")
         } else if !k.q.is_finite() {
@@ -345,8 +373,8 @@ where
     /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0), all exact.
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         let Forward { rhs, imp: w, .. } = self;
-        let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
-        let pt = Point::new(mode, &rhs.sw, t0, &y0.x, p);
+        let (model, p, mode) = (rhs.flow.model, rhs.flow.p, rhs.flow.mode);
+        let pt = rhs.flow.point(t0, &y0.x);
         let lin = &mut w.lin;
         model.rhs_jac_x(pt, &mut lin.w.jac);
         lin.w.power_iteration();
@@ -356,13 +384,18 @@ where
         } else {
             lin.dt.s.fill(0.0);
         }
-        if rhs.has_rc {
-            model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut w.lx0);
+        if rhs.flow.has_rc {
+            model.running_cost_grad_x(&rhs.flow.sw, At::new(t0, &y0.x, p), &mut w.lx0);
             lin.dt.q = if y0.s.ncols() == p.len() {
-                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &y0.s, &mut lin.dt.qp)
+                model.running_cost_sens_dt(
+                    &rhs.flow.sw,
+                    At::new(t0, &y0.x, p),
+                    &y0.s,
+                    &mut lin.dt.qp,
+                )
             } else {
                 // A narrow primal run: ∂ₜℓ alone, from the full-width zero S.
-                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &w.s0, &mut w.qp0)
+                model.running_cost_sens_dt(&rhs.flow.sw, At::new(t0, &y0.x, p), &w.s0, &mut w.qp0)
             };
         } else {
             w.lx0.fill(0.0);
@@ -400,13 +433,13 @@ where
             return ok_x;
         }
         // K_S = W⁻¹ hγ (R_S + B K_x), B K_x at (t0, x0, S0); D K_x likewise.
-        let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, rhs.p);
-        rhs.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
+        let pt = rhs.flow.point(t0, &y0.x);
+        rhs.flow.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
         k.s += &r.s;
-        if rhs.has_rc {
-            rhs.model.running_cost_sens_dir_x(
-                &rhs.sw,
-                At::new(t0, &y0.x, rhs.p),
+        if rhs.flow.has_rc {
+            rhs.flow.model.running_cost_sens_dir_x(
+                &rhs.flow.sw,
+                At::new(t0, &y0.x, rhs.flow.p),
                 &y0.s,
                 &k.x,
                 &mut k.qp,
@@ -415,7 +448,7 @@ where
         }
         k.s *= hg;
         let ok_s = w.lin.w.solve_mut(&mut k.s);
-        if rhs.has_rc {
+        if rhs.flow.has_rc {
             k.qp.gemv_tr(hg, &k.s, &w.lx0, hg);
         } else {
             k.qp.fill(0.0);
@@ -445,17 +478,17 @@ where
         let Some(ge) = global else {
             return;
         };
-        let (model, p) = (rhs.model, rhs.p);
-        let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, p);
+        let (model, p) = (rhs.flow.model, rhs.flow.p);
+        let pt = rhs.flow.point(t0, &y0.x);
         model.rhs_jac_x(pt, &mut imp.lin.w.jac);
-        if rhs.has_rc {
-            model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
+        if rhs.flow.has_rc {
+            model.running_cost_grad_x(&rhs.flow.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
         }
         // f_x and ℓ_x now hold the carried step's start, not the next step's.
         imp.lin.prepared = false;
         let tols = (self.atol, self.rtol);
-        let autonomous = !model.rhs_depends_on_t(rhs.mode);
-        let pattern = &model.info().jacobian_sparsity[rhs.mode];
+        let autonomous = !model.rhs_depends_on_t(rhs.flow.mode);
+        let pattern = &model.info().jacobian_sparsity[rhs.flow.mode];
         ge.carry(
             le,
             f0,
@@ -473,8 +506,9 @@ where
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
         let w = &mut self.imp.lin.w;
-        rhs.model
-            .rhs_jac_x(Point::new(rhs.mode, &rhs.sw, t, &y.x, rhs.p), &mut w.jac);
+        rhs.flow
+            .model
+            .rhs_jac_x(rhs.flow.point(t, &y.x), &mut w.jac);
         w.power_iteration()
     }
 }
@@ -510,14 +544,14 @@ where
         // changed neither): k₀ = F stays where the last exact step left it.
         if self.scheme == Scheme::Exact
             && self.dense_scheme == Scheme::Exact
-            && mode == self.sys.rhs.mode
-            && *sw == self.sys.rhs.sw
+            && mode == self.sys.rhs.flow.mode
+            && *sw == self.sys.rhs.flow.sw
         {
             self.restart_exact_keeping_rate(t, y);
             return;
         }
-        self.sys.rhs.mode = mode;
-        self.sys.rhs.sw.clone_from(sw);
+        self.sys.rhs.flow.mode = mode;
+        self.sys.rhs.flow.sw.clone_from(sw);
         self.restart_at(t, y);
         if self.scheme == Scheme::Exact {
             self.reuse_constant_rate();
@@ -528,16 +562,16 @@ where
     /// these bits. A non-finite F is not kept: the first step evaluates it again and reports it.
     fn reuse_constant_rate(&mut self) {
         let sys = &mut self.sys;
-        let Some(Some(c)) = sys.rates.get_mut(sys.rhs.mode) else {
+        let Some(Some(c)) = sys.rates.get_mut(sys.rhs.flow.mode) else {
             return;
         };
-        if !c.valid || c.sw != sys.rhs.sw {
+        if !c.valid || c.sw != sys.rhs.flow.sw {
             sys.rhs.eval(self.t, &self.y, &mut c.f);
             if c.f.nonfinite_part(sys.rhs.sens).is_some() {
                 c.valid = false;
                 return;
             }
-            c.sw.clone_from(&sys.rhs.sw);
+            c.sw.clone_from(&sys.rhs.flow.sw);
             c.valid = true;
         }
         self.k[0].copy_from(&c.f);
@@ -546,11 +580,11 @@ where
 
     /// Current mode.
     pub fn mode(&self) -> usize {
-        self.sys.rhs.mode
+        self.sys.rhs.flow.mode
     }
     /// Current frozen switch bits.
     pub fn switches(&self) -> &Switches {
-        &self.sys.rhs.sw
+        &self.sys.rhs.flow.sw
     }
     /// The run's global error estimate (`None` when `Options::global_error` is off); the
     /// last accepted step may still be pending ([`Integrator::close_step`]).
