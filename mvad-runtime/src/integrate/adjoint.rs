@@ -60,7 +60,7 @@
 //! switches to Rodas5P on it as on the forward run.
 
 use super::adjoint_error::AdjointError;
-use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
+use super::aug::{axpy_slice, WeightedRms};
 use super::forward::ModeFlow;
 use super::rosenbrock::{Linearisation, WMatrix};
 use super::system::{HermiteStep, ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
@@ -71,7 +71,8 @@ use crate::solution::{Method, Options};
 use nalgebra::{allocator::Allocator, Const, DefaultAllocator, Dim, OVector};
 
 /// A plain vector as the integrated vector of a system with no secondary parts (the
-/// adjoint's λ): every operation works on the one slice, `all` changes nothing.
+/// adjoint's λ): it is its own primary part, so every operation is the primary one and `all`
+/// changes nothing.
 impl<N: Dim> StageVector for OVector<f64, N>
 where
     DefaultAllocator: Allocator<N>,
@@ -80,29 +81,17 @@ where
 
     #[inline]
     fn copy_from(&mut self, other: &Self) {
-        self.as_mut_slice().copy_from_slice(other.as_slice());
+        other.primary_into(self);
     }
 
     #[inline]
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
-        self.as_mut_slice().copy_from_slice(base.as_slice());
-        accumulate_slices(
-            self.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.as_slice()),
-        );
+        Self::combine_primary(self, base, h, coefs, ks);
     }
 
     #[inline]
     fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
-        self.fill(0.0);
-        accumulate_slices(
-            self.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.as_slice()),
-        );
+        Self::lincomb_primary(self, h, coefs, ks);
     }
 
     #[inline]
@@ -112,17 +101,12 @@ where
 
     #[inline]
     fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], _all: bool) {
-        mix5_slice(self.as_mut_slice(), w, v.map(|u| u.as_slice()));
+        Self::mix5_primary(self, w, v);
     }
 
     #[inline]
     fn hermite(&mut self, step: &HermiteStep<'_, Self>, th: f64, _all: bool) {
-        hermite_slice(
-            self.as_mut_slice(),
-            step.parts(|v| v.as_slice()),
-            step.h,
-            th,
-        );
+        Self::hermite_primary(self, step, th);
     }
 
     #[inline]
