@@ -503,7 +503,12 @@ where
             let fired = if w < nev { self.fired[w] } else { None };
             self.scanner.restart_one(w, v, fired);
         }
-        self.fired.fill(None);
+        // Only the events applied at this instant (in `scanner.found`) have a firing value.
+        for c in &self.scanner.found {
+            if c.w < nev {
+                self.fired[c.w] = None;
+            }
+        }
         self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
