@@ -313,6 +313,20 @@ impl Scanner {
         };
     }
 
+    /// Adds to `found`, at t, every armed event whose value at the end of the last step
+    /// reaches zero within `window` at its slope there (v + max(v̇, 0)·window ≥ 0).
+    #[inline]
+    pub fn join_events_due(&mut self, t: f64, window: f64) {
+        for &w in &self.watched {
+            if w < self.nevents {
+                let tr = &self.tracks[w];
+                if tr.armed && tr.start_val + tr.slope.max(0.0) * window >= 0.0 {
+                    self.found.push(Crossing { w, t });
+                }
+            }
+        }
+    }
+
     /// Scans the accepted step [t0, t1] for crossings. With `linear` (every active watched
     /// value is affine in t over the step: an exact step of a constant flow and affine guards)
     /// only the values at t0 and t1 are evaluated: the interior samples are interpolated

@@ -618,6 +618,7 @@ where
     /// Scans [t0, t1] of the last step (which ends at `t_step`) for crossings into
     /// `scanner.found`: the watched values at the piece's ends and samples from the step's
     /// dense output (its exact end state at `t_step`).
+    #[inline]
     fn scan_piece(&mut self, t0: f64, t1: f64, t_step: f64) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let nev = self.scanner.nevents;
@@ -729,15 +730,7 @@ where
     /// whatever the declaration order. v and dv/dt are the guard's at the end of the last
     /// step (`Track::start_val`, `Track::slope`).
     fn join_state_events_due(&mut self, t: f64) {
-        let nev = self.scanner.nevents;
-        let window = time_resolution(t);
-        for i in 0..self.scanner.watched().len() {
-            let w = self.scanner.watched()[i];
-            let tr = &self.scanner.tracks[w];
-            if w < nev && tr.armed && tr.start_val + tr.slope.max(0.0) * window >= 0.0 {
-                self.scanner.found.push(Crossing { w, t });
-            }
-        }
+        self.scanner.join_events_due(t, time_resolution(t));
     }
 
     /// The `kink` diagnostic for switching function j, exactly zero at the start t and moving

@@ -76,12 +76,18 @@ where
     /// The end t₁ ≤ `t_step` of the next piece, from t₀, of the step that ends at `t_step`
     /// on which every watched function of the current mode that is not an affine guard is
     /// resolved (see the module doc).
+    #[inline]
     pub(super) fn resolved_end(&mut self, t0: f64, t_step: f64) -> Result<f64, SolveError> {
-        let mode = self.mode;
-        let n = self.watch[mode].unresolved.len();
-        if n == 0 {
+        if self.watch[self.mode].unresolved.is_empty() {
             return Ok(t_step);
         }
+        self.resolved_piece(t0, t_step)
+    }
+
+    /// [`Driver::resolved_end`] where some watched function is not an affine guard.
+    fn resolved_piece(&mut self, t0: f64, t_step: f64) -> Result<f64, SolveError> {
+        let mode = self.mode;
+        let n = self.watch[mode].unresolved.len();
         if t0 == self.integ.t_prev() {
             self.xs.copy_from(&self.integ.y_prev().x);
         } else {
