@@ -197,9 +197,12 @@ pub struct Track {
     pub armed: bool,
     /// v was increasing at the end of the previous step (dip detection at t₀).
     pub rising: bool,
-    /// dv/dt at the end of the previous step, from its last two samples (0 after a restart):
-    /// what a guard just short of zero needs to reach it (see `Driver::fire_at`).
-    pub slope: f64,
+    /// The rise of v over the last sample interval of the previous step and that interval's
+    /// length (0 and 1 after a restart): their ratio is dv/dt there, what a guard just short
+    /// of zero needs to reach it (see [`Scanner::join_events_due`]).
+    pub last_rise: f64,
+    /// See `last_rise`.
+    pub last_span: f64,
     /// The event fired at the last restart and this is the first step since (see
     /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
     pub fresh: bool,
@@ -300,7 +303,8 @@ impl Scanner {
         }
         tr.start_val = v;
         tr.rising = false;
-        tr.slope = 0.0;
+        tr.last_rise = 0.0;
+        tr.last_span = 1.0;
         tr.fresh = fired.is_some() && !strict;
         let below = fired.map_or(0.0, |vf| vf.min(0.0));
         tr.rearm_below = below;
@@ -314,13 +318,14 @@ impl Scanner {
     }
 
     /// Adds to `found`, at t, every armed event whose value at the end of the last step
-    /// reaches zero within `window` at its slope there (v + max(v̇, 0)·window ≥ 0).
+    /// reaches zero within `window` at its slope there (v + max(v̇, 0)·window ≥ 0, v̇ the last
+    /// rise over its span).
     #[inline]
     pub fn join_events_due(&mut self, t: f64, window: f64) {
         for &w in &self.watched {
             if w < self.nevents {
                 let tr = &self.tracks[w];
-                if tr.armed && tr.start_val + tr.slope.max(0.0) * window >= 0.0 {
+                if tr.armed && tr.start_val * tr.last_span + tr.last_rise.max(0.0) * window >= 0.0 {
                     self.found.push(Crossing { w, t });
                 }
             }
@@ -379,7 +384,8 @@ impl Scanner {
                 }
                 tr.start_val = v[NSAMP - 1];
                 tr.rising = v[NSAMP - 1] > v[NSAMP - 2];
-                tr.slope = (v[NSAMP - 1] - v[NSAMP - 2]) * (NSAMP - 1) as f64 / (t1 - t0);
+                tr.last_rise = v[NSAMP - 1] - v[NSAMP - 2];
+                tr.last_span = (t1 - t0) / (NSAMP - 1) as f64;
             }
             return Ok(());
         }
@@ -446,7 +452,8 @@ impl Scanner {
                 }
                 tr.start_val = b;
                 tr.rising = b > line_sample(a, b, NSAMP - 2);
-                tr.slope = (b - a) / (t1 - t0);
+                tr.last_rise = b - a;
+                tr.last_span = t1 - t0;
                 continue;
             }
             let times = sample_times(t0, t1);

@@ -349,6 +349,7 @@ where
         let mut integ = Integrator::new_narrow(model, p, opts);
         integ.set_lazy_dense(true);
         // S and q_θ as wide as the integrator's (zero width in a primal run of a Dyn model).
+        let watch = ModeWatch::of_modes(model);
         let y = integ.system().zeros();
         let aug_tmp = integ.system().zeros();
         let sp = if opts.sensitivities { np.value() } else { 0 };
@@ -369,8 +370,8 @@ where
             sw_next: Switches::new(info.switches),
             sw_undecided: Switches::new(info.switches),
             scanner: Scanner::new(nev, info.switches),
-            resolution: resolution::Resolution::new(nev + info.switches),
-            watch: ModeWatch::of_modes(model),
+            resolution: resolution::Resolution::new(&watch),
+            watch,
             affine_watch: false,
             xs: vn(),
             xe: vn(),

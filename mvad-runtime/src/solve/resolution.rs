@@ -49,12 +49,14 @@ pub(super) struct Resolution {
 }
 
 impl Resolution {
-    /// Scratch for `nwatch` watched functions.
-    pub(super) fn new(nwatch: usize) -> Self {
+    /// Scratch for the longest list of functions to resolve in any mode of `watch` (nothing
+    /// allocated when there is none: every watched function an affine guard).
+    pub(super) fn new(watch: &[super::ModeWatch]) -> Self {
+        let n = watch.iter().map(|m| m.unresolved.len()).max().unwrap_or(0);
         Resolution {
             next: f64::INFINITY,
-            v0: vec![0.0; nwatch],
-            s0: vec![0.0; nwatch],
+            v0: vec![0.0; n],
+            s0: vec![0.0; n],
         }
     }
 }
