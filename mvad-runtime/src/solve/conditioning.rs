@@ -13,10 +13,10 @@
 //! weighs S by |θ_j|, adjoint mode's quadrature g is controlled unweighted.
 
 use super::Driver;
-use crate::integrate::{sens_weight, ResetSecant, Saltation};
-use crate::model::{At, HybridModel, ModelAlloc, Occurrence};
+use crate::integrate::{sens_weight, EventRounding, ResetSecant, Saltation};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::solution::{Diagnostic, DiagnosticKind, ErrorEstimate, ILL_CONDITIONED_FACTOR};
-use nalgebra::{Const, DefaultAllocator, OVector};
+use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
 /// How an estimate's jump takes the reset (see [`Saltation`]).
 enum Reset {
@@ -43,8 +43,7 @@ where
         rate: f64,
         l_plus: f64,
     ) {
-        // A zero estimate (only exact steps so far) jumps to zero: nothing to compute.
-        if self.integ.global_error_mut().is_none_or(|ge| ge.is_zero()) {
+        if self.integ.global_error_mut().is_none() {
             return;
         }
         let (model, p) = (self.model, self.p);
@@ -61,13 +60,13 @@ where
             // secant of the reset (one evaluation, never the p-long ∂R/∂θ of `reset_jac`).
             Reset::Secant(occ, t)
         };
-        self.error_jump(reset, rate, (l_minus, l_plus), phi_t);
+        self.error_jump(reset, rate, (l_minus, l_plus), phi_t, (t, true));
     }
 
     /// Carries the estimate through the crossing of switching function j at t (identity
     /// reset): x in `y.x`, f⁻ and f⁺ computed, the old bits in `sw` and the new in `sw_next`.
     pub(super) fn error_through_switch(&mut self, j: usize, t: f64) {
-        if self.integ.global_error_mut().is_none_or(|ge| ge.is_zero()) {
+        if self.integ.global_error_mut().is_none() {
             return;
         }
         let (model, p) = (self.model, self.p);
@@ -80,19 +79,21 @@ where
         } else {
             0.0
         };
-        self.error_jump(Reset::Identity, rate, (l_minus, l_plus), None);
+        self.error_jump(Reset::Identity, rate, (l_minus, l_plus), None, (t, false));
     }
 
     /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, the reset as
     /// `reset` says (R_x, R_t from the driver's buffers, or the secant of R at x⁻ in `y.x`
     /// with x⁺ in `x_plus`), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event cost, φ_t with φ_x in
-    /// `cx`.
+    /// `cx`; then the jump's rounding at event time t (`event`: a user event, x⁺ in
+    /// `x_plus`, S⁺ in `s_plus`, R_θ in `rp`; else a switch crossing, S⁺ in `y.s`).
     fn error_jump(
         &mut self,
         reset: Reset,
         rate: f64,
         (l_minus, l_plus): (f64, f64),
         phi_t: Option<f64>,
+        (t, event): (f64, bool),
     ) {
         let (model, p) = (self.model, self.p);
         let (x_minus, x_plus) = (&self.y.x, &self.x_plus);
@@ -124,8 +125,18 @@ where
             cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
             secant: secant.as_ref().map(|f| f as &ResetSecant<'_, M::N>),
         };
+        let rounding = EventRounding {
+            t,
+            x_minus: &self.y.x,
+            x_plus: if event { &self.x_plus } else { &self.y.x },
+            sens: self.sens.then(|| match event {
+                true => (&self.dt, &self.s_plus, Some(&self.rp)),
+                false => (&self.dt, &self.y.s, None),
+            }),
+        };
         if let Some(ge) = self.integ.global_error_mut() {
             ge.jump(&s, self.sens);
+            ge.event_rounding(&s, &rounding);
         }
     }
 
@@ -140,14 +151,14 @@ where
     }
 
     /// The estimated errors at T of the run's C and dC/dθ (`grad`, meaningful with
-    /// sensitivities), with x(T) and f(T); pushes the `ill_conditioned` diagnostic when they
+    /// sensitivities), with x(T), S(T) and f(T); pushes the `ill_conditioned` diagnostic when they
     /// exceed what the tolerances ask for ([`judge`]), except in the adjoint's primal run.
     /// `None` when no estimate was carried.
     pub(super) fn error_at_end(
         &mut self,
         cost: f64,
         grad: &OVector<f64, M::P>,
-        x_final: &OVector<f64, M::N>,
+        (x_final, s_final): (&OVector<f64, M::N>, &OMatrix<f64, M::N, M::P>),
         f_end: &OVector<f64, M::N>,
     ) -> Option<ErrorEstimate> {
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
@@ -164,10 +175,32 @@ where
             None
         };
         let mut e_grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
-        let e_cost = self
-            .integ
-            .global_error_mut()?
-            .at_end(f_end, l_end, phi_x, sens, &mut e_grad);
+        // Ṡ(T) = f_x S + f_θ and q̇_θ(T) = ℓ_x S + ℓ_θ less its mean q_θ(T)/T, for the time
+        // shift of S at T (one evaluation per run; `s_plus` and `dt` are free after the last
+        // event).
+        if sens {
+            let pt = Point::new(self.mode, &self.sw, t_end, x_final, p);
+            model.rhs_sens(pt, s_final, &mut self.xs, &mut self.s_plus);
+            self.dt.fill(0.0);
+            if info.has_running_cost {
+                let at = At::new(t_end, x_final, p);
+                model.running_cost_value_grad(&self.sw, at, &mut self.gx, &mut self.dt);
+                self.dt.gemv_tr(1.0, s_final, &self.gx, 1.0);
+                if t_end > 0.0 {
+                    self.dt.axpy(-1.0 / t_end, &self.integ.y().qp, 1.0);
+                }
+            }
+        }
+        let phase = sens.then_some((
+            x_final,
+            (self.opts.atol, self.opts.rtol),
+            &self.s_plus,
+            &self.dt,
+        ));
+        let e_cost =
+            self.integ
+                .global_error_mut()?
+                .at_end(f_end, l_end, phi_x, sens, phase, &mut e_grad);
         let e_grad = sens.then(|| (e_grad.as_slice(), grad.as_slice()));
         let (estimate, diagnostic) = judge(
             (e_cost, cost),
