@@ -75,7 +75,7 @@ pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
-pub use global_error::{EventRounding, GlobalError, ResetSecant, Saltation};
+pub use global_error::{EventRounding, GlobalError, JumpOf, ResetSecant, Saltation};
 pub use scheme::Scheme;
 pub use step_error::StepError;
 pub use system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};

@@ -13,7 +13,7 @@
 //! weighs S by |θ_j|, adjoint mode's quadrature g is controlled unweighted.
 
 use super::Driver;
-use crate::integrate::{sens_weight, EventRounding, ResetSecant, Saltation};
+use crate::integrate::{sens_weight, EventRounding, JumpOf, ResetSecant, Saltation};
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::solution::{Diagnostic, DiagnosticKind, ErrorEstimate, ILL_CONDITIONED_FACTOR};
 use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
@@ -26,6 +26,8 @@ enum Reset {
     Jacobians,
     /// Without sensitivities: the secant of occurrence `.0`'s reset at time `.1`.
     Secant(Occurrence, f64),
+    /// Without sensitivities, for the rounding only: neither (|R_x f⁻| is bounded by |f⁻|).
+    Bounded,
 }
 
 impl<M: HybridModel> Driver<'_, M>
@@ -43,12 +45,29 @@ where
         rate: f64,
         l_plus: f64,
     ) {
-        if self.integ.global_error_mut().is_none() {
+        let dt = self.sens.then_some(&self.dt);
+        let Some((zero, rounds)) = self
+            .integ
+            .global_error()
+            .map(|ge| (ge.is_zero(), ge.takes_event_rounding(dt)))
+        else {
+            return;
+        };
+        if !rounds {
             return;
         }
         let (model, p) = (self.model, self.p);
         let occ = Occurrence::new(k, j);
         let l_minus = self.running_cost_minus(t);
+        if zero {
+            // A zero estimate (only exact steps so far) jumps to zero: only the rounding.
+            let reset = match self.sens {
+                true => Reset::Jacobians,
+                false => Reset::Bounded,
+            };
+            self.error_jump(reset, None, (l_minus, l_plus), None, (t, self.jump_of(k)));
+            return;
+        }
         let phi_t = model.info().events[k].has_cost.then(|| {
             model.event_cost_grad(occ, At::new(t, &self.x_plus, p), &mut self.cx, &mut self.cp)
         });
@@ -60,41 +79,74 @@ where
             // secant of the reset (one evaluation, never the p-long ∂R/∂θ of `reset_jac`).
             Reset::Secant(occ, t)
         };
-        self.error_jump(reset, rate, (l_minus, l_plus), phi_t, (t, true));
+        self.error_jump(
+            reset,
+            Some(rate),
+            (l_minus, l_plus),
+            phi_t,
+            (t, self.jump_of(k)),
+        );
+    }
+
+    /// How user event k's time was found ([`JumpOf`]).
+    fn jump_of(&self, k: usize) -> JumpOf {
+        match self.model.info().events[k].is_time_event() {
+            true => JumpOf::TimeEvent,
+            false => JumpOf::StateEvent,
+        }
     }
 
     /// Carries the estimate through the crossing of switching function j at t (identity
     /// reset): x in `y.x`, f⁻ and f⁺ computed, the old bits in `sw` and the new in `sw_next`.
     pub(super) fn error_through_switch(&mut self, j: usize, t: f64) {
-        if self.integ.global_error_mut().is_none() {
+        let dt = self.sens.then_some(&self.dt);
+        let Some((zero, rounds)) = self
+            .integ
+            .global_error()
+            .map(|ge| (ge.is_zero(), ge.takes_event_rounding(dt)))
+        else {
+            return;
+        };
+        if !rounds {
             return;
         }
         let (model, p) = (self.model, self.p);
-        // `apply_switch` leaves ∇σ_j in `gx` only with sensitivities.
-        let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
-        let rate = self.gx.dot(&self.f_minus) + gt;
         let l_minus = self.running_cost_minus(t);
         let l_plus = if model.info().has_running_cost {
             model.running_cost(&self.sw_next, At::new(t, &self.y.x, p))
         } else {
             0.0
         };
-        self.error_jump(Reset::Identity, rate, (l_minus, l_plus), None, (t, false));
+        // `apply_switch` leaves ∇σ_j in `gx` only with sensitivities; a zero estimate needs
+        // only the rounding, not the rate.
+        let rate = (!zero).then(|| {
+            let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
+            self.gx.dot(&self.f_minus) + gt
+        });
+        self.error_jump(
+            Reset::Identity,
+            rate,
+            (l_minus, l_plus),
+            None,
+            (t, JumpOf::Switch),
+        );
     }
 
     /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, the reset as
     /// `reset` says (R_x, R_t from the driver's buffers, or the secant of R at x⁻ in `y.x`
     /// with x⁺ in `x_plus`), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event cost, φ_t with φ_x in
-    /// `cx`; then the jump's rounding at event time t (`event`: a user event, x⁺ in
-    /// `x_plus`, S⁺ in `s_plus`, R_θ in `rp`; else a switch crossing, S⁺ in `y.s`).
+    /// `cx`; then the jump's rounding at event time t (`kind`; a user event has x⁺ in
+    /// `x_plus`, S⁺ in `s_plus`, R_θ in `rp`, a switch crossing S⁺ in `y.s`). Without
+    /// `rate` (a zero estimate, whose linearised jump is zero) only the rounding.
     fn error_jump(
         &mut self,
         reset: Reset,
-        rate: f64,
+        rate: Option<f64>,
         (l_minus, l_plus): (f64, f64),
         phi_t: Option<f64>,
-        (t, event): (f64, bool),
+        (t, kind): (f64, JumpOf),
     ) {
+        let event = kind != JumpOf::Switch;
         let (model, p) = (self.model, self.p);
         let (x_minus, x_plus) = (&self.y.x, &self.x_plus);
         let secant_at = |occ: Occurrence, t: f64| {
@@ -119,7 +171,7 @@ where
             f_minus: &self.f_minus,
             f_plus: &self.f_plus,
             gx: &self.gx,
-            rate,
+            rate: rate.unwrap_or(0.0),
             l_minus,
             l_plus,
             cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
@@ -127,6 +179,7 @@ where
         };
         let rounding = EventRounding {
             t,
+            kind,
             x_minus: &self.y.x,
             x_plus: if event { &self.x_plus } else { &self.y.x },
             sens: self.sens.then(|| match event {
@@ -135,7 +188,9 @@ where
             }),
         };
         if let Some(ge) = self.integ.global_error_mut() {
-            ge.jump(&s, self.sens);
+            if rate.is_some() {
+                ge.jump(&s, self.sens);
+            }
             ge.event_rounding(&s, &rounding);
         }
     }
