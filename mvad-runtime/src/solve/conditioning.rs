@@ -180,6 +180,7 @@ where
         let rounding = EventRounding {
             t,
             kind,
+            tols: (self.opts.atol, self.opts.rtol),
             x_minus: &self.y.x,
             x_plus: if event { &self.x_plus } else { &self.y.x },
             sens: self.sens.then(|| match event {
