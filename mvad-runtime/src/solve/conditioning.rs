@@ -26,8 +26,6 @@ enum Reset {
     Jacobians,
     /// Without sensitivities: the secant of occurrence `.0`'s reset at time `.1`.
     Secant(Occurrence, f64),
-    /// Without sensitivities, for the rounding only: neither (|R_x f⁻| is bounded by |f⁻|).
-    Bounded,
 }
 
 impl<M: HybridModel> Driver<'_, M>
@@ -45,27 +43,17 @@ where
         rate: f64,
         l_plus: f64,
     ) {
-        let dt = self.sens.then_some(&self.dt);
-        let Some((zero, rounds)) = self
-            .integ
-            .global_error()
-            .map(|ge| (ge.is_zero(), ge.takes_event_rounding(dt)))
-        else {
+        let Some(zero) = self.estimate_at_jump() else {
             return;
         };
-        if !rounds {
-            return;
-        }
         let (model, p) = (self.model, self.p);
         let occ = Occurrence::new(k, j);
         let l_minus = self.running_cost_minus(t);
         if zero {
-            // A zero estimate (only exact steps so far) jumps to zero: only the rounding.
-            let reset = match self.sens {
-                true => Reset::Jacobians,
-                false => Reset::Bounded,
-            };
-            self.error_jump(reset, None, (l_minus, l_plus), None, (t, self.jump_of(k)));
+            // A zero estimate (only exact steps so far) jumps to zero: only the rounding, which
+            // it takes with sensitivities only ([`Self::estimate_at_jump`]).
+            let kind = self.jump_of(k);
+            self.error_jump(Reset::Jacobians, None, (l_minus, l_plus), None, (t, kind));
             return;
         }
         let phi_t = model.info().events[k].has_cost.then(|| {
@@ -88,6 +76,15 @@ where
         );
     }
 
+    /// Whether the estimate has anything to do at the jump being applied: `None` without an
+    /// estimate, or when it is zero and the jump adds no rounding to it (t' = 0, or no
+    /// sensitivities: `GlobalError::takes_event_rounding`); else whether it is zero.
+    fn estimate_at_jump(&self) -> Option<bool> {
+        let ge = self.integ.global_error()?;
+        let dt = self.sens.then_some(&self.dt);
+        ge.takes_event_rounding(dt).then(|| ge.is_zero())
+    }
+
     /// How user event k's time was found ([`JumpOf`]).
     fn jump_of(&self, k: usize) -> JumpOf {
         match self.model.info().events[k].is_time_event() {
@@ -99,17 +96,9 @@ where
     /// Carries the estimate through the crossing of switching function j at t (identity
     /// reset): x in `y.x`, f⁻ and f⁺ computed, the old bits in `sw` and the new in `sw_next`.
     pub(super) fn error_through_switch(&mut self, j: usize, t: f64) {
-        let dt = self.sens.then_some(&self.dt);
-        let Some((zero, rounds)) = self
-            .integ
-            .global_error()
-            .map(|ge| (ge.is_zero(), ge.takes_event_rounding(dt)))
-        else {
+        let Some(zero) = self.estimate_at_jump() else {
             return;
         };
-        if !rounds {
-            return;
-        }
         let (model, p) = (self.model, self.p);
         let l_minus = self.running_cost_minus(t);
         let l_plus = if model.info().has_running_cost {
