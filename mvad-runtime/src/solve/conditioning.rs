@@ -172,7 +172,7 @@ where
             tols: (self.opts.atol, self.opts.rtol),
             x_minus: &self.y.x,
             x_plus: if event { &self.x_plus } else { &self.y.x },
-            sens: self.sens.then(|| match event {
+            sens: self.sens.then_some(match event {
                 true => (&self.dt, &self.s_plus, Some(&self.rp)),
                 false => (&self.dt, &self.y.s, None),
             }),
@@ -203,7 +203,8 @@ where
         &mut self,
         cost: f64,
         grad: &OVector<f64, M::P>,
-        (x_final, s_final): (&OVector<f64, M::N>, &OMatrix<f64, M::N, M::P>),
+        x_final: &OVector<f64, M::N>,
+        s_final: &OMatrix<f64, M::N, M::P>,
         f_end: &OVector<f64, M::N>,
     ) -> Option<ErrorEstimate> {
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);

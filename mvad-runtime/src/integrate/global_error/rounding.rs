@@ -84,6 +84,13 @@ pub enum JumpOf {
     Switch,
 }
 
+/// t', S⁺ and R_θ (`None`: zero) of an event's sensitivity jump ([`EventRounding`]).
+pub type SensJump<'a, N, P> = (
+    &'a OVector<f64, P>,
+    &'a OMatrix<f64, N, P>,
+    Option<&'a OMatrix<f64, N, P>>,
+);
+
 /// What the rounding of an event's jump is measured by ([`GlobalError::event_rounding`]),
 /// beside its [`Saltation`].
 pub struct EventRounding<'a, N: Dim, P: Dim>
@@ -101,12 +108,7 @@ where
     /// See `x_minus`.
     pub x_plus: &'a OVector<f64, N>,
     /// With sensitivities: t', S⁺ and R_θ (`None` for a switch crossing, whose R_θ = 0).
-    #[allow(clippy::type_complexity)]
-    pub sens: Option<(
-        &'a OVector<f64, P>,
-        &'a OMatrix<f64, N, P>,
-        Option<&'a OMatrix<f64, N, P>>,
-    )>,
+    pub sens: Option<SensJump<'a, N, P>>,
 }
 
 impl<N: Dim, P: Dim> GlobalError<N, P>
