@@ -524,7 +524,7 @@ where
     /// The estimated errors at T, given f(T), ℓ(T) and, with a final cost, Φ_x(T): returns the
     /// error of C and writes that of dC/dθ into `grad` (with `sens`). With `phase` =
     /// (x(T), (atol, rtol), Ṡ(T), q̇_θ(T) − q_θ(T)/T), the component γ of e_x along f(T)
-    /// (weights 1/(atol + rtol|xᵢ|), as [`GlobalError::carry`] moves it into α), when
+    /// (weights 1/(atol + rtol|xᵢ|), as `GlobalError::carry` moves it into α), when
     /// |γ|‖f_x‖∞ ≤ 10⁻³, is read as the time shift it is to first order: the
     /// sensitivities computed along x(t + γ) are S(t + γ), so e_S += γṠ(T) and
     /// e_qθ += γ(q̇_θ(T) − q̄_θ) (see the module doc).
