@@ -74,7 +74,7 @@ pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
-pub use global_error::{GlobalError, ResetSecant, Saltation};
+pub use global_error::{EventRounding, GlobalError, JumpOf, ResetSecant, Saltation};
 pub use scheme::Scheme;
 pub use system::{ImplicitSystem, Linearised, OdeSystem, QuadratureSum, StageVector};
 
