@@ -8,7 +8,6 @@
 //! The messages name no command-line flags: the runtime knows no front end. The `mvad`
 //! binary adds its hints (`--t-end`, `--method`) when it reports an error (`cli::solve_err`).
 
-use crate::integrate::StepError;
 use crate::qp::QpError;
 use crate::solution::{Diagnostic, DiagnosticKind};
 use std::fmt;
@@ -234,27 +233,3 @@ fn write_largest(f: &mut fmt::Formatter<'_>, largest: f64) -> fmt::Result {
 }
 
 impl std::error::Error for SolveError {}
-
-impl From<StepError> for SolveError {
-    fn from(e: StepError) -> Self {
-        match e {
-            StepError::StepSizeUnderflow { t, h, largest } => {
-                SolveError::StepSizeUnderflow { t, h, largest }
-            }
-            StepError::NonFinite { t, what } => SolveError::NonFinite { t, what },
-            StepError::MaxSteps {
-                t,
-                steps,
-                h,
-                not_stiff,
-                largest,
-            } => SolveError::MaxSteps {
-                t,
-                steps,
-                h,
-                not_stiff,
-                largest,
-            },
-        }
-    }
-}

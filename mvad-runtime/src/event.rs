@@ -124,7 +124,8 @@ pub fn locate_root<F: FnMut(f64) -> f64>(
 }
 
 /// Golden-section search for the maximum of `f` on [a, b] (30 iterations, the interval
-/// shrinks by 0.618³⁰ ≈ 5·10⁻⁷). Returns (argmax, max) among the evaluated points.
+/// shrinks by 0.618³⁰ ≈ 5·10⁻⁷), refined by the vertex of the parabola through the last two
+/// points and their midpoint. Returns (argmax, max) among the evaluated points.
 pub fn maximize<F: FnMut(f64) -> f64>(mut f: F, a: f64, b: f64) -> (f64, f64) {
     const R: f64 = 0.618_033_988_749_894_9;
     let (mut lo, mut hi) = (a, b);
@@ -147,11 +148,25 @@ pub fn maximize<F: FnMut(f64) -> f64>(mut f: F, a: f64, b: f64) -> (f64, f64) {
             fd = f(d);
         }
     }
-    if fc >= fd {
-        (c, fc)
-    } else {
-        (d, fd)
+    // The vertex of the parabola through c, their midpoint and d: exact for a quadratic, so a
+    // peak narrower than the final interval (a guard that rises above zero only within 1e-7 of
+    // its vertex) is not missed.
+    let m = 0.5 * (c + d);
+    let fm = f(m);
+    let best = [(c, fc), (m, fm), (d, fd)]
+        .into_iter()
+        .fold((c, fc), |b, p| if p.1 > b.1 { p } else { b });
+    let curvature = fc - 2.0 * fm + fd;
+    if curvature < 0.0 {
+        let vertex = m + 0.25 * (d - c) * (fc - fd) / curvature;
+        if vertex > lo && vertex < hi {
+            let fv = f(vertex);
+            if fv > best.1 {
+                return (vertex, fv);
+            }
+        }
     }
+    best
 }
 
 /// What a watched function is.
@@ -182,6 +197,12 @@ pub struct Track {
     pub armed: bool,
     /// v was increasing at the end of the previous step (dip detection at t₀).
     pub rising: bool,
+    /// The rise of v over the last sample interval of the previous step and that interval's
+    /// length (0 and 1 after a restart): their ratio is dv/dt there, what a guard just short
+    /// of zero needs to reach it (see [`Scanner::join_events_due`]).
+    pub last_rise: f64,
+    /// See `last_rise`.
+    pub last_span: f64,
     /// The event fired at the last restart and this is the first step since (see
     /// [`Scanner::scan`]: a whole excursion below zero may hide before the first sample).
     pub fresh: bool,
@@ -282,6 +303,8 @@ impl Scanner {
         }
         tr.start_val = v;
         tr.rising = false;
+        tr.last_rise = 0.0;
+        tr.last_span = 1.0;
         tr.fresh = fired.is_some() && !strict;
         let below = fired.map_or(0.0, |vf| vf.min(0.0));
         tr.rearm_below = below;
@@ -292,6 +315,21 @@ impl Scanner {
         } else {
             v <= 0.0
         };
+    }
+
+    /// Adds to `found`, at t, every armed event whose value at the end of the last step
+    /// reaches zero within `window` at its slope there (v + max(v̇, 0)·window ≥ 0, v̇ the last
+    /// rise over its span).
+    #[inline]
+    pub fn join_events_due(&mut self, t: f64, window: f64) {
+        for &w in &self.watched {
+            if w < self.nevents {
+                let tr = &self.tracks[w];
+                if tr.armed && tr.start_val * tr.last_span + tr.last_rise.max(0.0) * window >= 0.0 {
+                    self.found.push(Crossing { w, t });
+                }
+            }
+        }
     }
 
     /// Scans the accepted step [t0, t1] for crossings. With `linear` (every active watched
@@ -346,6 +384,8 @@ impl Scanner {
                 }
                 tr.start_val = v[NSAMP - 1];
                 tr.rising = v[NSAMP - 1] > v[NSAMP - 2];
+                tr.last_rise = v[NSAMP - 1] - v[NSAMP - 2];
+                tr.last_span = (t1 - t0) / (NSAMP - 1) as f64;
             }
             return Ok(());
         }
@@ -412,6 +452,8 @@ impl Scanner {
                 }
                 tr.start_val = b;
                 tr.rising = b > line_sample(a, b, NSAMP - 2);
+                tr.last_rise = b - a;
+                tr.last_span = t1 - t0;
                 continue;
             }
             let times = sample_times(t0, t1);

@@ -149,6 +149,10 @@ pub struct ModelInfo {
 }
 
 impl ModelInfo {
+    /// The name of mode `m`, or its index if the model names fewer modes.
+    pub fn mode_name(&self, m: usize) -> String {
+        self.modes.get(m).cloned().unwrap_or_else(|| m.to_string())
+    }
     /// Number of observables.
     pub fn nobservables(&self) -> usize {
         self.observables.len()

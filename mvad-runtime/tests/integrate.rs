@@ -6,8 +6,9 @@ mod odes;
 
 use approx::assert_relative_eq;
 use mvad_runtime::fixtures::Ball;
-use mvad_runtime::integrate::{AugState, Integrator, StepError};
+use mvad_runtime::integrate::{AugState, Integrator};
 use mvad_runtime::solution::Method;
+use mvad_runtime::SolveError;
 use mvad_runtime::Switches;
 use nalgebra::{DVector, Dyn};
 use odes::*;
@@ -613,7 +614,7 @@ fn backward_steps_match_the_closed_form_and_the_forward_run() {
         );
         assert!(matches!(
             bwd.step_fixed(0.0),
-            Err(StepError::StepSizeUnderflow { .. })
+            Err(SolveError::StepSizeUnderflow { .. })
         ));
     }
 }

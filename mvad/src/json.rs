@@ -80,7 +80,6 @@ pub fn by_name(names: &[String], idx: &[usize], values: &[f64]) -> Value {
 /// α_k = −J_k t_k' per observable and param (params restricted to `wrt`). An event without
 /// t' (adjoint mode) leaves out `dt` and `atoms`, as the spec allows.
 pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
-    let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
     let name = info
         .events
         .get(ev.event)
@@ -108,8 +107,14 @@ pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
     m.insert("index".into(), Value::from(ev.index));
     m.insert("name".into(), Value::from(name));
     m.insert("t".into(), num(ev.t));
-    m.insert("mode_before".into(), Value::from(mode_name(ev.mode_before)));
-    m.insert("mode_after".into(), Value::from(mode_name(ev.mode_after)));
+    m.insert(
+        "mode_before".into(),
+        Value::from(info.mode_name(ev.mode_before)),
+    );
+    m.insert(
+        "mode_after".into(),
+        Value::from(info.mode_name(ev.mode_after)),
+    );
     m.insert("guard_slope".into(), num(ev.guard_slope));
     m.insert("transversal".into(), Value::from(ev.transversal));
     let forward = !ev.dt.is_empty() || info.params.is_empty();
@@ -126,13 +131,12 @@ pub fn event_json(info: &ModelInfo, ev: &EventRecord, wrt: &[usize]) -> Value {
 /// One event of a trajectory (`mvad simulate --json`, `Model.simulate`): index, name, t, the
 /// modes and the state on both sides, x(t_k⁻) and x(t_k⁺).
 pub fn trajectory_event_json(info: &ModelInfo, ev: &EventRecord) -> Value {
-    let mode_name = |m: usize| info.modes.get(m).cloned().unwrap_or_else(|| m.to_string());
     serde_json::json!({
         "index": ev.index,
         "name": info.events.get(ev.event).map(|x| x.name.clone()),
         "t": num(ev.t),
-        "mode_before": mode_name(ev.mode_before),
-        "mode_after": mode_name(ev.mode_after),
+        "mode_before": info.mode_name(ev.mode_before),
+        "mode_after": info.mode_name(ev.mode_after),
         "x_before": ev.x_before.iter().map(|&z| num(z)).collect::<Vec<_>>(),
         "x_after": ev.x_after.iter().map(|&z| num(z)).collect::<Vec<_>>(),
     })

@@ -28,9 +28,11 @@
 //! time s = t − t_start (see [`super::record`]).
 
 use super::record::{FinalState, Item, Tape};
-use super::transpose::{transpose_jump, transpose_jump_with_error, JumpErrorWork, JumpWork};
+use super::transpose::{
+    transpose_jump, transpose_jump_with_error, JumpErrorWork, JumpSite, JumpWork,
+};
 use crate::error::SolveError;
-use crate::integrate::Integrator;
+use crate::integrate::{Backward, Integrator};
 use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
@@ -163,7 +165,7 @@ where
         x: OVector::zeros_generic(n, Const::<1>),
     };
     // g lives in the backward system, which adds each step's quadrature to it.
-    let mut integ = Integrator::backward(model, p, tape, opts, cw);
+    let mut integ = Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts);
     terminal(
         model,
         p,
@@ -188,16 +190,20 @@ where
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
+                let site = JumpSite {
+                    model,
+                    p,
+                    cw,
+                    jump: j,
+                };
                 let (g, ge) = integ.gradient_and_error_mut();
                 match (ge, &mut error_work) {
                     (Some(ge), Some(ew)) => {
                         let shift = tape.jump_shift(j);
                         let y = (&mut lam, g);
-                        transpose_jump_with_error(
-                            model, p, cw, j, states, shift, y, ge, &mut work, ew,
-                        )?;
+                        transpose_jump_with_error(site, states, shift, y, ge, &mut work, ew)?;
                     }
-                    _ => transpose_jump(model, p, cw, j, states, &mut lam, g, &mut work)?,
+                    _ => transpose_jump(site, states, &mut lam, g, &mut work)?,
                 }
                 continue;
             }

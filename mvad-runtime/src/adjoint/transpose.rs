@@ -165,14 +165,37 @@ where
     }
 }
 
+/// The jump being transposed, with what every transpose of it reads: the model, θ and the
+/// cost cotangent w.
+pub(super) struct JumpSite<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// The model.
+    pub model: &'a M,
+    /// θ.
+    pub p: &'a OVector<f64, M::P>,
+    /// The cost cotangent w.
+    pub cw: f64,
+    /// The recorded jump.
+    pub jump: &'a Jump,
+}
+
+impl<M: HybridModel> Clone for JumpSite<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<M: HybridModel> Copy for JumpSite<'_, M> where DefaultAllocator: ModelAlloc<M::N, M::P> {}
+
 /// Undoes one jump: λ⁺ → λ⁻ in place and its share of dC/dθ added to `grad` (see the module
 /// doc), with cost cotangent `cw`. x⁻ and x⁺ come from the tape.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn transpose_jump<M: HybridModel>(
-    model: &M,
-    p: &OVector<f64, M::P>,
-    cw: f64,
-    jump: &Jump,
+    site: JumpSite<'_, M>,
     states: (&[f64], &[f64]),
     lam: &mut OVector<f64, M::N>,
     grad: &mut OVector<f64, M::P>,
@@ -181,7 +204,7 @@ pub(super) fn transpose_jump<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    transpose_jump_and_remainder(model, p, cw, jump, states, (lam, grad), None, w)
+    transpose_jump_and_remainder(site, states, (lam, grad), None, w)
 }
 
 /// [`transpose_jump`] for (λ, g) and, when `remainder` is given, the jump's homogeneous
@@ -190,12 +213,8 @@ where
 /// serve both, so a reset whose Jacobian costs O(p) is evaluated once. A failure is the main
 /// transpose's; the remainder's own (a non-finite ratio from a non-finite remainder) leaves
 /// it without its t' term, as the estimate is then already non-finite.
-#[allow(clippy::too_many_arguments)]
 fn transpose_jump_and_remainder<M: HybridModel>(
-    model: &M,
-    p: &OVector<f64, M::P>,
-    cw: f64,
-    jump: &Jump,
+    site: JumpSite<'_, M>,
     (x_minus, x_plus): (&[f64], &[f64]),
     (lam, grad): LamGrad<'_, M::N, M::P>,
     mut remainder: Option<LamGrad<'_, M::N, M::P>>,
@@ -204,6 +223,7 @@ fn transpose_jump_and_remainder<M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let JumpSite { model, p, cw, jump } = site;
     let info = model.info();
     let t = jump.t;
     w.approach(model, p, jump, x_minus, x_plus);
@@ -338,12 +358,8 @@ where
 /// (r_λ, r_g) as the transpose maps (λ, g), and the primal run's displacement `shift` of the
 /// jump, if it was recorded, adds [`shift_error`]. O(n + p) per jump beyond the model's own
 /// products (one reset product for both cotangents; the shift evaluates no reset).
-#[allow(clippy::too_many_arguments)]
 pub(super) fn transpose_jump_with_error<M: HybridModel>(
-    model: &M,
-    p: &OVector<f64, M::P>,
-    cw: f64,
-    jump: &Jump,
+    site: JumpSite<'_, M>,
     states: (&[f64], &[f64]),
     shift: Option<(&[f64], &[f64], f64)>,
     (lam, g): LamGrad<'_, M::N, M::P>,
@@ -356,9 +372,9 @@ where
 {
     s.lam_plus.copy_from(lam);
     let (r_lam, r_g) = ge.remainder_mut();
-    transpose_jump_and_remainder(model, p, cw, jump, states, (lam, g), Some((r_lam, r_g)), w)?;
+    transpose_jump_and_remainder(site, states, (lam, g), Some((r_lam, r_g)), w)?;
     if let Some(shift) = shift {
-        shift_error(model, p, cw, jump, shift, ge.remainder_mut(), w, s);
+        shift_error(site, shift, ge.remainder_mut(), w, s);
     }
     Ok(())
 }
@@ -387,12 +403,8 @@ where
 /// as forward mode's estimate leaves out the jump map's derivative in x⁻), and the sweep's
 /// segments changing at t̃ instead of t, which moves (F⁻ − F⁺)·δt of the adjoint's
 /// right-hand side across the jump.
-#[allow(clippy::too_many_arguments)]
 fn shift_error<M: HybridModel>(
-    model: &M,
-    p: &OVector<f64, M::P>,
-    cw: f64,
-    jump: &Jump,
+    site: JumpSite<'_, M>,
     (d_minus, d_plus, dt): (&[f64], &[f64], f64),
     (r_lam, r_g): LamGrad<'_, M::N, M::P>,
     w: &mut JumpWork<M>,
@@ -400,6 +412,7 @@ fn shift_error<M: HybridModel>(
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let JumpSite { model, p, cw, jump } = site;
     if dt == 0.0 && d_minus.iter().chain(d_plus).all(|&d| d == 0.0) {
         return;
     }
@@ -483,8 +496,13 @@ mod tests {
             let transposed = |jump: &Jump, states, w: &mut JumpWork<Ball>| {
                 let mut lam = OVector::<f64, Const<2>>::from_column_slice(&lam_plus);
                 let mut g = OVector::<f64, Const<4>>::zeros();
-                transpose_jump(&model, &p, 1.0, jump, states, &mut lam, &mut g, w)
-                    .expect("transversal");
+                let site = JumpSite {
+                    model: &model,
+                    p: &p,
+                    cw: 1.0,
+                    jump,
+                };
+                transpose_jump(site, states, &mut lam, &mut g, w).expect("transversal");
                 (lam, g)
             };
             let (lam_rec, g_rec) = transposed(recorded, (&xm_rec[..], &xp_rec[..]), &mut w);
@@ -498,11 +516,14 @@ mod tests {
             let mut g = OVector::<f64, Const<4>>::zeros();
             let states = tape.jump_states(recorded);
             let shift = tape.jump_shift(recorded);
+            let site = JumpSite {
+                model: &model,
+                p: &p,
+                cw: 1.0,
+                jump: recorded,
+            };
             transpose_jump_with_error(
-                &model,
-                &p,
-                1.0,
-                recorded,
+                site,
                 states,
                 shift,
                 (&mut lam, &mut g),

@@ -40,6 +40,17 @@ fn golden_section_finds_max() {
     assert_relative_eq!(v, 1e-3, max_relative = 1e-6);
 }
 
+/// A peak narrower than golden section's final interval (5e-7 of [a, b]) is found by the
+/// parabolic refinement: a guard r² − (t − t*)² with r = 3e-7 (an `abs(x − c) <= r` window
+/// crossed at unit speed) is positive at the returned point.
+#[test]
+fn maximize_finds_a_narrow_peak() {
+    let peak = 0.371_234_5;
+    let (t, v) = maximize(|t| 9e-14 - (t - peak) * (t - peak), 0.0, 1.0);
+    assert!(v > 0.0, "max {v} at {t}");
+    assert!((t - peak).abs() < 3e-7);
+}
+
 /// A dip that crosses zero and comes back between two samples is found; its first root
 /// is located.
 #[test]

@@ -60,17 +60,19 @@
 //! switches to Rodas5P on it as on the forward run.
 
 use super::adjoint_error::AdjointError;
-use super::aug::{accumulate_slices, axpy_slice, hermite_slice, mix5_slice, WeightedRms};
-use super::rosenbrock::WMatrix;
-use super::system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
+use super::aug::{axpy_slice, WeightedRms};
+use super::forward::ModeFlow;
+use super::rosenbrock::{Linearisation, WMatrix};
+use super::system::{HermiteStep, ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
-use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Method, Options};
 use nalgebra::{allocator::Allocator, Const, DefaultAllocator, Dim, OVector};
 
 /// A plain vector as the integrated vector of a system with no secondary parts (the
-/// adjoint's λ): every operation works on the one slice, `all` changes nothing.
+/// adjoint's λ): it is its own primary part, so every operation is the primary one and `all`
+/// changes nothing.
 impl<N: Dim> StageVector for OVector<f64, N>
 where
     DefaultAllocator: Allocator<N>,
@@ -79,29 +81,17 @@ where
 
     #[inline]
     fn copy_from(&mut self, other: &Self) {
-        self.as_mut_slice().copy_from_slice(other.as_slice());
+        other.primary_into(self);
     }
 
     #[inline]
     fn combine(&mut self, base: &Self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
-        self.as_mut_slice().copy_from_slice(base.as_slice());
-        accumulate_slices(
-            self.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.as_slice()),
-        );
+        Self::combine_primary(self, base, h, coefs, ks);
     }
 
     #[inline]
     fn lincomb(&mut self, h: f64, coefs: &[f64], ks: &[Self], _all: bool) {
-        self.fill(0.0);
-        accumulate_slices(
-            self.as_mut_slice(),
-            h,
-            coefs,
-            ks.iter().map(|k| k.as_slice()),
-        );
+        Self::lincomb_primary(self, h, coefs, ks);
     }
 
     #[inline]
@@ -111,13 +101,12 @@ where
 
     #[inline]
     fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], _all: bool) {
-        mix5_slice(self.as_mut_slice(), w, v.map(|u| u.as_slice()));
+        Self::mix5_primary(self, w, v);
     }
 
     #[inline]
-    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, _all: bool) {
-        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.as_slice());
-        hermite_slice(self.as_mut_slice(), a, b, g0, g1, h, th);
+    fn hermite(&mut self, step: &HermiteStep<'_, Self>, th: f64, _all: bool) {
+        Self::hermite_primary(self, step, th);
     }
 
     #[inline]
@@ -215,17 +204,12 @@ struct AdjRhs<'a, M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    model: &'a M,
-    p: &'a OVector<f64, M::P>,
-    mode: usize,
-    sw: Switches,
+    flow: ModeFlow<'a, M>,
     /// Absolute time of the segment's start: the integrator runs in local time s = t − t_start.
     t_start: f64,
     /// The cotangent w of the cost (0 when the model has no running cost: ℓ is never
     /// evaluated then).
     w: f64,
-    has_rc: bool,
-    evals: usize,
 }
 
 /// x(t) from the record, on the segment being swept.
@@ -244,19 +228,16 @@ struct AdjImplicit<N: Dim, P: Dim>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    /// J_λλ = −f_xᵀ and the factors of W = I − hγ J_λλ.
-    w: WMatrix<N>,
+    /// J_λλ = −f_xᵀ and the factors of W = I − hγ J_λλ, and F_t at the step start.
+    lin: Linearisation<N, OVector<f64, N>>,
     /// x and f at the step start.
     x0: OVector<f64, N>,
     f0: OVector<f64, N>,
-    /// F_t at the step start.
-    dt: OVector<f64, N>,
     /// G_t at the step start `dt_at` (local time), and ℓ's directional-derivative scratch.
     dt_g: OVector<f64, P>,
     dt_at: Option<f64>,
     lx: OVector<f64, N>,
     lp: OVector<f64, P>,
-    prepared: bool,
 }
 
 impl<M: HybridModel> AdjRhs<'_, M>
@@ -266,7 +247,7 @@ where
     /// The model's point at local time s and state x.
     #[inline]
     fn point<'b>(&'b self, s: f64, x: &'b OVector<f64, M::N>) -> Point<'b, M::N, M::P> {
-        Point::new(self.mode, &self.sw, self.t_start + s, x, self.p)
+        self.flow.point(self.t_start + s, x)
     }
 }
 
@@ -292,7 +273,8 @@ where
 {
     /// The backward system of `model` at `p` over the record `tape`, with cost cotangent
     /// `cw` and g = 0; allocates its buffers once (the Rodas5P ones only when `opts.method`
-    /// may use it).
+    /// may use it). Its integrator is `Integrator::with_system(Backward::new(..), opts)`;
+    /// call [`Integrator::restart_segment`] before each segment.
     pub fn new(
         model: &'a M,
         p: &'a OVector<f64, M::P>,
@@ -309,17 +291,15 @@ where
         } else {
             M::P::from_usize(0)
         };
-        let has_rc = model.info().has_running_cost;
         Backward {
             rhs: AdjRhs {
-                model,
-                p,
-                mode: model.info().initial_mode,
-                sw: Switches::new(model.info().switches),
+                flow: ModeFlow::new(model, p),
                 t_start: 0.0,
-                w: if has_rc { cw } else { 0.0 },
-                has_rc,
-                evals: 0,
+                w: if model.info().has_running_cost {
+                    cw
+                } else {
+                    0.0
+                },
             },
             hist: History {
                 tape,
@@ -328,15 +308,13 @@ where
                 x: vn(),
             },
             imp: AdjImplicit {
-                w: WMatrix::new(n, used),
+                lin: Linearisation::new(WMatrix::new(n, used), vn()),
                 x0: vn(),
                 f0: vn(),
-                dt: vn(),
                 dt_g: OVector::zeros_generic(stiff_np, Const::<1>),
                 dt_at: None,
                 lx: vn(),
                 lp: OVector::zeros_generic(stiff_np, Const::<1>),
-                prepared: false,
             },
             g: OVector::zeros_generic(np, Const::<1>),
             quad: StepQuadrature {
@@ -356,13 +334,6 @@ where
         }
     }
 
-    fn mode_name(&self) -> String {
-        match self.rhs.model.info().modes.get(self.rhs.mode) {
-            Some(name) => name.clone(),
-            None => self.rhs.mode.to_string(),
-        }
-    }
-
     /// x₀ = x(t0), f₀ = f(t₀, x₀), F_t = −d(λᵀf_x) − w dℓ_x and G_t = −d(λᵀf_θ) − w dℓ_θ
     /// along (1, f₀) at fixed λ = y0 (local time t0).
     fn time_derivatives(&mut self, t0: f64, y0: &OVector<f64, M::N>) {
@@ -370,18 +341,20 @@ where
         hist.at(t0);
         imp.x0.copy_from(&hist.x);
         let pt = rhs.point(t0, &imp.x0);
-        rhs.model.rhs(pt, &mut imp.f0);
-        rhs.model
-            .rhs_vjp_dir(pt, y0, &imp.f0, &mut imp.dt, &mut imp.dt_g);
+        rhs.flow.model.rhs(pt, &mut imp.f0);
+        rhs.flow
+            .model
+            .rhs_vjp_dir(pt, y0, &imp.f0, &mut imp.lin.dt, &mut imp.dt_g);
         if rhs.w != 0.0 {
-            let (sw, t, p) = (&rhs.sw, rhs.t_start + t0, rhs.p);
+            let (sw, t, p) = (&rhs.flow.sw, rhs.t_start + t0, rhs.flow.p);
             let (lx, lp) = (&mut imp.lx, &mut imp.lp);
-            rhs.model
+            rhs.flow
+                .model
                 .running_cost_grad_dir(sw, At::new(t, &imp.x0, p), &imp.f0, lx, lp);
-            imp.dt.axpy(rhs.w, &imp.lx, 1.0);
+            imp.lin.dt.axpy(rhs.w, &imp.lx, 1.0);
             imp.dt_g.axpy(rhs.w, &imp.lp, 1.0);
         }
-        imp.dt.neg_mut();
+        imp.lin.dt.neg_mut();
         imp.dt_g.neg_mut();
         imp.dt_at = Some(t0);
     }
@@ -394,7 +367,7 @@ where
     type Vector = OVector<f64, M::N>;
 
     fn zeros(&self) -> Self::Vector {
-        OVector::zeros_generic(self.rhs.model.nstates(), Const::<1>)
+        OVector::zeros_generic(self.rhs.flow.model.nstates(), Const::<1>)
     }
 
     #[inline]
@@ -417,21 +390,21 @@ where
     fn eval(&mut self, t: f64, y: &Self::Vector, out: &mut Self::Vector) {
         self.hist.at(t);
         let rhs = &mut self.rhs;
-        rhs.evals += 1;
+        rhs.flow.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
-        rhs.model.adjoint_rate(pt, y, rhs.w, out);
+        rhs.flow.model.adjoint_rate(pt, y, rhs.w, out);
     }
 
     /// A mode whose flow is a function of θ alone and no running cost: f_x = 0, so λ is
     /// constant and ġ = −f_θᵀλ too (the segment is one exact step backwards).
     #[inline]
     fn constant_rate(&self) -> bool {
-        !self.rhs.has_rc && self.rhs.model.flow_is_constant(self.rhs.mode)
+        !self.rhs.flow.has_rc && self.rhs.flow.model.flow_is_constant(self.rhs.flow.mode)
     }
 
     #[inline]
     fn evals(&self) -> usize {
-        self.rhs.evals
+        self.rhs.flow.evals
     }
 
     /// `WeightedRms` over λ with weight 1 (g is a quadrature outside the vector; see the
@@ -456,7 +429,10 @@ where
 
     /// `adjoint of the flow of mode `m``.
     fn flow_name(&self) -> String {
-        format!("adjoint of the flow of mode `{}`", self.mode_name())
+        format!(
+            "adjoint of the flow of mode `{}`",
+            self.rhs.flow.mode_name()
+        )
     }
 
     fn stage_source(&self, _k: &Self::Vector) -> String {
@@ -502,21 +478,24 @@ where
     fn quadrature_add(&mut self, t: f64, y: &Self::Vector, a: f64, e: f64) {
         self.hist.at(t);
         let rhs = &mut self.rhs;
-        rhs.evals += 1;
+        rhs.flow.evals += 1;
         let pt = rhs.point(t, &self.hist.x);
         let q = &mut self.quad;
         match (a != 0.0, e != 0.0) {
             (true, false) => rhs
+                .flow
                 .model
                 .adjoint_quadrature_add(pt, y, rhs.w, a, &mut q.step),
             (false, true) => rhs
+                .flow
                 .model
                 .adjoint_quadrature_add(pt, y, rhs.w, e, &mut q.err),
             (true, true) => {
                 for &k in &q.support {
                     q.stage[k] = 0.0;
                 }
-                rhs.model
+                rhs.flow
+                    .model
                     .adjoint_quadrature_add(pt, y, rhs.w, 1.0, &mut q.stage);
                 for &k in &q.support {
                     let gk = q.stage[k];
@@ -536,7 +515,7 @@ where
         let mut rms = WeightedRms::new(atol, rtol);
         for &k in &q.support {
             let g0 = self.g[k];
-            let w = gradient_weight(self.rhs.p[k]);
+            let w = gradient_weight(self.rhs.flow.p[k]);
             rms.add_entry(q.err[k], g0, g0 + q.step[k], w);
         }
         rms.norm()
@@ -561,32 +540,24 @@ impl<M: HybridModel> ImplicitSystem for Backward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    type Linear = Linearisation<M::N, OVector<f64, M::N>>;
+
     /// J_λλ = −f_xᵀ (and its spectral radius), F_t and G_t at the step start.
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         self.time_derivatives(t0, y0);
         let Backward { rhs, imp, .. } = self;
-        let pt = rhs.point(t0, &imp.x0);
-        rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
-        imp.w.jac.transpose_mut();
-        imp.w.jac.neg_mut();
-        imp.w.power_iteration();
-        imp.prepared = true;
+        let w = &mut imp.lin.w;
+        adjoint_jacobian(rhs.flow.model, rhs.point(t0, &imp.x0), w);
+        w.power_iteration();
+        imp.lin.prepared = true;
     }
 
-    fn prepared(&self) -> bool {
-        self.imp.prepared
+    fn linearisation(&self) -> &Self::Linear {
+        &self.imp.lin
     }
 
-    fn time_derivative(&self) -> &Self::Vector {
-        &self.imp.dt
-    }
-
-    fn factorise(&mut self, hg: f64) -> bool {
-        self.imp.w.factorise(hg)
-    }
-
-    fn factorised_for(&self) -> Option<f64> {
-        self.imp.w.factorised_for()
+    fn linearisation_mut(&mut self) -> &mut Self::Linear {
+        &mut self.imp.lin
     }
 
     /// K_λ = W⁻¹ hγ R_λ (see the module doc).
@@ -598,12 +569,7 @@ where
         r: &Self::Vector,
         k: &mut Self::Vector,
     ) -> bool {
-        if self.imp.w.factorised_for().is_none() {
-            return false;
-        }
-        k.copy_from(r);
-        *k *= hg;
-        self.imp.w.solve_mut(k)
+        self.imp.lin.w.solve_scaled(hg, r, k)
     }
 
     /// `sum` += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
@@ -612,7 +578,7 @@ where
         let rhs = &mut self.rhs;
         let pt = rhs.point(t0, &self.hist.x);
         let target = self.quad.sum_mut(sum);
-        rhs.model.adjoint_quadrature_add(pt, v, 0.0, a, target);
+        rhs.flow.model.adjoint_quadrature_add(pt, v, 0.0, a, target);
     }
 
     /// `sum` += a·G_t at the step start (from `prepare`, recomputed if it was for another
@@ -620,7 +586,7 @@ where
     fn quadrature_dt_add(&mut self, t0: f64, y0: &Self::Vector, a: f64, sum: QuadratureSum) {
         if self.imp.dt_at != Some(t0) {
             self.time_derivatives(t0, y0);
-            self.imp.prepared = false;
+            self.imp.lin.prepared = false;
         }
         let dt_g = &self.imp.dt_g;
         let q = &mut self.quad;
@@ -663,7 +629,7 @@ where
             return;
         };
         hist.at(t0);
-        let model = rhs.model;
+        let model = rhs.flow.model;
         let pt = rhs.point(t0, &hist.x);
         let (_, r_g) = ge.remainder_mut();
         let mut forcing = None;
@@ -687,51 +653,38 @@ where
                 }
             }
         }
-        model.rhs_jac_x(pt, &mut imp.w.jac);
-        imp.w.jac.transpose_mut();
-        imp.w.jac.neg_mut();
+        adjoint_jacobian(model, pt, &mut imp.lin.w);
         // J now holds the carried step's start, not the next step's.
-        imp.prepared = false;
-        let pattern = &model.info().jacobian_sparsity[rhs.mode];
-        ge.carry(le, forcing, &mut imp.w, pattern, h, |v, a, g| {
+        imp.lin.prepared = false;
+        let pattern = &model.info().jacobian_sparsity[rhs.flow.mode];
+        ge.carry(le, forcing, &mut imp.lin.w, pattern, h, |v, a, g| {
             model.adjoint_quadrature_add(pt, v, 0.0, a, g)
         });
-    }
-
-    fn invalidate(&mut self) {
-        self.imp.prepared = false;
-        self.imp.w.invalidate();
     }
 
     fn spectral_radius_at(&mut self, t: f64, _y: &Self::Vector) -> f64 {
         let Backward { rhs, hist, imp, .. } = self;
         hist.at(t);
-        let pt = rhs.point(t, &hist.x);
-        rhs.model.rhs_jac_x(pt, &mut imp.w.jac);
-        imp.w.power_iteration()
+        let w = &mut imp.lin.w;
+        rhs.flow.model.rhs_jac_x(rhs.point(t, &hist.x), &mut w.jac);
+        w.power_iteration()
     }
+}
 
-    fn jac_spectral_radius(&self) -> f64 {
-        self.imp.w.rho
-    }
+/// J_λλ = −f_xᵀ at `pt` into `w.jac`.
+fn adjoint_jacobian<M: HybridModel>(model: &M, pt: Point<'_, M::N, M::P>, w: &mut WMatrix<M::N>)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    model.rhs_jac_x(pt, &mut w.jac);
+    w.jac.transpose_mut();
+    w.jac.neg_mut();
 }
 
 impl<'a, M: HybridModel> Integrator<Backward<'a, M>>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// An integrator of the backward system over `tape` (see [`Backward::new`]); allocates
-    /// every buffer once. Call [`Integrator::restart_segment`] before each segment.
-    pub fn backward(
-        model: &'a M,
-        p: &'a OVector<f64, M::P>,
-        tape: &'a Tape,
-        opts: &Options,
-        cw: f64,
-    ) -> Self {
-        Integrator::with_system(Backward::new(model, p, tape, opts, cw), opts)
-    }
-
     /// Forget all history and restart at (s, λ) on segment `seg` (its mode, switch bits and
     /// recorded steps), in the segment's local time s = t − t_start (see
     /// [`crate::adjoint::record`]); then `step(s_stop)` with s_stop < s integrates backwards.
@@ -741,12 +694,12 @@ where
         let sys = &mut self.sys;
         sys.hist.seg = Some(seg);
         sys.hist.cursor = seg.steps.end.saturating_sub(1);
-        sys.rhs.mode = seg.mode;
-        sys.rhs.sw.clone_from(&seg.sw);
+        sys.rhs.flow.mode = seg.mode;
+        sys.rhs.flow.sw.clone_from(&seg.sw);
         sys.rhs.t_start = seg.t_start;
         let q = &mut sys.quad;
         q.support.clear();
-        match sys.rhs.model.gradient_support(seg.mode) {
+        match sys.rhs.flow.model.gradient_support(seg.mode) {
             Some(support) => q.support.extend_from_slice(support),
             None => q.support.extend(0..sys.g.len()),
         }

@@ -1,8 +1,9 @@
 //! The forward augmented state (x, S, q, q_θ) and its vector-space operations.
 
-use super::system::StageVector;
+use super::system::{HermiteStep, StageVector};
 use crate::model::ModelAlloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
+use std::slice;
 
 /// The augmented state `(x, S, q, q_θ)` integrated over a smooth segment (see the module doc).
 #[derive(Clone, Debug, PartialEq)]
@@ -240,17 +241,9 @@ fn hermite_weights(theta: f64) -> (f64, f64, f64) {
     (theta - 2.0 * t2 + t3, t3 - t2, 3.0 * t2 - 2.0 * t3)
 }
 
-/// d = a + c (b − a) + h (w₀ f₀ + w₁ f₁), elementwise.
+/// d = a + c (b − a) + h (w₀ f₀ + w₁ f₁), elementwise, from `[a, b, f₀, f₁]`.
 #[inline]
-pub(super) fn hermite_slice(
-    d: &mut [f64],
-    a: &[f64],
-    b: &[f64],
-    f0: &[f64],
-    f1: &[f64],
-    h: f64,
-    th: f64,
-) {
+pub(super) fn hermite_slice(d: &mut [f64], [a, b, f0, f1]: [&[f64]; 4], h: f64, th: f64) {
     let (w0, w1, c) = hermite_weights(th);
     for ((((di, ai), bi), g0), g1) in d.iter_mut().zip(a).zip(b).zip(f0).zip(f1) {
         *di = ai + c * (bi - ai) + h * (w0 * g0 + w1 * g1);
@@ -306,16 +299,16 @@ where
     }
 
     #[inline]
-    fn hermite(&mut self, y0: &Self, y1: &Self, f0: &Self, f1: &Self, h: f64, th: f64, all: bool) {
-        Self::hermite_primary(&mut self.x, y0, y1, f0, f1, h, th);
+    fn hermite(&mut self, step: &HermiteStep<'_, Self>, th: f64, all: bool) {
+        Self::hermite_primary(&mut self.x, step, th);
         let mut q = [0.0];
-        hermite_slice(&mut q, &[y0.q], &[y1.q], &[f0.q], &[f1.q], h, th);
+        hermite_slice(&mut q, step.parts(|v| slice::from_ref(&v.q)), step.h, th);
         self.q = q[0];
         if all {
-            let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.s.as_slice());
-            hermite_slice(self.s.as_mut_slice(), a, b, g0, g1, h, th);
-            let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.qp.as_slice());
-            hermite_slice(self.qp.as_mut_slice(), a, b, g0, g1, h, th);
+            let s = step.parts(|v| v.s.as_slice());
+            hermite_slice(self.s.as_mut_slice(), s, step.h, th);
+            let qp = step.parts(|v| v.qp.as_slice());
+            hermite_slice(self.qp.as_mut_slice(), qp, step.h, th);
         }
     }
 

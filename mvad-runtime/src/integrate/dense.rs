@@ -6,10 +6,22 @@
 //! the cubic Hermite interpolant of (Y₀, F₀, Y₁, F₁)). Works for either direction of time.
 
 use super::explicit::Tableau;
-use super::system::{ImplicitSystem, StageVector};
+use super::system::{HermiteStep, ImplicitSystem, Linearised, StageVector};
 use super::{rosenbrock, tsit5::TSIT5, verner, verner::VERNER9, Integrator, Scheme};
 
 impl<Sys: ImplicitSystem> Integrator<Sys> {
+    /// The step from t_prev as a cubic Hermite interpolant: y_prev, the end state, and the
+    /// slopes k[0] and the FSAL slot at its ends.
+    fn hermite_step(&self) -> HermiteStep<'_, Sys::Vector> {
+        HermiteStep {
+            y0: &self.y_prev,
+            y1: self.end_state(),
+            f0: &self.k[0],
+            f1: &self.k[VERNER9.fsal_slot()],
+            h: self.dense_h,
+        }
+    }
+
     /// Dense output of the primary part (x) between t_prev and t (cheap; for root finding).
     pub fn dense_x(&self, t: f64, out: &mut <Sys::Vector as StageVector>::Primary) {
         if self.dense_h == 0.0 {
@@ -19,8 +31,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let theta = (t - self.t_prev) / self.dense_h;
         let (k, y0, y1, h) = (&self.k[..], &self.y_prev, self.end_state(), self.dense_h);
         if self.dense_pending {
-            let f1 = &k[VERNER9.fsal_slot()];
-            Sys::Vector::hermite_primary(out, y0, y1, &k[0], f1, h, theta);
+            Sys::Vector::hermite_primary(out, &self.hermite_step(), theta);
             return;
         }
         match self.dense_scheme {
@@ -39,17 +50,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         }
         let theta = (t - self.t_prev) / self.dense_h;
         if self.dense_pending {
-            let (k, all) = (&self.k, self.sys.all_parts());
-            let f1 = &k[VERNER9.fsal_slot()];
-            out.hermite(
-                &self.y_prev,
-                self.end_state(),
-                &k[0],
-                f1,
-                self.dense_h,
-                theta,
-                all,
-            );
+            out.hermite(&self.hermite_step(), theta, self.sys.all_parts());
             return;
         }
         let all = self.sys.all_parts();
@@ -155,7 +156,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.t = t_cut;
         self.k0_valid = false;
         self.fsal_slot = None;
-        self.sys.invalidate();
+        self.sys.linearisation_mut().invalidate();
     }
 
     /// Makes the full-order dense output of the last accepted step available (evaluates

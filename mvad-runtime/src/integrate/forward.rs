@@ -41,7 +41,7 @@
 
 use super::aug::{weighted_rms, AugState};
 use super::global_error::GlobalError;
-use super::rosenbrock::WMatrix;
+use super::rosenbrock::{Linearisation, WMatrix};
 use super::system::{ImplicitSystem, OdeSystem};
 use super::{Integrator, Scheme};
 #[cfg(doc)]
@@ -86,24 +86,63 @@ where
     f: AugState<N, P>,
 }
 
+/// One mode's flow of `model` at θ with frozen switch bits, as both systems evaluate it (the
+/// forward [`Rhs`] and the adjoint's), and the count of their evaluations.
+pub(super) struct ModeFlow<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    pub(super) model: &'a M,
+    pub(super) p: &'a OVector<f64, M::P>,
+    pub(super) mode: usize,
+    pub(super) sw: Switches,
+    /// The model has a running cost ℓ.
+    pub(super) has_rc: bool,
+    /// Evaluations of F (and of the adjoint's quadrature G).
+    pub(super) evals: usize,
+}
+
+impl<'a, M: HybridModel> ModeFlow<'a, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// `model` at `p` in its initial mode with its initial switch bits.
+    pub(super) fn new(model: &'a M, p: &'a OVector<f64, M::P>) -> Self {
+        let info = model.info();
+        ModeFlow {
+            model,
+            p,
+            mode: info.initial_mode,
+            sw: Switches::new(info.switches),
+            has_rc: info.has_running_cost,
+            evals: 0,
+        }
+    }
+
+    /// The model's point (m, sw, t, x, θ).
+    #[inline]
+    pub(super) fn point<'b>(&'b self, t: f64, x: &'b OVector<f64, M::N>) -> Point<'b, M::N, M::P> {
+        Point::new(self.mode, &self.sw, t, x, self.p)
+    }
+
+    /// Name of the current mode (or its index if the model names fewer modes).
+    pub(super) fn mode_name(&self) -> String {
+        self.model.info().mode_name(self.mode)
+    }
+}
+
 /// Everything F needs, apart from the Rosenbrock buffers so both can be borrowed at once.
 struct Rhs<'a, M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    model: &'a M,
-    p: &'a OVector<f64, M::P>,
-    mode: usize,
-    sw: Switches,
+    flow: ModeFlow<'a, M>,
     /// S and q_θ are integrated.
     sens: bool,
-    has_rc: bool,
     /// ℓ_x scratch.
     lx: OVector<f64, M::N>,
     /// ℓ_θ scratch.
     lp: OVector<f64, M::P>,
-    /// Evaluations of F.
-    evals: usize,
 }
 
 /// The Rodas5P buffers of the forward system (allocated once; empty for `Dyn` sizes when the
@@ -112,17 +151,13 @@ struct ImplicitWork<N: Dim, P: Dim>
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    /// f_x and the factors of W.
-    w: WMatrix<N>,
+    /// f_x and the factors of W, and F_t at the step start.
+    lin: Linearisation<N, AugState<N, P>>,
     /// ℓ_x at the step start (zeros without running cost).
     lx0: OVector<f64, N>,
     /// A zero S and its q̇_θ_t, full width, for ∂ₜℓ in a narrow primal run (else empty).
     s0: OMatrix<f64, N, P>,
     qp0: OVector<f64, P>,
-    /// F_t at the step start.
-    dt: AugState<N, P>,
-    /// (f_x, ℓ_x, F_t) belong to the current step start.
-    base_valid: bool,
 }
 
 impl<'a, M: HybridModel> Forward<'a, M>
@@ -167,25 +202,18 @@ where
         let rsp = if used { sp } else { rp };
         Forward {
             rhs: Rhs {
-                model,
-                p,
-                mode: model.info().initial_mode,
-                sw: Switches::new(model.info().switches),
+                flow: ModeFlow::new(model, p),
                 sens: opts.sensitivities,
-                has_rc: model.info().has_running_cost,
                 lx: OVector::zeros_generic(n, Const::<1>),
                 lp: OVector::zeros_generic(np, Const::<1>),
-                evals: 0,
             },
             sens_err: opts.sens_error_control && opts.sensitivities,
             sp,
             imp: ImplicitWork {
-                w: WMatrix::new(n, used),
+                lin: Linearisation::new(WMatrix::new(n, used), AugState::zeros(rn, rsp)),
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 s0: OMatrix::zeros_generic(n, s0p),
                 qp0: OVector::zeros_generic(s0p, Const::<1>),
-                dt: AugState::zeros(rn, rsp),
-                base_valid: false,
             },
             global: opts.global_error.then(|| GlobalError::new(n, sp)),
             atol: opts.atol,
@@ -203,14 +231,6 @@ where
                 .collect(),
         }
     }
-
-    /// Name of the current mode (or its index if the model names fewer modes).
-    fn mode_name(&self) -> String {
-        match self.rhs.model.info().modes.get(self.rhs.mode) {
-            Some(name) => name.clone(),
-            None => self.rhs.mode.to_string(),
-        }
-    }
 }
 
 impl<M: HybridModel> Rhs<'_, M>
@@ -220,34 +240,33 @@ where
     /// out = F(t, y): (f, f_x S + f_θ, ℓ, ℓ_x S + ℓ_θ).
     #[inline]
     fn eval(&mut self, t: f64, y: &AugState<M::N, M::P>, out: &mut AugState<M::N, M::P>) {
-        self.evals += 1;
+        self.flow.evals += 1;
         if self.sens {
-            self.model.rhs_sens(
-                Point::new(self.mode, &self.sw, t, &y.x, self.p),
-                &y.s,
-                &mut out.x,
-                &mut out.s,
-            );
+            self.flow
+                .model
+                .rhs_sens(self.flow.point(t, &y.x), &y.s, &mut out.x, &mut out.s);
         } else {
-            self.model
-                .rhs(Point::new(self.mode, &self.sw, t, &y.x, self.p), &mut out.x);
+            self.flow.model.rhs(self.flow.point(t, &y.x), &mut out.x);
         }
-        if !self.has_rc {
+        if !self.flow.has_rc {
             out.q = 0.0;
             if self.sens {
                 out.qp.fill(0.0);
             }
         } else if self.sens {
-            out.q = self.model.running_cost_value_grad(
-                &self.sw,
-                At::new(t, &y.x, self.p),
+            out.q = self.flow.model.running_cost_value_grad(
+                &self.flow.sw,
+                At::new(t, &y.x, self.flow.p),
                 &mut self.lx,
                 &mut self.lp,
             );
             out.qp.copy_from(&self.lp);
             out.qp.gemv_tr(1.0, &y.s, &self.lx, 1.0);
         } else {
-            out.q = self.model.running_cost(&self.sw, At::new(t, &y.x, self.p));
+            out.q = self
+                .flow
+                .model
+                .running_cost(&self.flow.sw, At::new(t, &y.x, self.flow.p));
         }
     }
 }
@@ -260,7 +279,7 @@ where
 
     /// (x, S, q, q_θ) with S n×p, or n×0 in a primal run of a `Dyn`-parameter model.
     fn zeros(&self) -> Self::Vector {
-        AugState::zeros(self.rhs.model.nstates(), self.sp)
+        AugState::zeros(self.rhs.flow.model.nstates(), self.sp)
     }
 
     #[inline]
@@ -290,12 +309,12 @@ where
     #[inline]
     fn constant_rate(&self) -> bool {
         // `rates` holds a slot exactly for the modes with !has_rc && flow_is_constant.
-        matches!(self.rates.get(self.rhs.mode), Some(Some(_)))
+        matches!(self.rates.get(self.rhs.flow.mode), Some(Some(_)))
     }
 
     #[inline]
     fn evals(&self) -> usize {
-        self.rhs.evals
+        self.rhs.flow.evals
     }
 
     /// `weighted_rms`: x, q (with a running cost) and, under sensitivity error control, S and
@@ -315,9 +334,9 @@ where
             y1,
             atol,
             rtol,
-            self.rhs.has_rc,
+            self.rhs.flow.has_rc,
             self.sens_err,
-            self.rhs.p,
+            self.rhs.flow.p,
         )
     }
 
@@ -327,12 +346,12 @@ where
 
     /// `flow of mode `m``.
     fn flow_name(&self) -> String {
-        format!("flow of mode `{}`", self.mode_name())
+        format!("flow of mode `{}`", self.rhs.flow.mode_name())
     }
 
     /// `flow of mode `m``, its sensitivity equation, the running cost or its gradient.
     fn stage_source(&self, k: &Self::Vector) -> String {
-        let mode = self.mode_name();
+        let mode = self.rhs.flow.mode_name();
         if !k.x.iter().all(|v| v.is_finite()) {
             format!("flow of mode `{mode}`")
         } else if !k.q.is_finite() {
@@ -349,49 +368,49 @@ impl<M: HybridModel> ImplicitSystem for Forward<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    type Linear = Linearisation<M::N, AugState<M::N, M::P>>;
+
     /// f_x (and its spectral radius), ℓ_x and F_t at the step start (t0, y0), all exact.
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, _h: f64) {
         let Forward { rhs, imp: w, .. } = self;
-        let (model, p, mode) = (rhs.model, rhs.p, rhs.mode);
-        let pt = Point::new(mode, &rhs.sw, t0, &y0.x, p);
-        model.rhs_jac_x(pt, &mut w.w.jac);
-        w.w.power_iteration();
-        model.rhs_dt(pt, &mut w.dt.x);
+        let (model, p, mode) = (rhs.flow.model, rhs.flow.p, rhs.flow.mode);
+        let pt = rhs.flow.point(t0, &y0.x);
+        let lin = &mut w.lin;
+        model.rhs_jac_x(pt, &mut lin.w.jac);
+        lin.w.power_iteration();
+        model.rhs_dt(pt, &mut lin.dt.x);
         if rhs.sens && model.rhs_depends_on_t(mode) {
-            model.rhs_sens_dt(pt, &y0.s, &mut w.dt.s);
+            model.rhs_sens_dt(pt, &y0.s, &mut lin.dt.s);
         } else {
-            w.dt.s.fill(0.0);
+            lin.dt.s.fill(0.0);
         }
-        if rhs.has_rc {
-            model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut w.lx0);
-            w.dt.q = if y0.s.ncols() == p.len() {
-                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &y0.s, &mut w.dt.qp)
+        if rhs.flow.has_rc {
+            model.running_cost_grad_x(&rhs.flow.sw, At::new(t0, &y0.x, p), &mut w.lx0);
+            lin.dt.q = if y0.s.ncols() == p.len() {
+                model.running_cost_sens_dt(
+                    &rhs.flow.sw,
+                    At::new(t0, &y0.x, p),
+                    &y0.s,
+                    &mut lin.dt.qp,
+                )
             } else {
                 // A narrow primal run: ∂ₜℓ alone, from the full-width zero S.
-                model.running_cost_sens_dt(&rhs.sw, At::new(t0, &y0.x, p), &w.s0, &mut w.qp0)
+                model.running_cost_sens_dt(&rhs.flow.sw, At::new(t0, &y0.x, p), &w.s0, &mut w.qp0)
             };
         } else {
             w.lx0.fill(0.0);
-            w.dt.q = 0.0;
-            w.dt.qp.fill(0.0);
+            lin.dt.q = 0.0;
+            lin.dt.qp.fill(0.0);
         }
-        w.base_valid = true;
+        lin.prepared = true;
     }
 
-    fn prepared(&self) -> bool {
-        self.imp.base_valid
+    fn linearisation(&self) -> &Self::Linear {
+        &self.imp.lin
     }
 
-    fn time_derivative(&self) -> &Self::Vector {
-        &self.imp.dt
-    }
-
-    fn factorise(&mut self, hg: f64) -> bool {
-        self.imp.w.factorise(hg)
-    }
-
-    fn factorised_for(&self) -> Option<f64> {
-        self.imp.w.factorised_for()
+    fn linearisation_mut(&mut self) -> &mut Self::Linear {
+        &mut self.imp.lin
     }
 
     /// K = hγ (I − hγ J)⁻¹ R by block forward substitution (see the module doc).
@@ -404,25 +423,23 @@ where
         k: &mut Self::Vector,
     ) -> bool {
         let Forward { rhs, imp: w, .. } = self;
-        if w.w.factorised_for().is_none() {
+        if w.lin.w.factorised_for().is_none() {
             return false;
         }
-        k.x.copy_from(&r.x);
-        k.x *= hg;
-        let ok_x = w.w.solve_mut(&mut k.x);
+        let ok_x = w.lin.w.solve_scaled(hg, &r.x, &mut k.x);
         let lxk = w.lx0.dot(&k.x);
         k.q = hg * (r.q + lxk);
         if !rhs.sens {
             return ok_x;
         }
         // K_S = W⁻¹ hγ (R_S + B K_x), B K_x at (t0, x0, S0); D K_x likewise.
-        let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, rhs.p);
-        rhs.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
+        let pt = rhs.flow.point(t0, &y0.x);
+        rhs.flow.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
         k.s += &r.s;
-        if rhs.has_rc {
-            rhs.model.running_cost_sens_dir_x(
-                &rhs.sw,
-                At::new(t0, &y0.x, rhs.p),
+        if rhs.flow.has_rc {
+            rhs.flow.model.running_cost_sens_dir_x(
+                &rhs.flow.sw,
+                At::new(t0, &y0.x, rhs.flow.p),
                 &y0.s,
                 &k.x,
                 &mut k.qp,
@@ -430,8 +447,8 @@ where
             k.qp += &r.qp;
         }
         k.s *= hg;
-        let ok_s = w.w.solve_mut(&mut k.s);
-        if rhs.has_rc {
+        let ok_s = w.lin.w.solve_mut(&mut k.s);
+        if rhs.flow.has_rc {
             k.qp.gemv_tr(hg, &k.s, &w.lx0, hg);
         } else {
             k.qp.fill(0.0);
@@ -461,38 +478,38 @@ where
         let Some(ge) = global else {
             return;
         };
-        let (model, p) = (rhs.model, rhs.p);
-        let pt = Point::new(rhs.mode, &rhs.sw, t0, &y0.x, p);
-        model.rhs_jac_x(pt, &mut imp.w.jac);
-        if rhs.has_rc {
-            model.running_cost_grad_x(&rhs.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
+        let (model, p) = (rhs.flow.model, rhs.flow.p);
+        let pt = rhs.flow.point(t0, &y0.x);
+        model.rhs_jac_x(pt, &mut imp.lin.w.jac);
+        if rhs.flow.has_rc {
+            model.running_cost_grad_x(&rhs.flow.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
         }
         // f_x and ℓ_x now hold the carried step's start, not the next step's.
-        imp.base_valid = false;
+        imp.lin.prepared = false;
         let tols = (self.atol, self.rtol);
-        let autonomous = !model.rhs_depends_on_t(rhs.mode);
-        let pattern = &model.info().jacobian_sparsity[rhs.mode];
+        let autonomous = !model.rhs_depends_on_t(rhs.flow.mode);
+        let pattern = &model.info().jacobian_sparsity[rhs.flow.mode];
         ge.carry(
-            le, f0, y0, tols, &mut imp.w, pattern, &imp.lx0, h, *sens_err, autonomous,
+            le,
+            f0,
+            y0,
+            tols,
+            &mut imp.lin.w,
+            pattern,
+            &imp.lx0,
+            h,
+            *sens_err,
+            autonomous,
         );
-    }
-
-    fn invalidate(&mut self) {
-        self.imp.base_valid = false;
-        self.imp.w.invalidate();
     }
 
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
-        rhs.model.rhs_jac_x(
-            Point::new(rhs.mode, &rhs.sw, t, &y.x, rhs.p),
-            &mut self.imp.w.jac,
-        );
-        self.imp.w.power_iteration()
-    }
-
-    fn jac_spectral_radius(&self) -> f64 {
-        self.imp.w.rho
+        let w = &mut self.imp.lin.w;
+        rhs.flow
+            .model
+            .rhs_jac_x(rhs.flow.point(t, &y.x), &mut w.jac);
+        w.power_iteration()
     }
 }
 
@@ -527,14 +544,14 @@ where
         // changed neither): k₀ = F stays where the last exact step left it.
         if self.scheme == Scheme::Exact
             && self.dense_scheme == Scheme::Exact
-            && mode == self.sys.rhs.mode
-            && *sw == self.sys.rhs.sw
+            && mode == self.sys.rhs.flow.mode
+            && *sw == self.sys.rhs.flow.sw
         {
             self.restart_exact_keeping_rate(t, y);
             return;
         }
-        self.sys.rhs.mode = mode;
-        self.sys.rhs.sw.clone_from(sw);
+        self.sys.rhs.flow.mode = mode;
+        self.sys.rhs.flow.sw.clone_from(sw);
         self.restart_at(t, y);
         if self.scheme == Scheme::Exact {
             self.reuse_constant_rate();
@@ -545,16 +562,16 @@ where
     /// these bits. A non-finite F is not kept: the first step evaluates it again and reports it.
     fn reuse_constant_rate(&mut self) {
         let sys = &mut self.sys;
-        let Some(Some(c)) = sys.rates.get_mut(sys.rhs.mode) else {
+        let Some(Some(c)) = sys.rates.get_mut(sys.rhs.flow.mode) else {
             return;
         };
-        if !c.valid || c.sw != sys.rhs.sw {
+        if !c.valid || c.sw != sys.rhs.flow.sw {
             sys.rhs.eval(self.t, &self.y, &mut c.f);
             if c.f.nonfinite_part(sys.rhs.sens).is_some() {
                 c.valid = false;
                 return;
             }
-            c.sw.clone_from(&sys.rhs.sw);
+            c.sw.clone_from(&sys.rhs.flow.sw);
             c.valid = true;
         }
         self.k[0].copy_from(&c.f);
@@ -563,11 +580,11 @@ where
 
     /// Current mode.
     pub fn mode(&self) -> usize {
-        self.sys.rhs.mode
+        self.sys.rhs.flow.mode
     }
     /// Current frozen switch bits.
     pub fn switches(&self) -> &Switches {
-        &self.sys.rhs.sw
+        &self.sys.rhs.flow.sw
     }
     /// The run's global error estimate (`None` when `Options::global_error` is off); the
     /// last accepted step may still be pending ([`Integrator::close_step`]).

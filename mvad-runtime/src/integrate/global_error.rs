@@ -49,19 +49,28 @@
 //! (e_S⁺ + f⁺ δt'ᵀ)ᵀ φ_x + φ_t δt' to that of dC/dθ. At T, e_C = e_q + Σ δφ + Φ_x·e_x and
 //! e_{dC/dθ} = e_qθ + Σ δ(dφ/dθ) + e_Sᵀ Φ_x.
 //!
+//! ## Rounding
+//! The estimate also carries the run's rounding, added where it is made and transported by
+//! the same mechanism as the steps' errors (see `rounding.rs`, `GlobalError::event_rounding`
+//! for the terms and the cases they bound).
+//!
 //! What the estimate leaves out: the second-order coupling of state errors into the
-//! sensitivities (∂(f_x S)/∂x · e_x along the flow, the derivative of the jump map in x⁻), so
-//! e_S is driven by the sensitivities' own local errors; and the error of locating events. The
+//! sensitivities (∂(f_x S)/∂x · e_x along the flow, the derivative of the jump map in x⁻)
+//! beyond the time shift at T, so e_S is driven by the sensitivities' own local errors and
+//! rounding; and the error of locating events beyond rounding. The
 //! embedded pairs' estimates bound the error of their lower-order solution, so the estimate is
 //! usually larger than the true error where the steps' errors dominate (1 to 100× on the
-//! suite; below it where locating events dominates, as for 10⁴ bounces of a ball); it is a
-//! criterion, not a correction. With sensitivity error control off, no local error of S is estimated, and only C
-//! is judged.
+//! suite); the rounding terms are bounds taken with one sign, 2 to 30× the errors measured
+//! on the cases above; it is a criterion, not a correction. With sensitivity error control
+//! off, no local error of S is estimated, and only C is judged.
 
 use super::aug::AugState;
 use super::rosenbrock::WMatrix;
 use crate::model::ModelAlloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
+
+mod rounding;
+pub use rounding::{EventRounding, JumpOf, PhaseRates};
 
 /// Explicit Euler substeps a step may take before the estimate is carried by one implicit
 /// step instead (|h|‖f_x‖∞ > 4: a stiff step).
@@ -147,13 +156,24 @@ where
     /// The error of Σ dφ_k/dθ so far.
     events_grad: OVector<f64, P>,
     /// Nothing has been carried yet: every part is exactly zero, and so is its image under
-    /// any jump (a run whose steps are all exact, which make no error, never leaves it).
+    /// any jump (a run whose steps are all exact, which make no error, never leaves it but
+    /// through its events' rounding, see `pending`).
     zero: bool,
+    /// While the estimate is zero, the events' rounding so far, not transported (see
+    /// [`GlobalError::event_rounding`]): it starts the estimate when the first step is
+    /// carried or when it reaches the tolerance, and is added at T otherwise.
+    pending: AugState<N, P>,
+    /// The largest ‖x⁺‖∞ and ‖S⁺‖∞ at the events that added to `pending`: the scale of its
+    /// tolerance.
+    pending_scale: (f64, f64),
     /// The last jump's displacement: the recorded jump (t̃, x̃⁻, x̃⁺) is the exact one moved
     /// by (δt, d⁻, d⁺), d⁻ = e_x⁻ + f⁻ δt, d⁺ = e_x⁺ + f⁺ δt (see [`GlobalError::jump_shift`]).
     d_minus: OVector<f64, N>,
     d_plus: OVector<f64, N>,
     shift_dt: f64,
+    /// Row sums Σ_j |∂f_i/∂x_j| of the last carried step's f_x (zeros before the first): with
+    /// ‖x‖∞ the scale of the rounding of evaluating f at an event ([`EventRounding`]).
+    jac_rows: OVector<f64, N>,
     /// Scratch: two n-vectors, n×p and p.
     xs: OVector<f64, N>,
     w: OVector<f64, N>,
@@ -205,6 +225,8 @@ where
     pub fn new(n: N, p: P) -> Self {
         GlobalError {
             r: AugState::zeros(n, p),
+            pending: AugState::zeros(n, p),
+            pending_scale: (0.0, 0.0),
             alpha: 0.0,
             beta: OVector::zeros_generic(p, Const::<1>),
             events_cost: 0.0,
@@ -213,6 +235,7 @@ where
             d_minus: OVector::zeros_generic(n, Const::<1>),
             d_plus: OVector::zeros_generic(n, Const::<1>),
             shift_dt: 0.0,
+            jac_rows: OVector::zeros_generic(n, Const::<1>),
             xs: OVector::zeros_generic(n, Const::<1>),
             w: OVector::zeros_generic(n, Const::<1>),
             ss: OMatrix::zeros_generic(n, p),
@@ -221,7 +244,8 @@ where
     }
 
     /// Whether the estimate is exactly zero because nothing has been carried yet (the steps so
-    /// far were exact): its jump at an event is then zero too, and needs no inputs.
+    /// far were exact): its jump at an event is then zero too, and needs no inputs; only the
+    /// event's rounding is added, to the pending part ([`GlobalError::event_rounding`]).
     pub fn is_zero(&self) -> bool {
         self.zero
     }
@@ -254,7 +278,9 @@ where
         sens: bool,
         autonomous: bool,
     ) {
-        self.zero = false;
+        if self.zero {
+            self.start_from_pending();
+        }
         let r = &mut self.r;
         r.x += &le.x;
         r.q += le.q;
@@ -262,7 +288,9 @@ where
             r.s += &le.s;
             r.qp += &le.qp;
         }
+        self.step_rounding(y0, f0, h);
         let m = substeps(&w.jac, pattern, false, h, &mut self.w);
+        self.jac_rows.copy_from(&self.w);
         if m <= EXPLICIT_SUBSTEPS {
             let dt = h / m;
             // The quadratures by the trapezoidal rule (r_x is linear across a substep).
@@ -494,16 +522,29 @@ where
     }
 
     /// The estimated errors at T, given f(T), ℓ(T) and, with a final cost, Φ_x(T): returns the
-    /// error of C and writes that of dC/dθ into `grad` (with `sens`).
+    /// error of C and writes that of dC/dθ into `grad` (with `sens`). With `phase` =
+    /// (x(T), (atol, rtol), Ṡ(T), q̇_θ(T) − q_θ(T)/T), the component γ of e_x along f(T)
+    /// (weights 1/(atol + rtol|xᵢ|), as `GlobalError::carry` moves it into α), when
+    /// |γ|‖f_x‖∞ ≤ 10⁻³, is read as the time shift it is to first order: the
+    /// sensitivities computed along x(t + γ) are S(t + γ), so e_S += γṠ(T) and
+    /// e_qθ += γ(q̇_θ(T) − q̄_θ) (see the module doc).
+    #[allow(clippy::too_many_arguments)]
     pub fn at_end(
         &mut self,
         f: &OVector<f64, N>,
         l: f64,
         phi_x: Option<&OVector<f64, N>>,
         sens: bool,
+        phase: Option<PhaseRates<'_, N, P>>,
         grad: &mut OVector<f64, P>,
     ) -> f64 {
+        if self.zero {
+            self.start_from_pending();
+        }
         self.materialise(f, l, sens);
+        if let (true, Some(phase)) = (sens, phase) {
+            self.phase_at_end(f, phase);
+        }
         let mut cost = self.r.q + self.events_cost;
         if let Some(phi_x) = phi_x {
             cost += phi_x.dot(&self.r.x);

@@ -64,7 +64,6 @@ mod global_error;
 mod quadrature;
 mod rosenbrock;
 mod scheme;
-mod step_error;
 mod stiffness;
 pub mod system;
 mod tsit5;
@@ -75,11 +74,11 @@ pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
 pub use forward::Forward;
-pub use global_error::{GlobalError, ResetSecant, Saltation};
+pub use global_error::{EventRounding, GlobalError, JumpOf, ResetSecant, Saltation};
 pub use scheme::Scheme;
-pub use step_error::StepError;
-pub use system::{ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
+pub use system::{ImplicitSystem, Linearised, OdeSystem, QuadratureSum, StageVector};
 
+use crate::error::SolveError;
 use crate::solution::{Method, Options, Stats};
 use control::Controller;
 use tsit5::TSIT5;
@@ -246,7 +245,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.y_prev.copy_from(y);
         self.fsal_slot = None;
         self.dense_pending = false;
-        self.sys.invalidate();
+        self.sys.linearisation_mut().invalidate();
     }
 
     /// The restart after a jump inside a segment of exact steps that leaves F as it was (the
@@ -345,9 +344,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
 
     /// Take ONE accepted step towards `t_stop`, never beyond it; lands exactly on `t_stop`
     /// when it is reached. `t_stop < t()` integrates backwards; `t_stop == t()` does nothing.
-    pub fn step(&mut self, t_stop: f64) -> Result<(), StepError> {
+    pub fn step(&mut self, t_stop: f64) -> Result<(), SolveError> {
         if t_stop.is_nan() {
-            return Err(StepError::NonFinite {
+            return Err(SolveError::NonFinite {
                 t: self.t,
                 what: "stop time".into(),
             });
@@ -391,8 +390,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 // Shrinking towards a point where the flow stops being defined (√ of a
                 // negative, 1/0, ...) ends here: report the NaN, not the step size.
                 return Err(match nonfinite.or_else(|| self.undefined_just_ahead(dir)) {
-                    Some(what) => StepError::NonFinite { t: self.t, what },
-                    None => StepError::StepSizeUnderflow {
+                    Some(what) => SolveError::NonFinite { t: self.t, what },
+                    None => SolveError::StepSizeUnderflow {
                         t: self.t,
                         h,
                         largest: self.largest_entry(),
@@ -412,7 +411,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
                 self.ctrl.last_rejected = true;
                 let what = self.nonfinite_source();
                 if nonfinite_tries > 60 {
-                    return Err(StepError::NonFinite { t: self.t, what });
+                    return Err(SolveError::NonFinite { t: self.t, what });
                 }
                 nonfinite = Some(what);
                 self.h = h * 0.25;
@@ -441,8 +440,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// The failure when the step budget is used up, with the step size `h` reached, whether
     /// stiffness is ruled out (the implicit scheme in use, or `auto`, whose stiffness test
     /// would have switched to it), and the largest state entry.
-    fn out_of_steps(&self, h: f64) -> StepError {
-        StepError::MaxSteps {
+    fn out_of_steps(&self, h: f64) -> SolveError {
+        SolveError::MaxSteps {
             t: self.t,
             steps: self.max_steps,
             h,
@@ -456,10 +455,10 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// error estimate (the step makes no error, and its flow, a function of θ alone, moves
     /// none). Fails as an adaptive step would: a step below the resolution of t, the step
     /// budget, or a state that overflows.
-    fn exact_step(&mut self, t_stop: f64) -> Result<(), StepError> {
+    fn exact_step(&mut self, t_stop: f64) -> Result<(), SolveError> {
         let h = t_stop - self.t;
         if h.abs() <= 10.0 * f64::EPSILON * self.t.abs() || h.abs() < 1e-300 {
-            return Err(StepError::StepSizeUnderflow {
+            return Err(SolveError::StepSizeUnderflow {
                 t: self.t,
                 h: h.abs(),
                 largest: self.largest_entry(),
@@ -478,7 +477,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             self.y.copy_from(&self.y_prev);
             self.stats.rejected_steps += 1;
             let what = self.nonfinite_source();
-            return Err(StepError::NonFinite { t: self.t, what });
+            return Err(SolveError::NonFinite { t: self.t, what });
         }
         self.t_prev = self.t;
         self.t = t_stop;
@@ -489,7 +488,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         // F is constant: k[0] stays the next step's first stage.
         self.k0_valid = false;
         self.fsal_slot = Some(0);
-        self.sys.invalidate();
+        self.sys.linearisation_mut().invalidate();
         self.dense_pending = false;
         self.stats.rhs_evals = self.sys.evals();
         // Pending like any accepted step: `close_step` carries no global error over an
@@ -501,9 +500,9 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// Takes one step of exactly `h` (either sign) with the active scheme and no error control
     /// (always accepted); returns the weighted norm of its local error estimate. For verifying
     /// convergence orders; the driver uses [`Integrator::step`].
-    pub fn step_fixed(&mut self, h: f64) -> Result<f64, StepError> {
+    pub fn step_fixed(&mut self, h: f64) -> Result<f64, SolveError> {
         if h.is_nan() || h == 0.0 || !h.is_finite() {
-            return Err(StepError::StepSizeUnderflow {
+            return Err(SolveError::StepSizeUnderflow {
                 t: self.t,
                 h,
                 largest: self.largest_entry(),
@@ -512,7 +511,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.ensure_k0()?;
         let err = self.attempt(h);
         if let Some(what) = self.sys.nonfinite_part(&self.ynew) {
-            return Err(StepError::NonFinite {
+            return Err(SolveError::NonFinite {
                 t: self.t,
                 what: what.into(),
             });
@@ -554,7 +553,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// Makes k[0] = F(t, y): from the FSAL stage of the last explicit step, or by evaluating.
-    fn ensure_k0(&mut self) -> Result<(), StepError> {
+    fn ensure_k0(&mut self) -> Result<(), SolveError> {
         if self.k0_valid {
             return Ok(());
         }
@@ -569,7 +568,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             } else {
                 self.sys.stage_source(&self.k[0])
             };
-            return Err(StepError::NonFinite { t: self.t, what });
+            return Err(SolveError::NonFinite { t: self.t, what });
         }
         self.k0_valid = true;
         Ok(())
@@ -662,7 +661,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.stats.steps += 1;
         self.k0_valid = false;
         self.fsal_slot = self.scheme.info().3;
-        self.sys.invalidate();
+        self.sys.linearisation_mut().invalidate();
         self.dense_pending = false;
         if self.scheme == Scheme::Verner9 {
             self.accepted_interp_stages(&VERNER9, h);

@@ -20,7 +20,7 @@
 //! n × n matrix W = I − hγ f_x is the system's business (for the forward augmented state see
 //! [`super::forward`]). [`WMatrix`] is that factorisation, shared by every system.
 
-use super::system::{ImplicitSystem, StageVector};
+use super::system::{ImplicitSystem, Linearised, StageVector};
 use super::Integrator;
 use nalgebra::allocator::Allocator;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
@@ -104,7 +104,7 @@ const H: [[f64; NSTAGES]; 3] = [
 
 /// The n × n matrix f_x of a step start and the in-place LU factors of W = I − hγ f_x
 /// (allocated once; zero-sized for `Dyn` when the method is never used).
-pub(super) struct WMatrix<N: Dim>
+pub struct WMatrix<N: Dim>
 where
     DefaultAllocator: Allocator<N, N> + Allocator<N>,
 {
@@ -216,6 +216,17 @@ where
         self.wlu.solve_upper_triangular_mut(b)
     }
 
+    /// k := hγ W⁻¹ r, the stage solve of a block that W alone governs; false (k untouched)
+    /// without factors.
+    pub fn solve_scaled(&self, hg: f64, r: &OVector<f64, N>, k: &mut OVector<f64, N>) -> bool {
+        if !self.lu_ok {
+            return false;
+        }
+        k.copy_from(r);
+        *k *= hg;
+        self.solve_mut(k)
+    }
+
     /// ρ(f_x) ≈ (‖J⁸v‖/‖v‖)^(1/8) from a fixed start vector (geometric mean of the growth
     /// factors of 8 power steps; within a small factor of ρ also for complex pairs, and 0 for
     /// nilpotent Jacobians such as the ball's); stored in `rho` and returned.
@@ -249,6 +260,71 @@ where
             self.pv /= g;
         }
         (log_growth / ITERS as f64).exp()
+    }
+}
+
+/// J of the step start (in `w`, with the factors of W = I − hγ J), F_t there (`dt`, a vector
+/// of the system's shape) and whether both belong to the current step start. A system fills
+/// `w.jac` and `dt` in its [`ImplicitSystem::prepare`] and sets `prepared`.
+pub struct Linearisation<N: Dim, V>
+where
+    DefaultAllocator: Allocator<N, N> + Allocator<N>,
+{
+    /// J (or, for the forward system, its f_x block) and the factors of W.
+    pub w: WMatrix<N>,
+    /// F_t at the step start.
+    pub dt: V,
+    /// `w.jac` and `dt` belong to the current step start.
+    pub prepared: bool,
+}
+
+impl<N: Dim, V> Linearisation<N, V>
+where
+    DefaultAllocator: Allocator<N, N> + Allocator<N>,
+{
+    /// Not prepared, with the buffers `w` and `dt`.
+    pub fn new(w: WMatrix<N>, dt: V) -> Self {
+        Linearisation {
+            w,
+            dt,
+            prepared: false,
+        }
+    }
+}
+
+impl<N: Dim, V> Linearised<V> for Linearisation<N, V>
+where
+    DefaultAllocator: Allocator<N, N> + Allocator<N>,
+{
+    #[inline]
+    fn prepared(&self) -> bool {
+        self.prepared
+    }
+
+    #[inline]
+    fn time_derivative(&self) -> &V {
+        &self.dt
+    }
+
+    #[inline]
+    fn factorise(&mut self, hg: f64) -> bool {
+        self.w.factorise(hg)
+    }
+
+    #[inline]
+    fn factorised_for(&self) -> Option<f64> {
+        self.w.factorised_for()
+    }
+
+    #[inline]
+    fn invalidate(&mut self) {
+        self.prepared = false;
+        self.w.invalidate();
+    }
+
+    #[inline]
+    fn spectral_radius(&self) -> f64 {
+        self.w.rho
     }
 }
 
@@ -351,14 +427,14 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     pub(super) fn rosenbrock_attempt(&mut self, h: f64) -> f64 {
         let all = self.sys.all_parts();
         let t0 = self.t;
-        if !self.sys.prepared() {
+        if !self.sys.linearisation().prepared() {
             self.sys.prepare(t0, &self.y, h);
             self.stats.jac_evals += 1;
         }
         let hg = h * GAMMA;
-        if self.sys.factorised_for() != Some(hg) {
+        if self.sys.linearisation().factorised_for() != Some(hg) {
             self.stats.factorizations += 1;
-            if !self.sys.factorise(hg) {
+            if !self.sys.linearisation_mut().factorise(hg) {
                 return f64::NAN;
             }
         }
@@ -394,7 +470,8 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             }
         }
         if D[s] != 0.0 {
-            self.r.axpy(h * D[s], self.sys.time_derivative(), all);
+            self.r
+                .axpy(h * D[s], self.sys.linearisation().time_derivative(), all);
         }
         let tail = &mut self.k[1 + s..];
         self.sys.solve_stage(t0, &self.y, hg, &self.r, &mut tail[0])

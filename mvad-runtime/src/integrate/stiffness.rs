@@ -3,7 +3,7 @@
 //! every [`JAC_CHECK_EVERY`] steps h·ρ(f_x) from a power iteration, and back to Tsit5 when
 //! Rodas5P's steps would be stable for it.
 
-use super::{ImplicitSystem, Integrator, Scheme};
+use super::{ImplicitSystem, Integrator, Linearised, Scheme};
 use crate::solution::Method;
 
 /// Real-axis stability boundary of Tsit5 used by the stiffness test (|hλ| beyond it is
@@ -66,7 +66,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             Scheme::Rodas5P => {
                 // Back to explicit when the step Rodas5P proposes is well inside Tsit5's
                 // stability region (hysteresis against the forward tests).
-                let rho = self.sys.jac_spectral_radius();
+                let rho = self.sys.linearisation().spectral_radius();
                 if self.h * rho < JAC_NONSTIFF_HRHO {
                     self.nonstiff_count += 1;
                 } else {

@@ -56,19 +56,8 @@ pub trait StageVector {
     fn axpy(&mut self, a: f64, other: &Self, all: bool);
     /// `self = Σ_i w_i v_i` over five vectors (the Rosenbrock dense output).
     fn mix5(&mut self, w: &[f64; 5], v: [&Self; 5], all: bool);
-    /// Cubic Hermite interpolant y₀ + c (y₁ − y₀) + h (w₀ f₀ + w₁ f₁) with
-    /// c = 3θ² − 2θ³, w₀ = θ − 2θ² + θ³, w₁ = θ³ − θ².
-    #[allow(clippy::too_many_arguments)]
-    fn hermite(
-        &mut self,
-        y0: &Self,
-        y1: &Self,
-        f0: &Self,
-        f1: &Self,
-        h: f64,
-        theta: f64,
-        all: bool,
-    );
+    /// The cubic Hermite interpolant of `step` at θ (see [`HermiteStep`]).
+    fn hermite(&mut self, step: &HermiteStep<'_, Self>, theta: f64, all: bool);
     /// Whether every entry of every part is finite.
     fn is_finite(&self) -> bool;
     /// The primary part as a slice.
@@ -114,19 +103,34 @@ pub trait StageVector {
         mix5_slice(out.slice_mut(), w, v.map(|u| u.primary()));
     }
     /// Primary part of [`StageVector::hermite`].
-    #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn hermite_primary(
-        out: &mut Self::Primary,
-        y0: &Self,
-        y1: &Self,
-        f0: &Self,
-        f1: &Self,
-        h: f64,
-        theta: f64,
-    ) {
-        let [a, b, g0, g1] = [y0, y1, f0, f1].map(|v| v.primary());
-        hermite_slice(out.slice_mut(), a, b, g0, g1, h, theta);
+    fn hermite_primary(out: &mut Self::Primary, step: &HermiteStep<'_, Self>, theta: f64) {
+        hermite_slice(out.slice_mut(), step.parts(|v| v.primary()), step.h, theta);
+    }
+}
+
+/// A step of signed length `h` as the cubic Hermite interpolant sees it: the values y₀, y₁
+/// and the slopes f₀, f₁ at its ends, y(θ) = y₀ + c (y₁ − y₀) + h (w₀ f₀ + w₁ f₁) with
+/// c = 3θ² − 2θ³, w₀ = θ − 2θ² + θ³, w₁ = θ³ − θ² (the dense output of a step whose own
+/// interpolant is not formed yet, `dense.rs`).
+pub struct HermiteStep<'a, V: ?Sized> {
+    /// y₀.
+    pub y0: &'a V,
+    /// y₁.
+    pub y1: &'a V,
+    /// f₀ = F(t₀, y₀).
+    pub f0: &'a V,
+    /// f₁ = F(t₀ + h, y₁).
+    pub f1: &'a V,
+    /// The step's signed length.
+    pub h: f64,
+}
+
+impl<'a, V: ?Sized> HermiteStep<'a, V> {
+    /// One part of each of y₀, y₁, f₀, f₁, in that order.
+    #[inline]
+    pub fn parts<'b, T: ?Sized>(&self, part: impl Fn(&'a V) -> &'b T) -> [&'b T; 4] {
+        [self.y0, self.y1, self.f0, self.f1].map(part)
     }
 }
 
@@ -243,17 +247,16 @@ pub trait OdeSystem {
 /// J = ∂F/∂Y and F_t = ∂F/∂t per step start, one factorisation of I − hγ J per attempt, and
 /// the stage solves. The system owns J, its factors and its scratch; the stepper only asks.
 pub trait ImplicitSystem: OdeSystem {
+    /// J, F_t and the factors of W at the step start, as the stepper reads them.
+    type Linear: Linearised<Self::Vector>;
     /// Evaluates J and F_t at the step start (t₀, Y₀) for steps of size about h (h may set the
-    /// difference steps in t); afterwards [`Self::prepared`] holds until [`Self::invalidate`].
+    /// difference steps in t); afterwards [`Linearised::prepared`] holds until
+    /// [`Linearised::invalidate`].
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64);
-    /// J and F_t belong to the current step start.
-    fn prepared(&self) -> bool;
-    /// F_t at the step start (valid after [`Self::prepare`]).
-    fn time_derivative(&self) -> &Self::Vector;
-    /// Factorises W = I − hγ J for `hg` = hγ (any sign); false when W is singular.
-    fn factorise(&mut self, hg: f64) -> bool;
-    /// hγ of the current regular factorisation, if any.
-    fn factorised_for(&self) -> Option<f64>;
+    /// The linearisation at the step start.
+    fn linearisation(&self) -> &Self::Linear;
+    /// The linearisation at the step start, mutably (to factorise W or forget it).
+    fn linearisation_mut(&mut self) -> &mut Self::Linear;
     /// Solves the stage equation (I/(hγ) − J) K = R at the step start, i.e.
     /// K = hγ (I − hγ J)⁻¹ R; false when the factors are missing or a solve failed.
     fn solve_stage(
@@ -282,11 +285,25 @@ pub trait ImplicitSystem: OdeSystem {
     fn quadrature_jac_add(&mut self, _t0: f64, _v: &Self::Vector, _a: f64, _sum: QuadratureSum) {}
     /// `sum` += a·∂G/∂t at the step start (t0, y0) (the quadrature's part of F_t).
     fn quadrature_dt_add(&mut self, _t0: f64, _y0: &Self::Vector, _a: f64, _sum: QuadratureSum) {}
-    /// Forgets J, F_t and the factors (new step start, restart, truncation).
-    fn invalidate(&mut self);
     /// Evaluates the Jacobian of the primary flow at (t, y) and returns an estimate of its
     /// spectral radius (for the stiffness test of the explicit method).
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64;
+}
+
+/// What the stepper reads of an implicit system's linearisation at the step start (J inside
+/// W, F_t, the factors of W = I − hγ J), the same for every system: `rosenbrock::Linearisation` is
+/// its one implementation, and [`ImplicitSystem::linearisation`] hands it over.
+pub trait Linearised<V> {
+    /// J and F_t belong to the current step start (set by [`ImplicitSystem::prepare`]).
+    fn prepared(&self) -> bool;
+    /// F_t at the step start (valid after [`ImplicitSystem::prepare`]).
+    fn time_derivative(&self) -> &V;
+    /// Factorises W = I − hγ J for `hg` = hγ (any sign); false when W is singular.
+    fn factorise(&mut self, hg: f64) -> bool;
+    /// hγ of the current regular factorisation, if any.
+    fn factorised_for(&self) -> Option<f64>;
+    /// Forgets J, F_t and the factors (new step start, restart, truncation).
+    fn invalidate(&mut self);
     /// The spectral-radius estimate of the last Jacobian evaluated.
-    fn jac_spectral_radius(&self) -> f64;
+    fn spectral_radius(&self) -> f64;
 }

@@ -1,7 +1,8 @@
 //! A non-finite stage is an error that names the flow (the schemes against closed forms,
 //! forward and backward in time, are in `mvad-runtime/tests/integrate.rs`).
 
-use super::{AugState, Integrator, StepError};
+use super::{AugState, Integrator};
+use crate::error::SolveError;
 use crate::fixtures::Ball;
 use crate::model::Switches;
 use crate::solution::Options;
@@ -18,7 +19,7 @@ fn nonfinite_start_is_an_error() {
     y.x[0] = 2.0;
     it.restart(0.0, &y, 0, &Switches::default());
     match it.step(1.0) {
-        Err(StepError::NonFinite { what, .. }) => {
+        Err(SolveError::NonFinite { what, .. }) => {
             assert!(what.contains("flow of mode"), "{what}")
         }
         other => panic!("expected NonFinite, got {other:?}"),

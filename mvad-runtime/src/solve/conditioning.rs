@@ -13,10 +13,10 @@
 //! weighs S by |θ_j|, adjoint mode's quadrature g is controlled unweighted.
 
 use super::Driver;
-use crate::integrate::{sens_weight, ResetSecant, Saltation};
-use crate::model::{At, HybridModel, ModelAlloc, Occurrence};
+use crate::integrate::{sens_weight, EventRounding, JumpOf, ResetSecant, Saltation};
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::solution::{Diagnostic, DiagnosticKind, ErrorEstimate, ILL_CONDITIONED_FACTOR};
-use nalgebra::{Const, DefaultAllocator, OVector};
+use nalgebra::{Const, DefaultAllocator, OMatrix, OVector};
 
 /// How an estimate's jump takes the reset (see [`Saltation`]).
 enum Reset {
@@ -43,13 +43,19 @@ where
         rate: f64,
         l_plus: f64,
     ) {
-        // A zero estimate (only exact steps so far) jumps to zero: nothing to compute.
-        if self.integ.global_error_mut().is_none_or(|ge| ge.is_zero()) {
+        let Some(zero) = self.estimate_at_jump() else {
             return;
-        }
+        };
         let (model, p) = (self.model, self.p);
         let occ = Occurrence::new(k, j);
         let l_minus = self.running_cost_minus(t);
+        if zero {
+            // A zero estimate (only exact steps so far) jumps to zero: only the rounding, which
+            // it takes with sensitivities only ([`Self::estimate_at_jump`]).
+            let kind = self.jump_of(k);
+            self.error_jump(Reset::Jacobians, None, (l_minus, l_plus), None, (t, kind));
+            return;
+        }
         let phi_t = model.info().events[k].has_cost.then(|| {
             model.event_cost_grad(occ, At::new(t, &self.x_plus, p), &mut self.cx, &mut self.cp)
         });
@@ -61,39 +67,75 @@ where
             // secant of the reset (one evaluation, never the p-long ∂R/∂θ of `reset_jac`).
             Reset::Secant(occ, t)
         };
-        self.error_jump(reset, rate, (l_minus, l_plus), phi_t);
+        self.error_jump(
+            reset,
+            Some(rate),
+            (l_minus, l_plus),
+            phi_t,
+            (t, self.jump_of(k)),
+        );
+    }
+
+    /// Whether the estimate has anything to do at the jump being applied: `None` without an
+    /// estimate, or when it is zero and the jump adds no rounding to it (t' = 0, or no
+    /// sensitivities: `GlobalError::takes_event_rounding`); else whether it is zero.
+    fn estimate_at_jump(&self) -> Option<bool> {
+        let ge = self.integ.global_error()?;
+        let dt = self.sens.then_some(&self.dt);
+        ge.takes_event_rounding(dt).then(|| ge.is_zero())
+    }
+
+    /// How user event k's time was found ([`JumpOf`]).
+    fn jump_of(&self, k: usize) -> JumpOf {
+        match self.model.info().events[k].is_time_event() {
+            true => JumpOf::TimeEvent,
+            false => JumpOf::StateEvent,
+        }
     }
 
     /// Carries the estimate through the crossing of switching function j at t (identity
     /// reset): x in `y.x`, f⁻ and f⁺ computed, the old bits in `sw` and the new in `sw_next`.
     pub(super) fn error_through_switch(&mut self, j: usize, t: f64) {
-        if self.integ.global_error_mut().is_none_or(|ge| ge.is_zero()) {
+        let Some(zero) = self.estimate_at_jump() else {
             return;
-        }
+        };
         let (model, p) = (self.model, self.p);
-        // `apply_switch` leaves ∇σ_j in `gx` only with sensitivities.
-        let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
-        let rate = self.gx.dot(&self.f_minus) + gt;
         let l_minus = self.running_cost_minus(t);
         let l_plus = if model.info().has_running_cost {
             model.running_cost(&self.sw_next, At::new(t, &self.y.x, p))
         } else {
             0.0
         };
-        self.error_jump(Reset::Identity, rate, (l_minus, l_plus), None);
+        // `apply_switch` leaves ∇σ_j in `gx` only with sensitivities; a zero estimate needs
+        // only the rounding, not the rate.
+        let rate = (!zero).then(|| {
+            let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
+            self.gx.dot(&self.f_minus) + gt
+        });
+        self.error_jump(
+            Reset::Identity,
+            rate,
+            (l_minus, l_plus),
+            None,
+            (t, JumpOf::Switch),
+        );
     }
 
     /// The estimate's jump with f⁻, f⁺ and ∇g from the driver's buffers, the reset as
     /// `reset` says (R_x, R_t from the driver's buffers, or the secant of R at x⁻ in `y.x`
     /// with x⁺ in `x_plus`), ġ = `rate`, (ℓ⁻, ℓ⁺) and, for an event cost, φ_t with φ_x in
-    /// `cx`.
+    /// `cx`; then the jump's rounding at event time t (`kind`; a user event has x⁺ in
+    /// `x_plus`, S⁺ in `s_plus`, R_θ in `rp`, a switch crossing S⁺ in `y.s`). Without
+    /// `rate` (a zero estimate, whose linearised jump is zero) only the rounding.
     fn error_jump(
         &mut self,
         reset: Reset,
-        rate: f64,
+        rate: Option<f64>,
         (l_minus, l_plus): (f64, f64),
         phi_t: Option<f64>,
+        (t, kind): (f64, JumpOf),
     ) {
+        let event = kind != JumpOf::Switch;
         let (model, p) = (self.model, self.p);
         let (x_minus, x_plus) = (&self.y.x, &self.x_plus);
         let secant_at = |occ: Occurrence, t: f64| {
@@ -118,14 +160,28 @@ where
             f_minus: &self.f_minus,
             f_plus: &self.f_plus,
             gx: &self.gx,
-            rate,
+            rate: rate.unwrap_or(0.0),
             l_minus,
             l_plus,
             cost: phi_t.map(|phi_t| (&self.cx, phi_t)),
             secant: secant.as_ref().map(|f| f as &ResetSecant<'_, M::N>),
         };
+        let rounding = EventRounding {
+            t,
+            kind,
+            tols: (self.opts.atol, self.opts.rtol),
+            x_minus: &self.y.x,
+            x_plus: if event { &self.x_plus } else { &self.y.x },
+            sens: self.sens.then_some(match event {
+                true => (&self.dt, &self.s_plus, Some(&self.rp)),
+                false => (&self.dt, &self.y.s, None),
+            }),
+        };
         if let Some(ge) = self.integ.global_error_mut() {
-            ge.jump(&s, self.sens);
+            if rate.is_some() {
+                ge.jump(&s, self.sens);
+            }
+            ge.event_rounding(&s, &rounding);
         }
     }
 
@@ -140,7 +196,7 @@ where
     }
 
     /// The estimated errors at T of the run's C and dC/dθ (`grad`, meaningful with
-    /// sensitivities), with x(T) and f(T); pushes the `ill_conditioned` diagnostic when they
+    /// sensitivities), with x(T), S(T) and f(T); pushes the `ill_conditioned` diagnostic when they
     /// exceed what the tolerances ask for ([`judge`]), except in the adjoint's primal run.
     /// `None` when no estimate was carried.
     pub(super) fn error_at_end(
@@ -148,6 +204,7 @@ where
         cost: f64,
         grad: &OVector<f64, M::P>,
         x_final: &OVector<f64, M::N>,
+        s_final: &OMatrix<f64, M::N, M::P>,
         f_end: &OVector<f64, M::N>,
     ) -> Option<ErrorEstimate> {
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
@@ -164,10 +221,32 @@ where
             None
         };
         let mut e_grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
-        let e_cost = self
-            .integ
-            .global_error_mut()?
-            .at_end(f_end, l_end, phi_x, sens, &mut e_grad);
+        // Ṡ(T) = f_x S + f_θ and q̇_θ(T) = ℓ_x S + ℓ_θ less its mean q_θ(T)/T, for the time
+        // shift of S at T (one evaluation per run; `s_plus` and `dt` are free after the last
+        // event).
+        if sens {
+            let pt = Point::new(self.mode, &self.sw, t_end, x_final, p);
+            model.rhs_sens(pt, s_final, &mut self.xs, &mut self.s_plus);
+            self.dt.fill(0.0);
+            if info.has_running_cost {
+                let at = At::new(t_end, x_final, p);
+                model.running_cost_value_grad(&self.sw, at, &mut self.gx, &mut self.dt);
+                self.dt.gemv_tr(1.0, s_final, &self.gx, 1.0);
+                if t_end > 0.0 {
+                    self.dt.axpy(-1.0 / t_end, &self.integ.y().qp, 1.0);
+                }
+            }
+        }
+        let phase = sens.then_some((
+            x_final,
+            (self.opts.atol, self.opts.rtol),
+            &self.s_plus,
+            &self.dt,
+        ));
+        let e_cost =
+            self.integ
+                .global_error_mut()?
+                .at_end(f_end, l_end, phi_x, sens, phase, &mut e_grad);
         let e_grad = sens.then(|| (e_grad.as_slice(), grad.as_slice()));
         let (estimate, diagnostic) = judge(
             (e_cost, cost),

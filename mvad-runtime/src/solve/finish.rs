@@ -67,7 +67,7 @@ where
                 what: "cost".into(),
             });
         }
-        let error_estimate = self.error_at_end(cost, &grad, &x_final, &f_end);
+        let error_estimate = self.error_at_end(cost, &grad, &x_final, &s_final, &f_end);
         let mut stats: Stats = self.integ.stats().clone();
         stats.events = self.nevents;
         stats.switch_crossings = self.switch_crossings;

@@ -29,6 +29,7 @@ mod finish;
 mod jump;
 mod qp;
 mod record;
+mod resolution;
 mod schedule;
 mod zeno;
 
@@ -207,6 +208,9 @@ struct ModeWatch {
     any: bool,
     /// Every active function is an affine guard.
     affine: bool,
+    /// The active functions that are not affine guards: steps are cut until they are
+    /// resolved (see `resolution`).
+    unresolved: Vec<usize>,
 }
 
 impl ModeWatch {
@@ -230,10 +234,16 @@ impl ModeWatch {
                     .enumerate()
                     .all(|(w, &a)| !a || (w < nev && model.guard_is_affine(w)));
                 let list: Vec<usize> = (0..active.len()).filter(|&w| active[w]).collect();
+                let unresolved = list
+                    .iter()
+                    .copied()
+                    .filter(|&w| w >= nev || !model.guard_is_affine(w))
+                    .collect();
                 ModeWatch {
                     any: !list.is_empty(),
                     list,
                     affine,
+                    unresolved,
                 }
             })
             .collect()
@@ -262,6 +272,8 @@ where
     /// Scratch: switching functions at exactly zero when the bits are first decided.
     sw_undecided: Switches,
     scanner: Scanner,
+    /// The length of the pieces the watched functions allow (see `resolution`).
+    resolution: resolution::Resolution,
     /// What each mode watches, decided once per run (see [`ModeWatch`]).
     watch: Vec<ModeWatch>,
     /// Every watched function active since the last restart is an affine guard (see
@@ -337,6 +349,7 @@ where
         let mut integ = Integrator::new_narrow(model, p, opts);
         integ.set_lazy_dense(true);
         // S and q_θ as wide as the integrator's (zero width in a primal run of a Dyn model).
+        let watch = ModeWatch::of_modes(model);
         let y = integ.system().zeros();
         let aug_tmp = integ.system().zeros();
         let sp = if opts.sensitivities { np.value() } else { 0 };
@@ -357,7 +370,8 @@ where
             sw_next: Switches::new(info.switches),
             sw_undecided: Switches::new(info.switches),
             scanner: Scanner::new(nev, info.switches),
-            watch: ModeWatch::of_modes(model),
+            resolution: resolution::Resolution::new(&watch),
+            watch,
             affine_watch: false,
             xs: vn(),
             xe: vn(),
@@ -461,6 +475,9 @@ where
                     if self.gx.dot(&self.work) + st > 0.0 {
                         self.sw_next.set(j, true);
                     }
+                    if self.gp.iter().any(|&v| v != 0.0) {
+                        self.report_kink_at_start(j, t);
+                    }
                 }
             }
         }
@@ -503,7 +520,12 @@ where
             let fired = if w < nev { self.fired[w] } else { None };
             self.scanner.restart_one(w, v, fired);
         }
-        self.fired.fill(None);
+        // Only the events applied at this instant (in `scanner.found`) have a firing value.
+        for c in &self.scanner.found {
+            if c.w < nev {
+                self.fired[c.w] = None;
+            }
+        }
         self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
@@ -526,7 +548,6 @@ where
     /// [`Driver::fire_at`]), restart, until T or a stop at an accumulation.
     fn run(&mut self, sink: &mut impl EventSink) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
-        let info = model.info();
         model.initial_state(p, &mut self.y.x);
         self.nonfinite_x(0.0, &self.y.x.clone(), || "initial state".into())?;
         if self.sens {
@@ -537,7 +558,6 @@ where
         self.schedule
             .start(model, p, (self.t_end, self.opts.max_periodic_occurrences))?;
         self.restart(0.0)?;
-        let nev = info.events.len();
         loop {
             let t = self.integ.t();
             let t_next = self.schedule.next_in_mode(model, p, self.mode, t)?;
@@ -561,36 +581,21 @@ where
             if self.rec.is_some() || self.watch[self.mode].any {
                 self.integ.ensure_dense();
             }
-            let (t0, t1) = (self.integ.t_prev(), self.integ.t());
-            let sim_tol = self.simultaneity(t1);
-            let linear = self.affine_watch && self.integ.scheme() == Scheme::Exact;
-            let sw = &self.sw;
-            {
-                let integ = &self.integ;
-                let xs = &mut self.xs;
-                let xe = &mut self.xe;
-                let sample = |t: f64, is_end: bool, watched: &[usize], out: &mut [f64]| {
-                    let x = if is_end {
-                        &integ.y().x
-                    } else {
-                        integ.dense_x(t, xs);
-                        &*xs
-                    };
-                    for &w in watched {
-                        out[w] = Self::signed(model, p, nev, sw, w, t, x);
-                    }
-                };
-                let eval = |w: usize, t: f64| {
-                    integ.dense_x(t, xe);
-                    Self::signed(model, p, nev, sw, w, t, xe)
-                };
-                let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
-                if let Err((w, t)) = res {
-                    return Err(self.guard_nonfinite(w, t));
+            let (t_first, t_step) = (self.integ.t_prev(), self.integ.t());
+            // The step is scanned in pieces short enough for the watched functions (one piece
+            // unless a watched function varies faster than the states; see `resolution`).
+            let mut t0 = t_first;
+            loop {
+                let t1 = self.resolved_end(t0, t_step)?;
+                self.scan_piece(t0, t1, t_step)?;
+                if self.scanner.found.is_empty() && t1 < t_step {
+                    t0 = t1;
+                    continue;
                 }
+                break;
             }
             if self.scanner.found.is_empty() {
-                self.record_step(t0, t1);
+                self.record_step(t_first, t_step);
                 continue;
             }
             let te = self
@@ -599,7 +604,7 @@ where
                 .iter()
                 .map(|c| c.t)
                 .fold(f64::INFINITY, f64::min);
-            self.record_step(t0, te);
+            self.record_step(t_first, te);
             self.integ.truncate(te);
             self.y.copy_from(self.integ.y());
             if let Some(rec) = &mut self.rec {
@@ -609,6 +614,38 @@ where
                 return Ok(());
             }
         }
+    }
+
+    /// Scans [t0, t1] of the last step (which ends at `t_step`) for crossings into
+    /// `scanner.found`: the watched values at the piece's ends and samples from the step's
+    /// dense output (its exact end state at `t_step`).
+    #[inline]
+    fn scan_piece(&mut self, t0: f64, t1: f64, t_step: f64) -> Result<(), SolveError> {
+        let (model, p) = (self.model, self.p);
+        let nev = self.scanner.nevents;
+        let sim_tol = self.simultaneity(t1);
+        let linear = self.affine_watch && self.integ.scheme() == Scheme::Exact;
+        let sw = &self.sw;
+        let integ = &self.integ;
+        let xs = &mut self.xs;
+        let xe = &mut self.xe;
+        let sample = |t: f64, is_end: bool, watched: &[usize], out: &mut [f64]| {
+            let x = if is_end && t == t_step {
+                &integ.y().x
+            } else {
+                integ.dense_x(t, xs);
+                &*xs
+            };
+            for &w in watched {
+                out[w] = Self::signed(model, p, nev, sw, w, t, x);
+            }
+        };
+        let eval = |w: usize, t: f64| {
+            integ.dense_x(t, xe);
+            Self::signed(model, p, nev, sw, w, t, xe)
+        };
+        let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
+        res.map_err(|(w, t)| self.guard_nonfinite(w, t))
     }
 
     /// The window within which events at t count as simultaneous: relative to the time
@@ -627,11 +664,15 @@ where
         // A time event joins this instant only if it is due within the resolution of t (a
         // step to it would be too short to take); one a little later fires at its own time.
         let due = t + time_resolution(t);
+        let scanned = !self.scanner.found.is_empty();
         let schedule = &self.schedule;
         for &k in schedule.armed_in(self.mode) {
             if schedule.time(k) <= due {
                 self.scanner.found.push(Crossing { w: k, t });
             }
+        }
+        if !scanned && !self.scanner.found.is_empty() {
+            self.join_state_events_due(t);
         }
         if self.scanner.found.len() > 1 {
             self.scanner.found.sort_unstable_by_key(|c| c.w);
@@ -681,6 +722,35 @@ where
             self.integ.set_step_size(h_seed);
         }
         Ok(false)
+    }
+
+    /// At an instant of time events only (no crossing scanned), the armed state events whose
+    /// guards reach zero within the resolution of t join it, as a time event due that soon
+    /// does: a guard x ≥ c with x = t on a step that landed on a time event at t = c ends the
+    /// step at v = −1 ulp (the stepper's rounding), and would otherwise fire 2 ulp later as an
+    /// instant of its own, not reported as simultaneous and applied after the time event
+    /// whatever the declaration order. v and dv/dt are the guard's at the end of the last
+    /// step (`Track::start_val`, `Track::slope`).
+    fn join_state_events_due(&mut self, t: f64) {
+        self.scanner.join_events_due(t, time_resolution(t));
+    }
+
+    /// The `kink` diagnostic for switching function j, exactly zero at the start t and moving
+    /// with θ (∂σ_j/∂θ ≠ 0): a tie of `min`/`max`, `abs` at zero. C is not differentiable in
+    /// θ there: on one side of θ the kink is crossed after t (a jump of S), on the other
+    /// before the run; dC/dθ is the one-sided value of the bit σ̇ chose.
+    #[cold]
+    #[inline(never)]
+    fn report_kink_at_start(&mut self, j: usize, t: f64) {
+        self.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::Kink,
+            t,
+            message: format!(
+                "switching function {j} (a kink of abs/min/max/sign/if) is exactly zero at t = {t} and \
+                 moves with the params: C is not differentiable here, and the gradient is one of its \
+                 one-sided values"
+            ),
+        });
     }
 
     /// The `simultaneous_events` diagnostic for the user events among the crossings found

@@ -26,6 +26,8 @@ pub(super) struct Schedule {
     /// (mode, the earliest time of the events armed there), as last computed; cleared
     /// whenever a time changes.
     earliest: Option<(usize, f64)>,
+    /// Each event's trigger (a copy of `EventInfo::trigger`, read on every occurrence).
+    trigger: Vec<Trigger>,
 }
 
 impl Schedule {
@@ -51,6 +53,7 @@ impl Schedule {
             armed: (0..info.modes.len()).map(|m| timed(m, true)).collect(),
             unarmed: (0..info.modes.len()).map(|m| timed(m, false)).collect(),
             earliest: None,
+            trigger: info.events.iter().map(|ev| ev.trigger).collect(),
         }
     }
 
@@ -131,8 +134,7 @@ impl Schedule {
     where
         DefaultAllocator: ModelAlloc<M::N, M::P>,
     {
-        let ev = &model.info().events[k];
-        let exists = match ev.trigger {
+        let exists = match self.trigger[k] {
             Trigger::Guard => false,
             Trigger::At => j == 0,
             Trigger::Every => true,
@@ -145,7 +147,7 @@ impl Schedule {
         if tau.is_finite() {
             Ok(tau)
         } else {
-            Err(nonfinite_time(tau, j, &ev.name))
+            Err(nonfinite_time(tau, j, &model.info().events[k].name))
         }
     }
 
@@ -163,7 +165,7 @@ impl Schedule {
     {
         let j = self.next[k] + 1;
         self.next[k] = j;
-        if !model.info().events[k].is_time_event() {
+        if self.trigger[k] == Trigger::Guard {
             return Ok(());
         }
         self.earliest = None;

@@ -75,7 +75,7 @@ where
         let data: Vec<Value> = rows
             .iter()
             .map(|r| {
-                let mut v = vec![num(r.t), Value::from(mode_name(info, r.mode))];
+                let mut v = vec![num(r.t), Value::from(info.mode_name(r.mode))];
                 v.extend(r.x.iter().chain(&r.y).map(|&z| num(z)));
                 Value::Array(v)
             })
@@ -111,10 +111,6 @@ where
             Ok(csv(info, &rows))
         }
     }
-}
-
-fn mode_name(info: &mvad::ModelInfo, m: usize) -> String {
-    info.modes.get(m).cloned().unwrap_or_else(|| m.to_string())
 }
 
 fn write_file(path: &std::path::Path, text: &str) -> Result<(), CliError> {
@@ -227,7 +223,7 @@ fn csv(info: &mvad::ModelInfo, rows: &[Row]) -> String {
     }
     s.push('\n');
     for r in rows {
-        s.push_str(&format!("{:?},{}", r.t, mode_name(info, r.mode)));
+        s.push_str(&format!("{:?},{}", r.t, info.mode_name(r.mode)));
         for v in r.x.iter().chain(&r.y) {
             s.push_str(&format!(",{v:?}"));
         }
@@ -260,12 +256,12 @@ where
                     .unwrap_or_default(),
                 g(e.t, 12),
                 if e.mode_before == e.mode_after {
-                    mode_name(info, e.mode_before)
+                    info.mode_name(e.mode_before)
                 } else {
                     format!(
                         "{} -> {}",
-                        mode_name(info, e.mode_before),
-                        mode_name(info, e.mode_after)
+                        info.mode_name(e.mode_before),
+                        info.mode_name(e.mode_after)
                     )
                 },
             ];

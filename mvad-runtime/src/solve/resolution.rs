@@ -1,0 +1,198 @@
+//! Steps short enough for the watched functions, not only for the states.
+//!
+//! The error control sizes a step by the states' local error; the scanner then samples each
+//! watched function at a few points of the step. A guard that varies much faster than the
+//! states — an explicit carrier sin(ωt) of a PWM, sin(ωx) of a shaft angle, any guard on a
+//! segment of a constant flow, where one exact step spans the whole segment — can cross zero
+//! and come back between two samples, and aliasing makes the samples look smooth. Such a
+//! step is cut until every watched function that is not an affine guard (an affine guard
+//! moves with the states, whose error is controlled; near-tangential dips are the scanner's
+//! job) is resolved on it: with v and v̇ = d·(∇g·f + ∂g/∂t) at the step's ends, the cubic
+//! Hermite interpolant H must reproduce v at the interior quarter points,
+//!
+//! ```text
+//!   max_i |v(t_i) − H(t_i)| ≤ RESOLUTION · (max v − min v) + 64 ε max |v|
+//! ```
+//!
+//! (max and min over the ends and the interior points). For a smooth v the defect is
+//! O(h⁴ v⁗), far below the range of its values over the step; for a v that oscillates within
+//! the step the end slopes, which are of the order of h⁻¹ times the range for each oscillation,
+//! drive H far outside the range of the samples (aliasing can make the samples look smooth,
+//! the slopes cannot). A piece of the step that fails is cut to a quarter until it passes or
+//! reaches the resolution of t, and the step is scanned piece by piece on its dense output
+//! (nothing is integrated again, and the state is cut from the dense output only at a
+//! crossing, as always); each piece starts at twice the length of the last one that passed.
+
+use super::{time_resolution, Driver};
+use crate::error::SolveError;
+use crate::model::{At, HybridModel, ModelAlloc, Point};
+use nalgebra::DefaultAllocator;
+
+/// The largest Hermite defect, relative to the range of the values over the step, a resolved
+/// watched function may show.
+const RESOLUTION: f64 = 0.1;
+
+/// Cuts a piece may take before it is scanned as it is (each cuts it to a quarter).
+const MAX_CUTS: usize = 40;
+
+/// Interior points of the check (at the quarters of the step).
+const POINTS: usize = 3;
+
+/// Per-run state of the check: the length of the next piece to try and scratch per watched
+/// function.
+#[derive(Clone, Debug)]
+pub(super) struct Resolution {
+    /// Twice the last piece that passed (∞ until one was cut).
+    next: f64,
+    v0: Vec<f64>,
+    s0: Vec<f64>,
+}
+
+impl Resolution {
+    /// Scratch for the longest list of functions to resolve in any mode of `watch` (nothing
+    /// allocated when there is none: every watched function an affine guard).
+    pub(super) fn new(watch: &[super::ModeWatch]) -> Self {
+        let n = watch.iter().map(|m| m.unresolved.len()).max().unwrap_or(0);
+        Resolution {
+            next: f64::INFINITY,
+            v0: vec![0.0; n],
+            s0: vec![0.0; n],
+        }
+    }
+}
+
+/// The cubic Hermite interpolant with values v₀, v₁ and slopes s₀, s₁ on a step of length h,
+/// at the fraction θ of the step.
+fn hermite(v0: f64, s0: f64, v1: f64, s1: f64, h: f64, theta: f64) -> f64 {
+    let (t2, t3) = (theta * theta, theta * theta * theta);
+    (2.0 * t3 - 3.0 * t2 + 1.0) * v0
+        + (t3 - 2.0 * t2 + theta) * h * s0
+        + (3.0 * t2 - 2.0 * t3) * v1
+        + (t3 - t2) * h * s1
+}
+
+impl<M: HybridModel> Driver<'_, M>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// The end t₁ ≤ `t_step` of the next piece, from t₀, of the step that ends at `t_step`
+    /// on which every watched function of the current mode that is not an affine guard is
+    /// resolved (see the module doc).
+    #[inline]
+    pub(super) fn resolved_end(&mut self, t0: f64, t_step: f64) -> Result<f64, SolveError> {
+        if self.watch[self.mode].unresolved.is_empty() {
+            return Ok(t_step);
+        }
+        self.resolved_piece(t0, t_step)
+    }
+
+    /// [`Driver::resolved_end`] where some watched function is not an affine guard.
+    fn resolved_piece(&mut self, t0: f64, t_step: f64) -> Result<f64, SolveError> {
+        let mode = self.mode;
+        let n = self.watch[mode].unresolved.len();
+        if t0 == self.integ.t_prev() {
+            self.xs.copy_from(&self.integ.y_prev().x);
+        } else {
+            self.integ.dense_x(t0, &mut self.xs);
+        }
+        for i in 0..n {
+            let w = self.watch[mode].unresolved[i];
+            let (v, s) = self.value_and_rate(w, t0, i == 0)?;
+            self.resolution.v0[i] = v;
+            self.resolution.s0[i] = s;
+        }
+        let mut t1 = t_step.min(t0 + self.resolution.next);
+        for _ in 0..MAX_CUTS {
+            if self.resolved_on(t0, t1, t_step)? {
+                break;
+            }
+            let cut = t0 + 0.25 * (t1 - t0);
+            if cut - t0 <= 4.0 * time_resolution(t0) {
+                break;
+            }
+            t1 = cut;
+        }
+        self.resolution.next = 2.0 * (t1 - t0);
+        Ok(t1)
+    }
+
+    /// Whether every unresolved-class watched function passes the Hermite check on [t0, t1]
+    /// (its values and rates at t0 in the scratch).
+    fn resolved_on(&mut self, t0: f64, t1: f64, t_step: f64) -> Result<bool, SolveError> {
+        let mode = self.mode;
+        let h = t1 - t0;
+        if t1 == t_step {
+            self.xs.copy_from(&self.integ.y().x);
+        } else {
+            self.integ.dense_x(t1, &mut self.xs);
+        }
+        let n = self.watch[mode].unresolved.len();
+        for i in 0..n {
+            let w = self.watch[mode].unresolved[i];
+            // The rates at t1 need f there once; `value_and_rate` evaluates it on the first.
+            let (v1, s1) = self.value_and_rate(w, t1, i == 0)?;
+            let (v0, s0) = (self.resolution.v0[i], self.resolution.s0[i]);
+            let mut defect: f64 = 0.0;
+            let (mut lo, mut hi) = (v0.min(v1), v0.max(v1));
+            for q in 1..=POINTS {
+                let theta = q as f64 / (POINTS + 1) as f64;
+                let t = t0 + theta * h;
+                self.integ.dense_x(t, &mut self.xe);
+                let nev = self.scanner.nevents;
+                let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.xe);
+                defect = defect.max((v - hermite(v0, s0, v1, s1, h, theta)).abs());
+                (lo, hi) = (lo.min(v), hi.max(v));
+            }
+            // The rounding of v is no defect. NaN is the scanner's to report.
+            let floor = 64.0 * f64::EPSILON * lo.abs().max(hi.abs());
+            if defect > RESOLUTION * (hi - lo) + floor {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
+    /// The signed watched value v of function w at (t, `self.xs`) and its rate
+    /// v̇ = ±(∇g·f + ∂g/∂t), with f = f(t, `self.xs`) evaluated into `self.work` when `eval_f`
+    /// (else the f already there).
+    fn value_and_rate(&mut self, w: usize, t: f64, eval_f: bool) -> Result<(f64, f64), SolveError> {
+        let (model, p) = (self.model, self.p);
+        let nev = self.scanner.nevents;
+        if eval_f {
+            model.rhs(
+                Point::new(self.mode, &self.sw, t, &self.xs, p),
+                &mut self.work,
+            );
+        }
+        let v = Self::signed(model, p, nev, &self.sw, w, t, &self.xs);
+        let rate = if w < nev {
+            let gt = model.guard_grad(w, At::new(t, &self.xs, p), &mut self.gx, &mut self.gp);
+            model.info().events[w].direction.sign() * (self.gx.dot(&self.work) + gt)
+        } else {
+            let j = w - nev;
+            let st = model.switch_grad(j, At::new(t, &self.xs, p), &mut self.gx, &mut self.gp);
+            let s = self.gx.dot(&self.work) + st;
+            if self.sw.get(j) {
+                -s
+            } else {
+                s
+            }
+        };
+        Ok((v, rate))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hermite_reproduces_cubics() {
+        // v(t) = 1 − 2t + 3t² − t³ on [0, 2]: v₀ = 1, v₁ = 1, v̇₀ = −2, v̇₁ = −2 + 12 − 12 = −2.
+        let v = |t: f64| 1.0 - 2.0 * t + 3.0 * t * t - t * t * t;
+        for theta in [0.25, 0.5, 0.75] {
+            let h = hermite(1.0, -2.0, v(2.0), -2.0, 2.0, theta);
+            assert!((h - v(2.0 * theta)).abs() < 1e-14);
+        }
+    }
+}
