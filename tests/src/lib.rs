@@ -8,6 +8,23 @@ pub const SINK: &str = include_str!("../tests/sink.hyb");
 
 mvad::hybrid!(include "tests/sink.hyb");
 
+/// Solves `m` at the params `p` (a slice, in declaration order).
+pub fn solve_at<M: mvad::HybridModel>(
+    m: &M,
+    p: &[f64],
+    opts: &mvad::Options,
+) -> Result<mvad::Solution, mvad::runtime::error::SolveError>
+where
+    nalgebra::DefaultAllocator: mvad::ModelAlloc<M::N, M::P>,
+{
+    let pv = nalgebra::OVector::<f64, M::P>::from_iterator_generic(
+        m.nparams(),
+        nalgebra::Const::<1>,
+        p.iter().copied(),
+    );
+    mvad::solve(m, &pv, opts)
+}
+
 /// The `.hyb` files of `models/`, as (file name, source), sorted by name.
 pub fn model_files() -> Vec<(String, String)> {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../models");

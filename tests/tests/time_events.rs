@@ -10,8 +10,8 @@ use mvad::runtime::solution::{GradientMode, Options, Solution};
 use mvad::runtime::solve::{solve, solve_with};
 use mvad::table::Table;
 use mvad::{fd_gradient, HybridModel, ModelAlloc, Trigger};
-use mvad_tests::assert_near;
-use nalgebra::{DefaultAllocator, OVector};
+use mvad_tests::{assert_near, solve_at};
+use nalgebra::DefaultAllocator;
 
 mvad::hybrid!(include "tests/dose.hyb");
 mvad::hybrid!(include "tests/sampled.hyb");
@@ -35,12 +35,7 @@ fn run<M: HybridModel>(m: &M, p: &[f64], opts: &Options) -> Solution
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let pv = OVector::<f64, M::P>::from_iterator_generic(
-        m.nparams(),
-        nalgebra::Const::<1>,
-        p.iter().copied(),
-    );
-    solve(m, &pv, opts).expect("runs")
+    solve_at(m, p, opts).expect("runs")
 }
 
 /// C = A (1 − e^{−k(T − t_d)})/k with t_d = 2·tdose, and its gradient in (k, A, tdose).

@@ -22,41 +22,33 @@ where
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
         let mut fw = FinalWork::new(model);
         self.integ.close_step();
-        let mut x_final = self.integ.y().x.clone();
-        let mut s_final = self.integ.y().s.clone();
-        let mut grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
-        let mut cost;
-        let f_end;
-        if let Some((t_star_geo, ratio)) = self.zeno_stop {
-            // The segment up to the last event was closed when it fired.
-            let acc = self.extrapolate_accumulation(
-                t_star_geo,
-                &mut fw,
-                &mut x_final,
-                &mut s_final,
-                &mut grad,
-            );
-            cost = acc.cost;
-            self.report_accumulation(acc.t_star, ratio);
-            if let Some(rec) = &mut self.rec {
-                rec.hold(t_end, &x_final, &s_final, self.mode, &self.sw);
-            }
-            // The state is at rest at T.
-            f_end = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
-        } else {
-            let y = self.integ.y();
+        // After an accumulation the run's state is the held limit in `self.y` (see
+        // `after_accumulation`), whose flow is zero; otherwise the integrator's at T.
+        let held = self.zeno.holding();
+        if !held {
+            self.y.copy_from(self.integ.y());
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(t_end, self.mode, &self.sw);
-                rec.finish(t_end, &y.x, self.mode, &self.sw);
+                rec.finish(t_end, &self.y.x, self.mode, &self.sw);
             }
-            cost = y.q + self.c_ev.value();
-            if sens {
-                grad.copy_from(&y.qp);
-                grad += &self.g_ev;
-            }
-            model.rhs(Point::new(self.mode, &self.sw, t_end, &y.x, p), &mut fw.f);
-            f_end = fw.f.clone();
         }
+        let x_final = self.y.x.clone();
+        let s_final = self.y.s.clone();
+        let mut cost = self.y.q + self.c_ev.value();
+        let mut grad = OVector::<f64, M::P>::zeros_generic(model.nparams(), Const::<1>);
+        if sens {
+            grad.copy_from(&self.y.qp);
+            grad += &self.g_ev;
+        }
+        if held {
+            fw.f.fill(0.0);
+        } else {
+            model.rhs(
+                Point::new(self.mode, &self.sw, t_end, &x_final, p),
+                &mut fw.f,
+            );
+        }
+        let f_end = fw.f.clone();
         cost += final_terms(
             model,
             p,
@@ -84,6 +76,9 @@ where
             Some(rec) => rec.into_parts(),
             None => (None, None),
         };
+        // A run that passed through an accumulation is not swept back (its tape holds a jump
+        // to the limit that no event made).
+        let tape = tape.filter(|_| !self.zeno.passed());
         let sol = Solution {
             t_end,
             params: p.iter().copied().collect(),
@@ -103,21 +98,47 @@ where
         Ok((sol, tape))
     }
 
-    /// The `zeno` diagnostic of a run that ended at an accumulation point t*.
-    fn report_accumulation(&mut self, t_star: f64, ratio: f64) {
+    /// The `zeno` diagnostic of an accumulation of event k's occurrences at t* (`stuck`: at
+    /// a single instant, the state stuck on the guard), held at its limit on [t*, T] or, when
+    /// `released_at` is τ, until a time event at τ moved it off (the run went on from there);
+    /// `frozen` names the states held although the accumulation does not constrain them.
+    pub(super) fn report_accumulation(
+        &mut self,
+        k: usize,
+        stuck: bool,
+        t_star: f64,
+        ratio: f64,
+        released_at: Option<f64>,
+        frozen: &[String],
+    ) {
         let n = self.nevents;
-        let message = if let Some(k) = self.stuck {
+        let name = self.event_name(k);
+        let held = match released_at {
+            None => "[t*, T]".to_string(),
+            Some(tau) => format!(
+                "[t*, {tau}], where a time event moved it off the guard and the run went on"
+            ),
+        };
+        let message = if stuck {
             format!(
-                "after event `{}` at t = {t_star} the flow carries the state straight back through \
-                 its guard: events accumulate there; the run ended at that time and the state \
-                 is held at rest on [t, T]",
-                self.event_name(k)
+                "after event `{name}` at t* = {t_star} the flow carries the state straight back \
+                 through its guard: events accumulate there; the state is held at rest on {held}"
             )
         } else {
             format!(
-                "events accumulate (dwell-time ratio {ratio:.4} over the last {ZENO_RATIOS} dwells): \
-                 the run ended at the estimated accumulation time t* = {t_star} after {n} events; \
-                 the tail was extrapolated (Aitken) and the state held at its limit on [t*, T]"
+                "events of `{name}` accumulate (dwell-time ratio {ratio:.4} over the last \
+                 {ZENO_RATIOS} dwells) at the estimated accumulation time t* = {t_star} after {n} \
+                 events; the tail was extrapolated (Aitken) and the state held at its limit on {held}"
+            )
+        };
+        let message = if frozen.is_empty() {
+            message
+        } else {
+            format!(
+                "{message}; states {} take no part in the accumulation and have a non-zero flow \
+                 at t*, yet were held too: their values after t*, and what reads them, are \
+                 those of a frozen state, not of their flow",
+                frozen.join(", ")
             )
         };
         self.diagnostics.push(Diagnostic {

@@ -67,7 +67,7 @@ where
         let zeno_stop = if timed {
             None
         } else {
-            self.zeno_verdict(t, l_plus, approach.grazing, approach.cosine)
+            self.zeno_verdict(k, t, l_plus, approach.grazing, approach.cosine)
         };
         self.emit_event(k, t, mode_before, approach, sink);
         if timed {
@@ -182,6 +182,11 @@ where
     /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite.
     fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
         let info = self.model.info();
+        if self.zeno.holding() {
+            // Held at the limit of an accumulation: the state does not move.
+            self.f_minus.fill(0.0);
+            return Ok(());
+        }
         self.model.rhs(
             Point::new(self.mode, &self.sw, t, &self.y.x, self.p),
             &mut self.f_minus,

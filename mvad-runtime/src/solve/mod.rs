@@ -659,7 +659,7 @@ where
     /// `scanner.found` and the time events armed in the current mode that are due by
     /// t + [`time_resolution`]; user events in declaration order, switch flips only when
     /// no user event fires. Then checks the event budget and restarts. Returns true when the
-    /// run must stop (an accumulation).
+    /// run has ended (held at the limit of an accumulation up to T).
     fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<bool, SolveError> {
         // A time event joins this instant only if it is due within the resolution of t (a
         // step to it would be too short to take); one a little later fires at its own time.
@@ -709,7 +709,8 @@ where
             });
         }
         if stop {
-            return Ok(true);
+            // Held at the accumulation's limit until T, or until a time event resumes the run.
+            return self.after_accumulation(sink);
         }
         // Seed the first step after the jump with the step size in use before it (the
         // error control still shrinks a seed that is too long): Hairer's start-up
