@@ -216,7 +216,7 @@ impl Schedule {
     /// The earliest next time of the time events armed in `mode` (∞ if none), after skipping
     /// the occurrences before `t` of every time event that is not armed there. O(1) when
     /// every time event is armed in `mode` and no time has changed since the last call.
-    #[inline]
+    #[inline(always)]
     pub(super) fn next_in_mode<M: HybridModel>(
         &mut self,
         model: &M,
