@@ -25,6 +25,21 @@ where
     mvad::solve(m, &pv, opts)
 }
 
+/// Solves `m` at its params' default values.
+pub fn solve_at_defaults<M: mvad::HybridModel>(m: &M, opts: &mvad::Options) -> mvad::Solution
+where
+    nalgebra::DefaultAllocator: mvad::ModelAlloc<M::N, M::P>,
+{
+    solve_at(m, &m.info().param_defaults, opts).expect("runs")
+}
+
+/// The model of `tests/tests/FILE` through the loaded door.
+pub fn loaded_test_model(file: &str) -> mvad::interp::InterpretedModel {
+    let src = std::fs::read_to_string(format!("{}/tests/{file}", env!("CARGO_MANIFEST_DIR")))
+        .expect(file);
+    mvad::interp::InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{file}: {e:?}"))
+}
+
 /// The `.hyb` files of `models/`, as (file name, source), sorted by name.
 pub fn model_files() -> Vec<(String, String)> {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../models");

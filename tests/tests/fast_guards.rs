@@ -12,10 +12,9 @@
 
 use mvad::interp::InterpretedModel;
 use mvad::runtime::solution::{DiagnosticKind, GradientMode, Options, Solution};
-use mvad::runtime::solve::solve;
 use mvad::HybridModel;
 use mvad::ModelAlloc;
-use nalgebra::{DefaultAllocator, OVector};
+use nalgebra::DefaultAllocator;
 use std::f64::consts::PI;
 
 mvad::hybrid!(include "tests/pwm.hyb");
@@ -25,25 +24,18 @@ mvad::hybrid!(include "tests/square_wave.hyb");
 mvad::hybrid!(include "tests/time_and_state.hyb");
 
 fn loaded(file: &str) -> InterpretedModel {
-    let src = std::fs::read_to_string(format!("{}/tests/{file}", env!("CARGO_MANIFEST_DIR")))
-        .expect(file);
-    InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{file}: {e:?}"))
+    mvad_tests::loaded_test_model(file)
 }
 
 fn run<M: HybridModel>(m: &M, mode: GradientMode) -> Solution
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let p = OVector::<f64, M::P>::from_iterator_generic(
-        m.nparams(),
-        nalgebra::Const::<1>,
-        m.info().param_defaults.iter().copied(),
-    );
     let opts = Options {
         gradient_mode: mode,
         ..Options::default()
     };
-    solve(m, &p, &opts).expect("runs")
+    mvad_tests::solve_at_defaults(m, &opts)
 }
 
 /// Runs `check` on the solution of the model through both doors in both modes.

@@ -17,29 +17,21 @@
 
 use mvad::interp::InterpretedModel;
 use mvad::runtime::solution::{DiagnosticKind, GradientMode, Options, Solution};
-use mvad::runtime::solve::solve;
 use mvad::{HybridModel, ModelAlloc};
-use nalgebra::{DefaultAllocator, OVector};
+use nalgebra::DefaultAllocator;
 
 mvad::hybrid!(include "tests/rounding_sampled.hyb");
 mvad::hybrid!(include "tests/rounding_ball.hyb");
 
 fn loaded(file: &str) -> InterpretedModel {
-    let src = std::fs::read_to_string(format!("{}/tests/{file}", env!("CARGO_MANIFEST_DIR")))
-        .expect(file);
-    InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{file}: {e:?}"))
+    mvad_tests::loaded_test_model(file)
 }
 
 fn run<M: HybridModel>(m: &M, opts: &Options) -> Solution
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let p = OVector::<f64, M::P>::from_iterator_generic(
-        m.nparams(),
-        nalgebra::Const::<1>,
-        m.info().param_defaults.iter().copied(),
-    );
-    solve(m, &p, opts).expect("runs")
+    mvad_tests::solve_at_defaults(m, opts)
 }
 
 fn opts(rtol: f64, t_end: f64, mode: GradientMode) -> Options {

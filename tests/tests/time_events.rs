@@ -26,9 +26,7 @@ fn tight() -> Options {
 }
 
 fn loaded(file: &str) -> InterpretedModel {
-    let src = std::fs::read_to_string(format!("{}/tests/{file}", env!("CARGO_MANIFEST_DIR")))
-        .expect(file);
-    InterpretedModel::from_source(&src).unwrap_or_else(|e| panic!("{file}: {e:?}"))
+    mvad_tests::loaded_test_model(file)
 }
 
 fn run<M: HybridModel>(m: &M, p: &[f64], opts: &Options) -> Solution
