@@ -521,11 +521,14 @@ where
             self.scanner.restart_one(w, v, fired);
         }
         // Only the events applied at this instant (in `scanner.found`) have a firing value.
+        // (A Zeno hold relies on this: the accumulating event's firing value outlives the
+        // hold, keeping it disarmed when a time event restarts the held state on its guard.)
         for c in &self.scanner.found {
             if c.w < nev {
                 self.fired[c.w] = None;
             }
         }
+        self.resolution.forget();
         self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
@@ -586,7 +589,7 @@ where
             // unless a watched function varies faster than the states; see `resolution`).
             let mut t0 = t_first;
             loop {
-                let t1 = self.resolved_end(t0, t_step)?;
+                let t1 = self.resolved_end(t0, t_step);
                 self.scan_piece(t0, t1, t_step)?;
                 if self.scanner.found.is_empty() && t1 < t_step {
                     t0 = t1;

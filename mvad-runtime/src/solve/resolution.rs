@@ -24,7 +24,6 @@
 //! crossing, as always); each piece starts at twice the length of the last one that passed.
 
 use super::{time_resolution, Driver};
-use crate::error::SolveError;
 use crate::model::{At, HybridModel, ModelAlloc, Point};
 use nalgebra::DefaultAllocator;
 
@@ -44,8 +43,15 @@ const POINTS: usize = 3;
 pub(super) struct Resolution {
     /// Twice the last piece that passed (∞ until one was cut).
     next: f64,
+    /// v and v̇ of each function at the start of the piece being checked.
     v0: Vec<f64>,
     s0: Vec<f64>,
+    /// v and v̇ at the end of the last piece checked, which the next piece starts from.
+    v1: Vec<f64>,
+    s1: Vec<f64>,
+    /// The time of `v1`, `s1` when they hold for every function and the state has not jumped
+    /// since (NaN otherwise: see [`Resolution::forget`]).
+    end: f64,
 }
 
 impl Resolution {
@@ -57,7 +63,15 @@ impl Resolution {
             next: f64::INFINITY,
             v0: vec![0.0; n],
             s0: vec![0.0; n],
+            v1: vec![0.0; n],
+            s1: vec![0.0; n],
+            end: f64::NAN,
         }
+    }
+
+    /// Forgets the values at the end of the last piece (the state, mode or bits changed).
+    pub(super) fn forget(&mut self) {
+        self.end = f64::NAN;
     }
 }
 
@@ -79,31 +93,41 @@ where
     /// on which every watched function of the current mode that is not an affine guard is
     /// resolved (see the module doc).
     #[inline]
-    pub(super) fn resolved_end(&mut self, t0: f64, t_step: f64) -> Result<f64, SolveError> {
+    pub(super) fn resolved_end(&mut self, t0: f64, t_step: f64) -> f64 {
         if self.watch[self.mode].unresolved.is_empty() {
-            return Ok(t_step);
+            return t_step;
         }
         self.resolved_piece(t0, t_step)
     }
 
     /// [`Driver::resolved_end`] where some watched function is not an affine guard.
-    fn resolved_piece(&mut self, t0: f64, t_step: f64) -> Result<f64, SolveError> {
+    fn resolved_piece(&mut self, t0: f64, t_step: f64) -> f64 {
         let mode = self.mode;
         let n = self.watch[mode].unresolved.len();
-        if t0 == self.integ.t_prev() {
-            self.xs.copy_from(&self.integ.y_prev().x);
+        let r = &mut self.resolution;
+        if t0 == r.end {
+            // The last piece (of this step or the last) ended here and passed: its end values
+            // are this piece's start values.
+            std::mem::swap(&mut r.v0, &mut r.v1);
+            std::mem::swap(&mut r.s0, &mut r.s1);
         } else {
-            self.integ.dense_x(t0, &mut self.xs);
-        }
-        for i in 0..n {
-            let w = self.watch[mode].unresolved[i];
-            let (v, s) = self.value_and_rate(w, t0, i == 0)?;
-            self.resolution.v0[i] = v;
-            self.resolution.s0[i] = s;
+            if t0 == self.integ.t_prev() {
+                self.xs.copy_from(&self.integ.y_prev().x);
+            } else {
+                self.integ.dense_x(t0, &mut self.xs);
+            }
+            for i in 0..n {
+                let w = self.watch[mode].unresolved[i];
+                let (v, s) = self.value_and_rate(w, t0, i == 0);
+                self.resolution.v0[i] = v;
+                self.resolution.s0[i] = s;
+            }
         }
         let mut t1 = t_step.min(t0 + self.resolution.next);
+        self.resolution.end = f64::NAN;
         for _ in 0..MAX_CUTS {
-            if self.resolved_on(t0, t1, t_step)? {
+            if self.resolved_on(t0, t1, t_step) {
+                self.resolution.end = t1;
                 break;
             }
             let cut = t0 + 0.25 * (t1 - t0);
@@ -113,12 +137,12 @@ where
             t1 = cut;
         }
         self.resolution.next = 2.0 * (t1 - t0);
-        Ok(t1)
+        t1
     }
 
     /// Whether every unresolved-class watched function passes the Hermite check on [t0, t1]
-    /// (its values and rates at t0 in the scratch).
-    fn resolved_on(&mut self, t0: f64, t1: f64, t_step: f64) -> Result<bool, SolveError> {
+    /// (its values and rates at t0 in `v0`, `s0`; those at t1 are left in `v1`, `s1`).
+    fn resolved_on(&mut self, t0: f64, t1: f64, t_step: f64) -> bool {
         let mode = self.mode;
         let h = t1 - t0;
         if t1 == t_step {
@@ -130,7 +154,8 @@ where
         for i in 0..n {
             let w = self.watch[mode].unresolved[i];
             // The rates at t1 need f there once; `value_and_rate` evaluates it on the first.
-            let (v1, s1) = self.value_and_rate(w, t1, i == 0)?;
+            let (v1, s1) = self.value_and_rate(w, t1, i == 0);
+            (self.resolution.v1[i], self.resolution.s1[i]) = (v1, s1);
             let (v0, s0) = (self.resolution.v0[i], self.resolution.s0[i]);
             let mut defect: f64 = 0.0;
             let (mut lo, mut hi) = (v0.min(v1), v0.max(v1));
@@ -146,16 +171,16 @@ where
             // The rounding of v is no defect. NaN is the scanner's to report.
             let floor = 64.0 * f64::EPSILON * lo.abs().max(hi.abs());
             if defect > RESOLUTION * (hi - lo) + floor {
-                return Ok(false);
+                return false;
             }
         }
-        Ok(true)
+        true
     }
 
     /// The signed watched value v of function w at (t, `self.xs`) and its rate
     /// v̇ = ±(∇g·f + ∂g/∂t), with f = f(t, `self.xs`) evaluated into `self.work` when `eval_f`
     /// (else the f already there).
-    fn value_and_rate(&mut self, w: usize, t: f64, eval_f: bool) -> Result<(f64, f64), SolveError> {
+    fn value_and_rate(&mut self, w: usize, t: f64, eval_f: bool) -> (f64, f64) {
         let (model, p) = (self.model, self.p);
         let nev = self.scanner.nevents;
         if eval_f {
@@ -178,7 +203,7 @@ where
                 s
             }
         };
-        Ok((v, rate))
+        (v, rate)
     }
 }
 
