@@ -84,8 +84,13 @@ where
             && info.events[k].armed_in(mode_after)
             && t < self.t_end
             && self.stuck_after_reset(k, t, mode_after, approach.rate);
-        if approach.grazing && zeno_stop.is_none() && !stuck {
-            self.report_grazing(k, t, approach);
+        if zeno_stop.is_none() && !stuck {
+            if approach.grazing {
+                self.report_grazing(k, t, approach);
+            } else if let Some((vm, dg)) = (!timed).then(|| self.undecided_crossing(k, t)).flatten()
+            {
+                self.report_undecided_crossing(k, t, vm, dg);
+            }
         }
         if let Some(rec) = &mut self.rec {
             let modes = (mode_before, mode_after);

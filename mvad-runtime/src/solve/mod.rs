@@ -21,7 +21,8 @@
 //!
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
-//! `zeno` accumulations; `record` the trajectory record; `finish` the end of the run.
+//! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
+//! `record` the trajectory record; `finish` the end of the run.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
 mod conditioning;
@@ -31,6 +32,7 @@ mod qp;
 mod record;
 mod resolution;
 mod schedule;
+mod undecided;
 mod zeno;
 
 pub(crate) use conditioning::judge;
@@ -648,7 +650,11 @@ where
             Self::signed(model, p, nev, sw, w, t, xe)
         };
         let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
-        res.map_err(|(w, t)| self.guard_nonfinite(w, t))
+        res.map_err(|(w, t)| self.guard_nonfinite(w, t))?;
+        if self.scanner.missed() {
+            self.report_near_misses(t1);
+        }
+        Ok(())
     }
 
     /// The window within which events at t count as simultaneous: relative to the time
