@@ -236,9 +236,9 @@ pub struct Scanner {
     vals: Vec<[f64; NSAMP]>,
     /// One sample of every function, as written by the caller.
     tmp: Vec<f64>,
-    /// Some watched event's dip search found a maximum below zero on the current step (see
+    /// Some watched event's dip search evaluated a maximum on the current step (see
     /// [`Scanner::peak`]).
-    missed: bool,
+    peaked: bool,
 }
 
 impl Scanner {
@@ -252,7 +252,7 @@ impl Scanner {
             found: Vec::with_capacity(nw),
             vals: vec![[0.0; NSAMP]; nw],
             tmp: vec![0.0; nw],
-            missed: false,
+            peaked: false,
         }
     }
 
@@ -284,10 +284,10 @@ impl Scanner {
         self.tracks[w].peak
     }
 
-    /// Whether the last scan's dip search found an event's maximum below zero (see
+    /// Whether the last scan's dip search evaluated a maximum of an event's guard (see
     /// [`Scanner::peak`]).
-    pub fn missed(&self) -> bool {
-        self.missed
+    pub fn peaked(&self) -> bool {
+        self.peaked
     }
 
     /// Whether function `w` triggers on v > 0 (switches) rather than v ≥ 0 (events).
@@ -386,7 +386,7 @@ impl Scanner {
         E: FnMut(usize, f64) -> f64,
     {
         self.found.clear();
-        self.missed = false;
+        self.peaked = false;
         if self.watched.is_empty() {
             return Ok(());
         }
@@ -558,7 +558,7 @@ impl Scanner {
             if bracket.is_none() {
                 if let Some(i0) = armed_from {
                     (bracket, peak) = dip(&v, times, i0, rising, strict, |t| eval(w, t));
-                    self.missed |= w < self.nevents && bracket.is_none() && peak.is_some();
+                    self.peaked |= w < self.nevents && peak.is_some();
                 } else if fresh {
                     // The event fired at t₀ and no sample went below its re-arming level:
                     // the whole excursion to the negative side and back (a short hop of a

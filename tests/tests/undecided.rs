@@ -126,3 +126,30 @@ fn a_crossing_by_less_than_the_tolerance_grazes_in_every_unit_of_time() {
         }
     }
 }
+
+/// A clock z = t passing through a window (z − w)² ≤ 1 far out (w = 1.5e8, where rtol·z = 1.5
+/// exceeds the window's half-width): at the guard's maximum ∂g/∂z = 0, so an error of z only
+/// shifts the time and moves the maximum by nothing; the crossing is decided (no `grazing`,
+/// which δg taken at the crossing, 2·1.5, once gave), and C = (1 − e^{−t_e}) + (1 − e^{−(T − t_e)}) = 2.
+#[test]
+fn a_clock_through_a_window_is_decided_however_large_the_clock() {
+    let src = "model WindowClock {
+        param w = 1.5e8;  param k = 1;
+        state x = 1;  state z = 0;
+        flow { der(x) = -k * x; der(z) = 1; }
+        event enter when (z - w)^2 <= 1 { x = x + 1; }
+        cost = integral(x);
+        horizon 3e8;
+    }";
+    let m = InterpretedModel::from_source(src).expect("valid");
+    for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+        let opts = Options {
+            gradient_mode: mode,
+            ..Options::default()
+        };
+        let sol = mvad_tests::solve_at_defaults(&m, &opts);
+        assert_eq!(sol.stats.events, 1, "{mode:?}");
+        assert!(grazing(&sol).is_empty(), "{mode:?}: {:?}", sol.diagnostics);
+        mvad_tests::assert_near(sol.cost, 2.0, 1e-8, format!("{mode:?}"));
+    }
+}

@@ -84,12 +84,12 @@ where
             && info.events[k].armed_in(mode_after)
             && t < self.t_end
             && self.stuck_after_reset(k, t, mode_after, approach.rate);
+        let undecided = self.take_undecided(k);
         if zeno_stop.is_none() && !stuck {
             if approach.grazing {
                 self.report_grazing(k, t, approach);
-            } else if let Some((vm, dg)) = (!timed).then(|| self.undecided_crossing(k, t)).flatten()
-            {
-                self.report_undecided_crossing(k, t, vm, dg);
+            } else if let Some(d) = undecided {
+                self.diagnostics.push(d);
             }
         }
         if let Some(rec) = &mut self.rec {

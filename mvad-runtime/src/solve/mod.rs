@@ -313,6 +313,10 @@ where
     /// `max_events`: their number is the model's, T/period or a table's rows.
     scheduled_events: usize,
     diagnostics: Vec<Diagnostic>,
+    /// The `grazing` diagnostics of crossings found at a turning point within the guard's
+    /// uncertainty on the step just scanned, by event (see `undecided`): reported when the
+    /// event is applied, unless its crossing cosine already grazes.
+    undecided: Vec<(usize, Diagnostic)>,
     switch_crossings: usize,
     zeno: Zeno<M>,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
@@ -400,6 +404,7 @@ where
             nevents: 0,
             scheduled_events: 0,
             diagnostics: Vec::new(),
+            undecided: Vec::new(),
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
             zeno_stop: None,
@@ -531,6 +536,7 @@ where
             }
         }
         self.resolution.forget();
+        self.undecided.clear();
         self.integ.restart(t, &self.y, self.mode, &self.sw);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
@@ -651,8 +657,8 @@ where
         };
         let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
         res.map_err(|(w, t)| self.guard_nonfinite(w, t))?;
-        if self.scanner.missed() {
-            self.report_near_misses(t1);
+        if self.scanner.peaked() {
+            self.judge_peaks(t1);
         }
         Ok(())
     }
