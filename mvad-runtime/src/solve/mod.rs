@@ -317,6 +317,9 @@ where
     /// uncertainty on the step just scanned, by event (see `undecided`): reported when the
     /// event is applied, unless its crossing cosine already grazes.
     undecided: Vec<(usize, Diagnostic)>,
+    /// The time at which the count of events towards `Options::max_events` passed half its
+    /// limit (see [`SolveError::MaxEvents`]).
+    flood_half: Option<f64>,
     switch_crossings: usize,
     zeno: Zeno<M>,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
@@ -405,6 +408,7 @@ where
             scheduled_events: 0,
             diagnostics: Vec::new(),
             undecided: Vec::new(),
+            flood_half: None,
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
             zeno_stop: None,
@@ -717,10 +721,15 @@ where
         // not a flood. Nor does one state event (or switch crossing) per scheduled occurrence:
         // a queue drains once per arrival at most. A flood is many more than that.
         let total = self.nevents - self.scheduled_events + self.switch_crossings;
-        if total > self.opts.max_events.saturating_add(self.scheduled_events) {
+        let limit = self.opts.max_events.saturating_add(self.scheduled_events);
+        if total > limit / 2 && self.flood_half.is_none() {
+            self.flood_half = Some(t);
+        }
+        if total > limit {
             return Err(SolveError::MaxEvents {
                 t,
                 count: self.opts.max_events,
+                span: t - self.flood_half.unwrap_or(t),
             });
         }
         if stop {
