@@ -317,7 +317,7 @@ impl<'a> Lowerer<'a> {
             .observes()
             .map(|o| {
                 self.inlining.push(&o.value as *const ast::Expr);
-                let id = self.expr(&o.value, Ctx::Pointwise);
+                let id = self.expr(&o.value, Ctx::Frozen);
                 self.inlining.pop();
                 (o.name.name.clone(), id)
             })

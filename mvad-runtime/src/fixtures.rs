@@ -168,12 +168,18 @@ impl HybridModel for Ball {
     ) -> f64 {
         zero_grad(gx, gp)
     }
-    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+    fn observe(&self, _sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
         let At { x, .. } = at;
         y[0] = x[0];
         y[1] = x[1];
     }
-    fn observe_jac(&self, _at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
+    fn observe_jac(
+        &self,
+        _sw: &Switches,
+        _at: At<'_, Self::N, Self::P>,
+        yx: &mut [f64],
+        yp: &mut [f64],
+    ) {
         yx.fill(0.0);
         yx[0] = 1.0; // ∂height/∂h
         yx[3] = 1.0; // ∂velocity/∂v

@@ -8,10 +8,13 @@
 //! ```
 //!
 //! (one such measure per parameter): a density on the smooth segments plus Dirac atoms at
-//! the events. Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt for
+//! the events and at the switch crossings of kinks where y jumps (`sign`, `if` in an
+//! observable: J = h(sw⁺) − h(sw⁻) at the continuous x(t_c), t_c' the crossing-time
+//! sensitivity; a continuous kink, `max`, `abs`, has J = 0 and no atom). Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt for
 //! φ independent of θ (and a horizon independent of θ). The density is evaluated at the
-//! recorded nodes of every step (see [`Trajectory`]) and interpolated with the same degree-4
-//! polynomial; pairings integrate φ·density step by step with adaptive Gauss–Legendre
+//! recorded nodes of every step (see [`Trajectory`]) under the frozen switch bits of the
+//! step's segment (a node at a crossing takes the branch of its own step: no step straddles
+//! a kink of h) and interpolated with the same degree-4 polynomial; pairings integrate φ·density step by step with adaptive Gauss–Legendre
 //! quadrature (so the result is exact up to the dense output's accuracy for any φ that is
 //! smooth on each step) and add Σ_k φ(t_k) α_k.
 
@@ -38,6 +41,29 @@ pub struct Measure {
     nodes: Vec<f64>,
     /// Atoms (t_k, α_k per parameter), in time order.
     pub atoms: Vec<(f64, Vec<f64>)>,
+    /// Where each atom of `atoms` comes from (same order).
+    pub origins: Vec<AtomOrigin>,
+}
+
+/// What placed an atom of a [`Measure`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AtomOrigin {
+    /// A user event: its entry `index` in [`Solution::events`] and the jump J of y there.
+    Event {
+        /// Position in the event table.
+        index: usize,
+        /// J = y(t_k⁺) − y(t_k⁻).
+        jump: f64,
+    },
+    /// A switch crossing of kink `switch` where y jumps by `jump` (`sign`, `if`).
+    Switch {
+        /// Index j of the switching function.
+        switch: usize,
+        /// J = h(sw⁺) − h(sw⁻) at x(t_c).
+        jump: f64,
+    },
+    /// The effective atom of a Zeno tail at the accumulation time.
+    ZenoTail,
 }
 
 /// Builds μ_y for observable `observable` from a solution run with `Options::record` and
@@ -74,11 +100,12 @@ where
     let mut nodes = Vec::with_capacity(traj.len() * TRAJ_NODES * np);
     for k in 0..traj.len() {
         let (a, b) = (traj.t0[k], traj.t1[k]);
+        let sw = traj.switches_of_step(k);
         for i in 0..TRAJ_NODES {
             let t = a + (b - a) * i as f64 / (TRAJ_NODES - 1) as f64;
             let node = &traj.data[(k * TRAJ_NODES + i) * len..(k * TRAJ_NODES + i + 1) * len];
             x.as_mut_slice().copy_from_slice(&node[..n]);
-            model.observe_jac(At::new(t, &x, params), &mut yx, &mut yp);
+            model.observe_jac(sw, At::new(t, &x, params), &mut yx, &mut yp);
             let at = nodes.len();
             nodes.extend_from_slice(&yp[observable * np..(observable + 1) * np]);
             add_density(
@@ -88,11 +115,21 @@ where
             );
         }
     }
-    let atoms = solution
+    let mut atoms: Vec<(f64, Vec<f64>)> = solution
         .events
         .iter()
         .map(|e| (e.t, e.atoms[observable].clone()))
         .collect();
+    let mut origins: Vec<AtomOrigin> = solution
+        .events
+        .iter()
+        .enumerate()
+        .map(|(index, e)| AtomOrigin::Event {
+            index,
+            jump: e.jump_observables[observable],
+        })
+        .collect();
+    add_crossing_atoms(model, params, traj, observable, &mut atoms, &mut origins);
     let mut mu = Measure {
         observable,
         name: info.observables[observable].clone(),
@@ -101,12 +138,63 @@ where
         t1: traj.t1.clone(),
         nodes,
         atoms,
+        origins,
     };
     let zeno = solution.diagnostic(DiagnosticKind::Zeno);
     if let Some(d) = zeno {
         mu.add_zeno_tail_atom(d.t);
     }
     Ok(mu)
+}
+
+/// A jump of an observable at a switch crossing of at most this many ulps of its values is
+/// taken as continuity (the two branches of a continuous kink agree at σ = 0 up to the
+/// rounding of the located crossing).
+const CONTINUOUS_ULPS: f64 = 16.0;
+
+/// Adds to `atoms` (kept in time order) the atom α = −J t_c' of observable `observable` at
+/// every recorded switch crossing where it jumps (|J| above rounding, see
+/// [`CONTINUOUS_ULPS`]; a crossing recorded without sensitivities has no t' and adds
+/// nothing).
+fn add_crossing_atoms<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    traj: &Trajectory,
+    observable: usize,
+    atoms: &mut Vec<(f64, Vec<f64>)>,
+    origins: &mut Vec<AtomOrigin>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    if traj.crossings.is_empty() {
+        return;
+    }
+    let nobs = model.info().nobservables();
+    let (mut before, mut after) = (vec![0.0; nobs], vec![0.0; nobs]);
+    let mut x = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
+    for c in &traj.crossings {
+        x.as_mut_slice().copy_from_slice(&c.x);
+        model.observe(&c.before, At::new(c.t, &x, params), &mut before);
+        model.observe(&c.after, At::new(c.t, &x, params), &mut after);
+        let (y_minus, y_plus) = (before[observable], after[observable]);
+        let jump = y_plus - y_minus;
+        // A continuous kink (max, abs, min) leaves a jump of rounding size where the
+        // crossing was located (σ ≈ 0 to a few ulps): no atom.
+        let rounding = CONTINUOUS_ULPS * f64::EPSILON * y_minus.abs().max(y_plus.abs());
+        if jump.abs() <= rounding || c.dt.is_empty() {
+            continue;
+        }
+        let alpha = c.dt.iter().map(|d| -jump * d).collect();
+        let at = atoms.partition_point(|a| a.0 <= c.t);
+        atoms.insert(at, (c.t, alpha));
+        origins.insert(
+            at,
+            AtomOrigin::Switch {
+                switch: c.switch,
+                jump,
+            },
+        );
+    }
 }
 
 /// Adds h_x S to `out` (one entry per parameter): out_j += Σ_r h_x[r] S[r, j], with S the
@@ -154,6 +242,7 @@ impl Measure {
             .collect();
         let at = self.atoms.partition_point(|a| a.0 <= t_star);
         self.atoms.insert(at, (t_star, tail));
+        self.origins.insert(at, AtomOrigin::ZenoTail);
     }
 
     /// The density h_x S + h_θ at t into `out` (length p); right-continuous at events.

@@ -318,10 +318,18 @@ where
 
     // ---- observables ------------------------------------------------------------------
 
-    /// y = h(t, x, θ), one entry per observable.
-    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]);
-    /// ∂h/∂x (row-major nobs×n) and ∂h/∂θ (row-major nobs×p).
-    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]);
+    /// y = h(t, x, θ), one entry per observable, with the frozen branches `sw` (an
+    /// observable's kinks are switches like a flow's: the bits of the segment t lies in,
+    /// and at a crossing those on the side asked for).
+    fn observe(&self, sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]);
+    /// ∂h/∂x (row-major nobs×n) and ∂h/∂θ (row-major nobs×p), with the frozen branches `sw`.
+    fn observe_jac(
+        &self,
+        sw: &Switches,
+        at: At<'_, Self::N, Self::P>,
+        yx: &mut [f64],
+        yp: &mut [f64],
+    );
 
     // ---- cost -------------------------------------------------------------------------
 

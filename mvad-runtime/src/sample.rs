@@ -7,8 +7,9 @@
 //!
 //! the density of the measure μ_y at tᵢ ([`crate::measure`](mod@crate::measure)): a sample at a fixed time tᵢ that
 //! is not an event time sees no atom, since the event moves past it only when θ moves by a
-//! finite amount. Like the record, a sample is right-continuous: at an event time it reads
-//! the post-event state x(t_k⁺).
+//! finite amount. Like the record, a sample is right-continuous at user events: at an event
+//! time it reads the post-event state x(t_k⁺). At a switch crossing of a kink it is the left
+//! limit: the observables under the bits before the flip, with S(t_c⁻) (x is continuous).
 
 use crate::error::SolveError;
 use crate::measure::add_density;
@@ -93,13 +94,15 @@ where
         if !traj.sample_into(t, x.as_mut_slice(), &mut s) {
             return Err(SolveError::NotRecorded);
         }
-        model.observe(At::new(t, &x, params), &mut y);
+        // The bits of the step the sample read (at a switch crossing: the one on the left).
+        let sw = traj.switches_of_step(traj.step_for(t).unwrap_or(0));
+        model.observe(sw, At::new(t, &x, params), &mut y);
         out.states.extend_from_slice(x.as_slice());
         out.observables.extend_from_slice(&y);
         if p == 0 {
             continue;
         }
-        model.observe_jac(At::new(t, &x, params), &mut yx, &mut yp);
+        model.observe_jac(sw, At::new(t, &x, params), &mut yx, &mut yp);
         for o in 0..m {
             row.copy_from_slice(&yp[o * p..(o + 1) * p]);
             add_density(&yx[o * n..(o + 1) * n], &s, &mut row);

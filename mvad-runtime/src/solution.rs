@@ -372,8 +372,11 @@ impl Solution {
 ///
 /// Each step [t₀, t₁] keeps x and S at [`TRAJ_NODES`] equispaced nodes, filled from the
 /// integrator's dense output; [`Trajectory::sample`] evaluates the interpolating polynomial.
-/// The record is right-continuous: at an event time t_k it returns the post-event state
-/// x(t_k⁺), S(t_k⁺) (the step that *starts* at t_k); at T the last step's end.
+/// The record is right-continuous at user events: at an event time t_k it returns the
+/// post-event state x(t_k⁺), S(t_k⁺) (the step that *starts* at t_k); at T the last step's
+/// end. At a switch crossing of a kink (x continuous, S and the bits jump) it returns the
+/// left limit x(t_c), S(t_c⁻) with the bits of the segment that ends there
+/// ([`Trajectory::step_for`]), the value at t_c⁻ of an observable that jumps there.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
     /// Number of states n.
@@ -388,6 +391,29 @@ pub struct Trajectory {
     pub segments: Vec<Segment>,
     /// Node data, per step `TRAJ_NODES × (n + n·p)` values: x then S (column-major) per node.
     pub data: Vec<f64>,
+    /// The switch crossings of kinks, in time order (what the measure's atoms of an
+    /// observable that jumps at a crossing need).
+    pub crossings: Vec<SwitchCrossing>,
+}
+
+/// A switch crossing of a kink as a recording run keeps it: switching function σ_j reached
+/// zero at t, x is continuous there and the bits flip. An observable y = h(sw, t, x, θ) that
+/// reads bit j jumps by J = h(after) − h(before), and its measure has the atom α = −J t'
+/// there, t' = −(∇ₓσ_j·S⁻ + ∂θσ_j)/σ̇_j (the crossing-time sensitivity the run computed).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SwitchCrossing {
+    /// Crossing time t_c.
+    pub t: f64,
+    /// Index j of the switching function.
+    pub switch: usize,
+    /// x(t_c).
+    pub x: Vec<f64>,
+    /// t' = dt_c/dθ (empty when the run had no sensitivities).
+    pub dt: Vec<f64>,
+    /// The bits before the crossing.
+    pub before: crate::model::Switches,
+    /// The bits after it.
+    pub after: crate::model::Switches,
 }
 
 impl Trajectory {
@@ -400,6 +426,33 @@ impl Trajectory {
             t1: Vec::new(),
             segments: Vec::new(),
             data: Vec::new(),
+            crossings: Vec::new(),
+        }
+    }
+
+    /// The step a sample at t reads: [`Trajectory::step_at`] (right-continuous), except at
+    /// the time of a switch crossing, where the step that ends there (the left limit: x is
+    /// continuous, S and the bits are those before the flip).
+    pub fn step_for(&self, t: f64) -> Option<usize> {
+        let k = self.step_at(t)?;
+        let at_crossing = k > 0
+            && self.t0[k] == t
+            && self.t1[k - 1] == t
+            && self
+                .crossings
+                .binary_search_by(|c| c.t.total_cmp(&t))
+                .is_ok();
+        Some(if at_crossing { k - 1 } else { k })
+    }
+
+    /// The frozen switch bits of the segment that holds step k (empty bits for a step outside
+    /// every segment, which a finished run never has).
+    pub fn switches_of_step(&self, k: usize) -> &crate::model::Switches {
+        static NONE: std::sync::OnceLock<crate::model::Switches> = std::sync::OnceLock::new();
+        let i = self.segments.partition_point(|s| s.end_step <= k);
+        match self.segments.get(i) {
+            Some(s) if s.first_step <= k => &s.switches,
+            _ => NONE.get_or_init(crate::model::Switches::default),
         }
     }
 
@@ -463,7 +516,7 @@ impl Trajectory {
     /// x(t) and S(t) into `x` (length n) and `s` (length n·p, column-major); see the type's
     /// doc for which side of an event is returned. Returns false when nothing was recorded.
     pub fn sample_into(&self, t: f64, x: &mut [f64], s: &mut [f64]) -> bool {
-        let Some(k) = self.step_at(t) else {
+        let Some(k) = self.step_for(t) else {
             return false;
         };
         let w = Self::weights_on(self.t0[k], self.t1[k], t);

@@ -621,22 +621,28 @@ impl HybridModel for InterpretedModel {
         }
     }
 
-    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+    fn observe(&self, sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
         if y.len() < self.info.observables.len() {
             return;
         }
         let mut sc = self.scratch.borrow_mut();
-        let at = pt0(at);
+        let at = at_sw(at, sw);
         self.eval(&self.observe, &at, &mut sc.regs, y);
     }
-    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
+    fn observe_jac(
+        &self,
+        sw: &Switches,
+        at: At<'_, Self::N, Self::P>,
+        yx: &mut [f64],
+        yp: &mut [f64],
+    ) {
         let nobs = self.info.observables.len();
         let (n, np) = (self.n, self.p);
         if yx.len() < nobs * n || yp.len() < nobs * np {
             return;
         }
         let tape = &self.observe_jac;
-        self.with(tape, &pt0(at), |ok, regs, _| {
+        self.with(tape, &at_sw(at, sw), |ok, regs, _| {
             let fill = if ok { 0.0 } else { f64::NAN };
             yx.iter_mut().take(nobs * n).for_each(|v| *v = fill);
             yp.iter_mut().take(nobs * np).for_each(|v| *v = fill);

@@ -170,8 +170,8 @@ where
         fn event_time_grad(&self, occ: Occurrence, p: &Pv<M>, dtau: &mut Pv<M>);
         fn switch_value(&self, j: usize, at: AtM<'_, M>) -> f64;
         fn switch_grad(&self, j: usize, at: AtM<'_, M>, gx: &mut Xv<M>, gp: &mut Pv<M>) -> f64;
-        fn observe(&self, at: AtM<'_, M>, y: &mut [f64]);
-        fn observe_jac(&self, at: AtM<'_, M>, yx: &mut [f64], yp: &mut [f64]);
+        fn observe(&self, sw: &mvad::Switches, at: AtM<'_, M>, y: &mut [f64]);
+        fn observe_jac(&self, sw: &mvad::Switches, at: AtM<'_, M>, yx: &mut [f64], yp: &mut [f64]);
         fn running_cost(&self, sw: &mvad::Switches, at: AtM<'_, M>) -> f64;
         fn running_cost_value_grad(&self, sw: &mvad::Switches, at: AtM<'_, M>,
             lx: &mut Xv<M>, lp: &mut Pv<M>) -> f64;

@@ -499,11 +499,11 @@ where
     let nobs = info.observables.len();
     let y = |q: &Pt| {
         let mut y = vec![0.0; nobs];
-        m.observe(At::new(q.t, &vn(m, &q.x), &vp(m, &q.p)), &mut y);
+        m.observe(sw, At::new(q.t, &vn(m, &q.x), &vp(m, &q.p)), &mut y);
         y
     };
     let (mut yx, mut yp) = (vec![9.0; nobs * n], vec![9.0; nobs * p]);
-    m.observe_jac(at, &mut yx, &mut yp);
+    m.observe_jac(sw, at, &mut yx, &mut yp);
     fd_check(&format!("{} observe", info.name), pt, Wrt::X, &yx, &y);
     fd_check(&format!("{} observe", info.name), pt, Wrt::P, &yp, &y);
 

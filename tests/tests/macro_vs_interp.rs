@@ -112,10 +112,10 @@ where
     }
     let nobs = info.observables.len();
     let mut y = vec![0.0; nobs];
-    m.observe(at, &mut y);
+    m.observe(sw, at, &mut y);
     put("y".into(), &y);
     let (mut yx, mut yp) = (vec![7.0; nobs * x.len()], vec![7.0; nobs * p.len()]);
-    m.observe_jac(at, &mut yx, &mut yp);
+    m.observe_jac(sw, at, &mut yx, &mut yp);
     put("yx".into(), &yx);
     put("yp".into(), &yp);
     // ℓ's value-and-gradient method returns ℓ again (stored as `lt`).

@@ -309,7 +309,8 @@ impl Gen<'_> {
             k.nswitches(),
         );
 
-        // Observables.
+        // Observables (their kinks and qps under the frozen bits, as the flow's).
+        self.frozen.set(true);
         let nobs = k.observables.len();
         let nobs_l = usize_lit(nobs);
         let (obs, obs_jac) = if nobs == 0 {
@@ -349,6 +350,7 @@ impl Gen<'_> {
             );
             (obs, jac)
         };
+        self.frozen.set(false);
 
         // Cost (ℓ reads qps under the frozen bits, as the flow does).
         self.frozen.set(true);
@@ -399,8 +401,8 @@ impl Gen<'_> {
             fn switch_value(&self, j: usize, #at) -> f64 { #let_at #swv }
             #[inline]
             fn switch_grad(&self, j: usize, #at, gx: &mut #xv, gp: &mut #pv) -> f64 { #let_at #swg }
-            fn observe(&self, #at, y: &mut [f64]) { #let_at #obs }
-            fn observe_jac(&self, #at, yx: &mut [f64], yp: &mut [f64]) { #let_at #obs_jac }
+            fn observe(&self, sw: &#sw_t, #at, y: &mut [f64]) { #let_at #obs }
+            fn observe_jac(&self, sw: &#sw_t, #at, yx: &mut [f64], yp: &mut [f64]) { #let_at #obs_jac }
             #[inline]
             fn running_cost(&self, sw: &#sw_t, #at) -> f64 { #let_at #rc }
             #[inline]

@@ -139,7 +139,9 @@ where
     let mut x = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
     for (i, &t) in cot.times.iter().enumerate() {
         tape.sample(t, x.as_mut_slice());
+        let bits = tape.sample_switches(t).ok_or(SolveError::NotRecorded)?;
         model.observe(
+            bits,
             At::new(t, &x, params),
             &mut observables[i * nobs..(i + 1) * nobs],
         );
@@ -319,8 +321,12 @@ fn replay_events<M: HybridModel, K: EventSink>(
         work.approach(model, p, j, x_before, x_after);
         let gt = work.crossing_grad(model, p, j);
         let (slope, grazing) = work.slope_and_grazing(gt, opts.grazing_tol);
-        model.observe(At::new(j.t, work.x_minus(), p), &mut obs_minus);
-        model.observe(At::new(j.t, work.x_plus(), p), &mut obs_plus);
+        model.observe(
+            &j.sw_before,
+            At::new(j.t, work.x_minus(), p),
+            &mut obs_minus,
+        );
+        model.observe(&j.sw_after, At::new(j.t, work.x_plus(), p), &mut obs_plus);
         sink.event(&EventView {
             index,
             event: k,

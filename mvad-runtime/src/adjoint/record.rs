@@ -413,6 +413,41 @@ impl Tape {
         }
     }
 
+    /// Whether item i is a segment that starts at a switch crossing of a kink (item i − 1
+    /// is a switch flip at its start): a sample at its start belongs to the segment before
+    /// it (the left limit, see [`Tape::sample_switches`]).
+    pub fn starts_at_switch(&self, i: usize) -> bool {
+        match (i.checked_sub(1).map(|h| &self.items[h]), &self.items[i]) {
+            (Some(Item::Jump(j)), Item::Segment(s)) => {
+                matches!(j.kind, JumpKind::Switch(_)) && j.t == s.t_start
+            }
+            _ => false,
+        }
+    }
+
+    /// The switch bits an observable sampled at t is evaluated with: those of the segment
+    /// [`Tape::sample`] reads, except at a switch crossing of a kink, where the bits before
+    /// the flip (the value at t⁻; x is continuous there); at T those at T.
+    pub fn sample_switches(&self, t: f64) -> Option<&Switches> {
+        let fin = self.fin.as_ref()?;
+        if t == fin.t {
+            return Some(&fin.sw);
+        }
+        let i = self
+            .items
+            .iter()
+            .position(|it| matches!(it, Item::Segment(s) if s.t_start <= t && t < s.t_end))?;
+        match (&self.items[i], i.checked_sub(1).map(|h| &self.items[h])) {
+            (Item::Segment(s), Some(Item::Jump(j)))
+                if s.t_start == t && self.starts_at_switch(i) =>
+            {
+                Some(&j.sw_before)
+            }
+            (Item::Segment(s), _) => Some(&s.sw),
+            _ => None,
+        }
+    }
+
     /// x(t) at a sample time into `out`, right-continuous: on the segment with
     /// t_start ≤ t < t_end, or x(T) (after any jump at T) for t = T. False (and `out`
     /// untouched) for a time outside [0, T] or a run that did not reach T.

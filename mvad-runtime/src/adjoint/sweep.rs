@@ -11,7 +11,10 @@
 //! 3. A sample at t_s adds h_xᵀw_s to λ and h_θᵀw_s to g where the sweep passes t_s. Samples
 //!    are right-continuous, as the trajectory record is (`Trajectory::sample`): one at an
 //!    event time t_k takes x(t_k⁺), the state after every jump at t_k, so it is added before
-//!    those jumps are undone; one at T takes x(T) after any jump at T.
+//!    those jumps are undone; one at T takes x(T) after any jump at T. At a switch crossing of
+//!    a kink a sample is the left limit (the trajectory record's convention there): it is
+//!    added on the segment that ends at the crossing, after the flip is undone, with that
+//!    segment's bits. h is evaluated under the bits of the segment it is added on.
 //! 4. At t = 0: g += λ(0)ᵀ∂x₀/∂θ ([`crate::model::ModelAdjoint::initial_state_vjp`]).
 //!
 //! The quadrature g is not under error control (only λ is: see `integrate::adjoint`), so
@@ -33,7 +36,7 @@ use super::transpose::{
 };
 use crate::error::SolveError;
 use crate::integrate::{Backward, Integrator};
-use crate::model::{At, HybridModel, ModelAlloc, Point};
+use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Options, Stats};
 use nalgebra::{Const, DefaultAllocator, Dim, OVector};
 
@@ -75,11 +78,12 @@ impl<M: HybridModel> SampleWork<M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// λ += h_xᵀ w and g += h_θᵀ w at (t, `self.x`).
+    /// λ += h_xᵀ w and g += h_θᵀ w at (t, `self.x`) under the bits `bits`.
     fn add(
         &mut self,
         model: &M,
         p: &OVector<f64, M::P>,
+        bits: &Switches,
         s: &Sample<'_>,
         lam: &mut OVector<f64, M::N>,
         g: &mut OVector<f64, M::P>,
@@ -88,7 +92,7 @@ where
             return;
         }
         let (n, np) = (lam.len(), g.len());
-        model.observe_jac(At::new(s.t, &self.x, p), &mut self.yx, &mut self.yp);
+        model.observe_jac(bits, At::new(s.t, &self.x, p), &mut self.yx, &mut self.yp);
         for (i, &wi) in s.w.iter().enumerate() {
             if wi == 0.0 {
                 continue;
@@ -180,13 +184,21 @@ where
     let mut left = samples.len();
     while left > 0 && samples[left - 1].t >= fin.t {
         sw.x.as_mut_slice().copy_from_slice(&fin.x);
-        sw.add(model, p, &samples[left - 1], &mut lam, integ.gradient_mut());
+        let bits = &fin.sw;
+        sw.add(
+            model,
+            p,
+            bits,
+            &samples[left - 1],
+            &mut lam,
+            integ.gradient_mut(),
+        );
         left -= 1;
     }
     let mut work = JumpWork::new(model);
     let mut error_work = opts.global_error.then(|| JumpErrorWork::new(model));
     let mut h_seed = 0.0;
-    for item in tape.items().iter().rev() {
+    for (i, item) in tape.items().iter().enumerate().rev() {
         let seg = match item {
             Item::Jump(j) => {
                 let states = tape.jump_states(j);
@@ -236,9 +248,19 @@ where
             }
             lam.copy_from(integ.y());
             let mut cursor = seg.steps.end - 1;
-            while left > 0 && samples[left - 1].t >= stop {
+            // A sample at a switch crossing is the left limit: the segment before takes it.
+            let left_limit = |t: f64| t == seg.t_start && tape.starts_at_switch(i);
+            while left > 0 && samples[left - 1].t >= stop && !left_limit(samples[left - 1].t) {
                 tape.state_at(seg, s_stop, &mut cursor, sw.x.as_mut_slice());
-                sw.add(model, p, &samples[left - 1], &mut lam, integ.gradient_mut());
+                let bits = &seg.sw;
+                sw.add(
+                    model,
+                    p,
+                    bits,
+                    &samples[left - 1],
+                    &mut lam,
+                    integ.gradient_mut(),
+                );
                 left -= 1;
             }
             if stop <= seg.t_start {

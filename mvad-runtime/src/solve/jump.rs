@@ -433,8 +433,12 @@ where
             self.nevents += 1;
             return;
         }
-        model.observe(At::new(t, &self.y.x, p), &mut self.obs_minus);
-        model.observe(At::new(t, &self.x_plus, p), &mut self.obs_plus);
+        model.observe(&self.sw, At::new(t, &self.y.x, p), &mut self.obs_minus);
+        model.observe(
+            &self.sw_next,
+            At::new(t, &self.x_plus, p),
+            &mut self.obs_plus,
+        );
         sink.event(&EventView {
             index: self.nevents,
             event: k,
@@ -530,6 +534,8 @@ where
                 &self.sw_next,
                 ge,
             );
+            let dt = if self.sens { self.dt.as_slice() } else { &[] };
+            rec.crossing(j, t, x, dt, (&self.sw, &self.sw_next));
         }
         std::mem::swap(&mut self.sw, &mut self.sw_next);
         self.switch_crossings += 1;

@@ -7,7 +7,7 @@
 use crate::adjoint::record::{JumpKind, Tape};
 use crate::integrate::{AugState, Forward, GlobalError, Integrator};
 use crate::model::{HybridModel, ModelAlloc, Switches};
-use crate::solution::{Segment, Trajectory, TRAJ_NODES};
+use crate::solution::{Segment, SwitchCrossing, Trajectory, TRAJ_NODES};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 /// The records being kept and the segment currently open.
@@ -139,6 +139,30 @@ impl Recorder {
                 (dm.as_slice(), dp.as_slice(), dt)
             });
             tape.jump(kind, t, a, b, modes, sw_before, sw_after, shift);
+        }
+    }
+
+    /// A switch crossing of kink j at t (for the trajectory: the measure's atoms of the
+    /// observables that jump there); `dt` is t' (empty without sensitivities).
+    pub(super) fn crossing<N: Dim>(
+        &mut self,
+        j: usize,
+        t: f64,
+        x: &OVector<f64, N>,
+        dt: &[f64],
+        sw: (&Switches, &Switches),
+    ) where
+        DefaultAllocator: nalgebra::allocator::Allocator<N>,
+    {
+        if let Some(traj) = &mut self.traj {
+            traj.crossings.push(SwitchCrossing {
+                t,
+                switch: j,
+                x: x.as_slice().to_vec(),
+                dt: dt.to_vec(),
+                before: sw.0.clone(),
+                after: sw.1.clone(),
+            });
         }
     }
 

@@ -407,10 +407,16 @@ impl<T: Spec> HybridModel for AdModel<T> {
         self.scalar_grad(at, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
             .1
     }
-    fn observe(&self, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+    fn observe(&self, _sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
         on_slices(at, |t, x, p| self.spec.observe(t, x, p, y));
     }
-    fn observe_jac(&self, at: At<'_, Self::N, Self::P>, yx: &mut [f64], yp: &mut [f64]) {
+    fn observe_jac(
+        &self,
+        _sw: &Switches,
+        at: At<'_, Self::N, Self::P>,
+        yx: &mut [f64],
+        yp: &mut [f64],
+    ) {
         let (td, xd, pd) = self.seed(at);
         let no = self.info.observables.len();
         let mut y = vec![D::c(0.0); no];

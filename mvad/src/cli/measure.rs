@@ -16,7 +16,7 @@ use mvad_runtime::reduce::integrate_adaptive;
 use std::path::PathBuf;
 
 use clap::Args;
-use mvad::runtime::measure::{measure, Measure};
+use mvad::runtime::measure::{measure, AtomOrigin, Measure};
 use mvad::runtime::solution::{Options, Solution};
 use mvad::runtime::solve::solve;
 use mvad::{At, HybridModel, ModelAlloc};
@@ -122,20 +122,22 @@ where
             );
         }
         m.insert("density".into(), Value::Object(d));
-        let atoms: Vec<Value> = sol
-            .events
+        let atoms: Vec<Value> = mu
+            .atoms
             .iter()
-            .zip(&mu.atoms)
-            .map(|(e, (t, a))| {
+            .zip(&mu.origins)
+            .map(|((t, a), origin)| {
                 let mut vals = Map::new();
                 for &k in wrt {
                     vals.insert(info.params[k].clone(), num(a[k]));
                 }
+                let (index, name, switch, jump) = atom_origin(&sol, info, origin);
                 serde_json::json!({
-                    "index": e.index,
-                    "name": info.events.get(e.event).map(|x| x.name.clone()),
+                    "index": index,
+                    "name": name,
+                    "switch": switch,
                     "t": num(*t),
-                    "jump": num(e.jump_observables.get(obs).copied().unwrap_or(f64::NAN)),
+                    "jump": num(jump),
                     "values": Value::Object(vals),
                 })
             })
@@ -181,12 +183,14 @@ where
     if !mu.atoms.is_empty() {
         let header = param_header(&["#", "t", "jump J"], "α d/d", &info.params, wrt);
         let mut t = Table::new(&header);
-        for (e, (tk, a)) in sol.events.iter().zip(&mu.atoms).take(MAX_EVENT_ROWS) {
-            let mut row = vec![
-                e.index.to_string(),
-                g(*tk, 10),
-                g(e.jump_observables.get(obs).copied().unwrap_or(f64::NAN), 8),
-            ];
+        for ((tk, a), origin) in mu.atoms.iter().zip(&mu.origins).take(MAX_EVENT_ROWS) {
+            let (index, _, switch, jump) = atom_origin(&sol, info, origin);
+            let label = match (index, switch) {
+                (Some(i), _) => i.to_string(),
+                (None, Some(j)) => format!("switch {j}"),
+                (None, None) => "zeno tail".into(),
+            };
+            let mut row = vec![label, g(*tk, 10), g(jump, 8)];
             row.extend(wrt.iter().map(|&k| g(a[k], 8)));
             t.row(row);
         }
@@ -217,24 +221,26 @@ where
     Ok(out)
 }
 
-/// y(t, x) for observable `obs` at the parameters `params`.
-fn observer<'a, M: HybridModel>(
-    model: &'a M,
-    params: &'a OVector<f64, M::P>,
-    obs: usize,
-) -> impl Fn(f64, &[f64]) -> f64 + 'a
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    let nobs = model.info().nobservables();
-    move |t, x| {
-        let mut y = vec![0.0; nobs];
-        model.observe(At::new(t, &xvec(model, x), params), &mut y);
-        y[obs]
+/// What placed an atom: (the event's index in the run's table and its name, or the kink's
+/// switching function, and the jump J of the observable; NaN for a Zeno tail).
+fn atom_origin(
+    sol: &Solution,
+    info: &mvad::ModelInfo,
+    origin: &AtomOrigin,
+) -> (Option<usize>, Option<String>, Option<usize>, f64) {
+    match *origin {
+        AtomOrigin::Event { index, jump } => {
+            let e = &sol.events[index];
+            let name = info.events.get(e.event).map(|x| x.name.clone());
+            (Some(e.index), name, None, jump)
+        }
+        AtomOrigin::Switch { switch, jump } => (None, None, Some(switch), jump),
+        AtomOrigin::ZenoTail => (None, None, None, f64::NAN),
     }
 }
 
-/// y(t) along a recorded solution (right-continuous at events; NaN without a record).
+/// y(t) along a recorded solution, under the bits of the step the sample reads
+/// (right-continuous at events, the left limit at a switch crossing; NaN without a record).
 fn observable_along<'a, M: HybridModel>(
     model: &'a M,
     params: &'a OVector<f64, M::P>,
@@ -244,9 +250,15 @@ fn observable_along<'a, M: HybridModel>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let y_at = observer(model, params, obs);
+    let nobs = model.info().nobservables();
     move |t| match sol.trajectory.as_ref() {
-        Some(traj) => y_at(t, &traj.sample(t).0),
+        Some(traj) => {
+            let mut y = vec![0.0; nobs];
+            let sw = traj.switches_of_step(traj.step_for(t).unwrap_or(0));
+            let x = xvec(model, &traj.sample(t).0);
+            model.observe(sw, At::new(t, &x, params), &mut y);
+            y[obs]
+        }
         None => f64::NAN,
     }
 }

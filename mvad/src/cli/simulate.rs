@@ -141,16 +141,24 @@ where
     let Some(traj) = sol.trajectory.as_ref() else {
         return Vec::new();
     };
-    let observe = |t: f64, x: &[f64]| {
+    // The observables under the bits of recorded step k.
+    let observe = |t: f64, x: &[f64], k: usize| {
         let mut y = vec![0.0; nobs];
-        model.observe(At::new(t, &xvec(model, x), params), &mut y);
+        let sw = traj.switches_of_step(k);
+        model.observe(sw, At::new(t, &xvec(model, x), params), &mut y);
         y
+    };
+    // The steps on either side of an event at t (the one ending there, the one starting).
+    let sides = |t: f64| {
+        let k = traj.step_at(t).unwrap_or(0);
+        let before = if k > 0 && traj.t0[k] == t { k - 1 } else { k };
+        (before, k)
     };
     let sample = |t: f64| {
         let (x, _) = traj.sample(t);
         let k = traj.step_at(t).unwrap_or(0);
         let mode = mode_at_step(traj, k, sol.mode_final);
-        let y = observe(t, &x);
+        let y = observe(t, &x, traj.step_for(t).unwrap_or(0));
         Row { t, mode, x, y }
     };
     let mut out = Vec::new();
@@ -158,14 +166,15 @@ where
     let mut push_events_until = |t: f64, out: &mut Vec<Row>, inclusive: bool| {
         while let Some(e) = events.peek() {
             if e.t < t || (inclusive && e.t <= t) {
-                let y = observe(e.t, &e.x_before);
+                let (before, after) = sides(e.t);
+                let y = observe(e.t, &e.x_before, before);
                 out.push(Row {
                     t: e.t,
                     mode: e.mode_before,
                     x: e.x_before.clone(),
                     y,
                 });
-                let y = observe(e.t, &e.x_after);
+                let y = observe(e.t, &e.x_after, after);
                 out.push(Row {
                     t: e.t,
                     mode: e.mode_after,
@@ -202,7 +211,7 @@ where
                 out.push(sample(t1));
             } else {
                 let x = sol.x_final.clone();
-                let y = observe(sol.t_end, &x);
+                let y = observe(sol.t_end, &x, 0);
                 out.push(Row {
                     t: sol.t_end,
                     mode: sol.mode_final,
