@@ -10,7 +10,7 @@
 //! (one such measure per parameter): a density on the smooth segments plus Dirac atoms at
 //! the events and at the switch crossings of kinks where y jumps (`sign`, `if` in an
 //! observable: J = h(sw⁺) − h(sw⁻) at the continuous x(t_c), t_c' the crossing-time
-//! sensitivity; a continuous kink, `max`, `abs`, has J = 0 and no atom). Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt for
+//! sensitivity; a continuous kink, `max`, `abs`, has J ≈ 0, an atom at rounding level). Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt for
 //! φ independent of θ (and a horizon independent of θ). The density is evaluated at the
 //! recorded nodes of every step (see [`Trajectory`]) under the frozen switch bits of the
 //! step's segment (a node at a crossing takes the branch of its own step: no step straddles
@@ -147,14 +147,11 @@ where
     Ok(mu)
 }
 
-/// A jump of an observable at a switch crossing of at most this many ulps of its values is
-/// taken as continuity (the two branches of a continuous kink agree at σ = 0 up to the
-/// rounding of the located crossing).
-const CONTINUOUS_ULPS: f64 = 16.0;
-
 /// Adds to `atoms` (kept in time order) the atom α = −J t_c' of observable `observable` at
-/// every recorded switch crossing where it jumps (|J| above rounding, see
-/// [`CONTINUOUS_ULPS`]; a crossing recorded without sensitivities has no t' and adds
+/// every recorded switch crossing where it jumps (J ≠ 0: an observable that does not read
+/// the flipped bit has J = 0 exactly; a continuous kink, `max`, `abs`, leaves J = ±σ(x_c),
+/// the rounding of the located crossing, and an atom of that size, which is kept rather
+/// than judged away; a crossing recorded without sensitivities has no t' and adds
 /// nothing).
 fn add_crossing_atoms<M: HybridModel>(
     model: &M,
@@ -176,12 +173,8 @@ fn add_crossing_atoms<M: HybridModel>(
         x.as_mut_slice().copy_from_slice(&c.x);
         model.observe(&c.before, At::new(c.t, &x, params), &mut before);
         model.observe(&c.after, At::new(c.t, &x, params), &mut after);
-        let (y_minus, y_plus) = (before[observable], after[observable]);
-        let jump = y_plus - y_minus;
-        // A continuous kink (max, abs, min) leaves a jump of rounding size where the
-        // crossing was located (σ ≈ 0 to a few ulps): no atom.
-        let rounding = CONTINUOUS_ULPS * f64::EPSILON * y_minus.abs().max(y_plus.abs());
-        if jump.abs() <= rounding || c.dt.is_empty() {
+        let jump = after[observable] - before[observable];
+        if jump == 0.0 || c.dt.is_empty() {
             continue;
         }
         let alpha = c.dt.iter().map(|d| -jump * d).collect();
