@@ -2,7 +2,8 @@
 //!
 //! Names resolve in the order state, param, const, observable; consts are folded to
 //! numbers and observables used inside other expressions are inlined. Expressions of a
-//! flow or of the running cost ℓ are lowered *frozen*: each `abs`, `min`, `max`, `sign`
+//! flow, of the running cost ℓ or of an observable are lowered *frozen* (an observable's
+//! kinks are watched like a flow's, so the measure's steps never straddle them): each `abs`, `min`, `max`, `sign`
 //! and `if` becomes a [`Node::Switch`] on bit j of the switch
 //! word, with its switching function σ_j recorded (lowered pointwise, deduplicated by
 //! hash-consing):
@@ -22,7 +23,7 @@
 //! added to the final cost Φ. A model without states (but with qps) gets one mode `main`
 //! with an empty flow.
 //!
-//! Everywhere else (guards, resets, observables, x₀, horizon, event and final costs) the
+//! Everywhere else (guards, resets, x₀, horizon, event and final costs) the
 //! same functions are lowered pointwise ([`Node::Select`] and
 //! `abs`/`sign` calls), with the derivative of the side actually taken. A kink whose σ
 //! is constant never switches and is lowered pointwise wherever it appears.

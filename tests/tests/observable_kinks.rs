@@ -50,7 +50,10 @@ where
 {
     let c = 0.7;
     let sol = run(m);
-    assert_eq!(sol.stats.switch_crossings, 1, "{door}: the kink x = c is watched");
+    assert_eq!(
+        sol.stats.switch_crossings, 1,
+        "{door}: the kink x = c is watched"
+    );
     let p = params(m);
     for (name, want) in [("y", -2.0), ("z", -c)] {
         let what = format!("{door}, {name}");
@@ -64,7 +67,12 @@ where
         assert_near(mu.pair(|_| 1.0)[0], want, 1e-8, &what);
         for i in 0..=40 {
             let t = 2.0 * i as f64 / 40.0;
-            assert_near(mu.density(t)[0], 0.0, 1e-9, format_args!("{what}: density at {t}"));
+            assert_near(
+                mu.density(t)[0],
+                0.0,
+                1e-9,
+                format_args!("{what}: density at {t}"),
+            );
         }
     }
     // A sample at the crossing itself is the left limit (y = −1, z = w = 0); after it y = 1.
@@ -96,11 +104,20 @@ where
     let p = params(m);
     let mu = measure(m, &p, &sol, m.info().observable_index("u").unwrap()).unwrap();
     let total = mu.pair(|_| 1.0);
-    assert_near(total[0], sol.gradient[0], 1e-7, format_args!("{door}: ⟨μ_u, 1⟩ vs grad"));
+    assert_near(
+        total[0],
+        sol.gradient[0],
+        1e-7,
+        format_args!("{door}: ⟨μ_u, 1⟩ vs grad"),
+    );
     assert_near(total[0], want, 1e-7, format_args!("{door}: ⟨μ_u, 1⟩"));
     // u is continuous across the kink (an atom of rounding size at most), and the kick's
     // atom has t' = 0 in a.
-    assert!(mu.atoms.iter().all(|(_, a)| a[0].abs() < 1e-13), "{door}: {:?}", mu.atoms);
+    assert!(
+        mu.atoms.iter().all(|(_, a)| a[0].abs() < 1e-13),
+        "{door}: {:?}",
+        mu.atoms
+    );
     // The density on the step that ends at the switch is exactly −1 (it was garbage
     // when the node at the crossing took the other branch).
     let n = 200;
@@ -129,16 +146,28 @@ where
     let t_c = -(1.0 - a * c).ln() / a;
     let sol = run(m);
     assert_eq!(sol.stats.switch_crossings, 1, "{door}");
-    assert_near(sol.gradient[0], -(3.0 - t_c), 1e-8, format_args!("{door}: dC/dc"));
+    assert_near(
+        sol.gradient[0],
+        -(3.0 - t_c),
+        1e-8,
+        format_args!("{door}: dC/dc"),
+    );
     let p = params(m);
     let mu = measure(m, &p, &sol, 0).unwrap();
     let total = mu.pair(|_| 1.0);
     for j in 0..2 {
-        assert_near(total[j], sol.gradient[j], 1e-8, format_args!("{door}: θ{j}"));
+        assert_near(
+            total[j],
+            sol.gradient[j],
+            1e-8,
+            format_args!("{door}: θ{j}"),
+        );
     }
     // y is continuous at the kink: its atom is the rounding of the located crossing.
     assert!(
-        mu.atoms.iter().all(|(_, a)| a.iter().all(|v| v.abs() < 1e-13)),
+        mu.atoms
+            .iter()
+            .all(|(_, a)| a.iter().all(|v| v.abs() < 1e-13)),
         "{door}: {:?}",
         mu.atoms
     );
@@ -147,7 +176,10 @@ where
 #[test]
 fn a_kink_only_in_an_observable_is_watched() {
     check_kink_only(&ObsKinkOnly::new(), "compiled");
-    check_kink_only(&mvad_tests::loaded_test_model("obs_kink_only.hyb"), "loaded");
+    check_kink_only(
+        &mvad_tests::loaded_test_model("obs_kink_only.hyb"),
+        "loaded",
+    );
 }
 
 /// Samples of u = max(−x, −a) and y = x t: their VJPs agree between forward and adjoint
@@ -170,7 +202,12 @@ where
         let adj = vjp(m, &p, &tight(GradientMode::Adjoint), &cot).unwrap();
         let what = format!("{door}, du({t})/dθ");
         for j in 0..4 {
-            assert_near(adj.gradient[j], fwd.gradient[j], 1e-7, format_args!("{what} θ{j}"));
+            assert_near(
+                adj.gradient[j],
+                fwd.gradient[j],
+                1e-7,
+                format_args!("{what} θ{j}"),
+            );
         }
         assert_near(fwd.observables[2 * k], adj.observables[2 * k], 1e-9, &what);
         match k {
@@ -210,8 +247,8 @@ fn an_observable_kink_leaves_the_gradient_alone() {
 
 /// At the switch crossing itself (the time t_c ≈ c the forward run located it at) a sample
 /// is the left limit, in both modes: y = −1, w = 0 and dw/dc = 0 (the right limit would be
-/// c² and c). (The adjoint's primal run locates its own t_c; where it is the same, as here,
-/// the sweep takes the sample on the segment before the flip.)
+/// c² and c). The adjoint's primal run (at tighter tolerances) locates its own t_c, so
+/// there this checks only that the sample is not taken from the right of its crossing.
 fn check_sample_at_crossing<M: HybridModel>(m: &M, door: &str)
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -231,7 +268,12 @@ where
         let out = vjp(m, &p, &tight(mode), &cot).unwrap();
         assert_eq!(out.observables[y], -1.0, "{what}: y(c)");
         assert_eq!(out.observables[w], 0.0, "{what}: w(c)");
-        assert_near(out.gradient[0], 0.0, 1e-12, format_args!("{what}: dw(c)/dc"));
+        assert_near(
+            out.gradient[0],
+            0.0,
+            1e-12,
+            format_args!("{what}: dw(c)/dc"),
+        );
     }
 }
 

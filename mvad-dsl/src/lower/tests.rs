@@ -49,7 +49,7 @@ fn events_directions_names_and_resets() {
 }
 
 #[test]
-fn kinks_become_deduplicated_switches_only_in_flows_and_running_cost() {
+fn kinks_become_deduplicated_switches_in_flows_running_cost_and_observables() {
     let p = program(
         "model M { param a = 1; state x = 1; state y = 2;
            flow { der(x) = abs(x - y) + sign(x - y); der(y) = min(x, y) + max(y, a); }
@@ -72,8 +72,13 @@ fn kinks_become_deduplicated_switches_only_in_flows_and_running_cost() {
     let f_neg = p.arena.eval(&p.modes[0].flow, &at(0b00));
     assert_eq!(f_pos, vec![(0.5 - 2.0) + 1.0, 2.0 + 2.0]);
     assert_eq!(f_neg, vec![(2.0 - 0.5) - 1.0, 0.5 + 1.0]);
-    // Observables are pointwise whatever the bits.
-    assert_eq!(p.arena.eval(&[p.observables[0].1], &at(0b11)), vec![1.5]);
+    // Observables follow the bits too (their kink is the flow's σ = x − y), guards do not.
+    assert_eq!(p.arena.eval(&[p.observables[0].1], &at(0b11)), vec![-1.5]);
+    assert_eq!(p.arena.eval(&[p.observables[0].1], &at(0b00)), vec![1.5]);
+    assert_eq!(
+        p.arena.eval(&[p.events[0].guard], &at(0b11)),
+        p.arena.eval(&[p.events[0].guard], &at(0b00))
+    );
 }
 
 #[test]
