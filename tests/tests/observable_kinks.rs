@@ -155,13 +155,8 @@ where
     let p = params(m);
     let mu = measure(m, &p, &sol, 0).unwrap();
     let total = mu.pair(|_| 1.0);
-    for j in 0..2 {
-        assert_near(
-            total[j],
-            sol.gradient[j],
-            1e-8,
-            format_args!("{door}: θ{j}"),
-        );
+    for (j, (&got, &want)) in total.iter().zip(&sol.gradient).enumerate() {
+        assert_near(got, want, 1e-8, format_args!("{door}: θ{j}"));
     }
     // y is continuous at the kink: its atom is the rounding of the located crossing.
     assert!(
