@@ -5,6 +5,7 @@
 use super::Driver;
 use crate::adjoint::record::JumpKind;
 use crate::error::SolveError;
+use crate::integrate::zero_rows;
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::sens;
 use crate::sink::{EventSink, EventView};
@@ -47,14 +48,14 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     /// Applies user event k at time t to `self.y` (the state at t⁻) and hands it to `sink`.
-    /// Returns true when the run must stop here: a Zeno accumulation has been reached or
-    /// the reset left the state stuck on its guard.
+    /// Sets `self.zeno_stop` when the run must restart from a limit: a Zeno accumulation has
+    /// been reached or the reset left the state stuck on its guard.
     pub(super) fn apply_event(
         &mut self,
         k: usize,
         t: f64,
         sink: &mut impl EventSink,
-    ) -> Result<bool, SolveError> {
+    ) -> Result<(), SolveError> {
         let info = self.model.info();
         let timed = info.events[k].is_time_event();
         let j = self.schedule.occurrence(k);
@@ -117,7 +118,7 @@ where
             self.zeno_stop = Some((t, 0.0));
             self.stuck = Some(k);
         }
-        Ok(self.zeno_stop.is_some())
+        Ok(())
     }
 
     /// f⁻, ∇g and ∂g/∂t at (t, x⁻), whether the crossing grazes and, with sensitivities, the
@@ -179,18 +180,15 @@ where
         Ok(approach)
     }
 
-    /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite.
+    /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite: the
+    /// masked flow during a hold (the held rows zero; see `zeno`).
     fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
         let info = self.model.info();
-        if self.zeno.holding() {
-            // Held at the limit of an accumulation: the state does not move.
-            self.f_minus.fill(0.0);
-            return Ok(());
-        }
         self.model.rhs(
             Point::new(self.mode, &self.sw, t, &self.y.x, self.p),
             &mut self.f_minus,
         );
+        zero_rows(&mut self.f_minus, &self.held);
         self.nonfinite_x(t, &self.f_minus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })
@@ -281,7 +279,7 @@ where
     }
 
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
-    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (zero unless `flows`, see
+    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (masked during a hold; zero unless `flows`, see
     /// [`Approach::flows`]) and, with sensitivities, S⁺ by the saltation jump (see
     /// [`sens::jump`]) into `self.s_plus`.
     fn event_reset(&mut self, k: usize, j: usize, t: f64, flows: bool) -> Result<(), SolveError> {
@@ -302,6 +300,8 @@ where
                 Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
                 &mut self.f_plus,
             );
+            // During a hold the masked flow (released rows are corrected in `review_holds`).
+            zero_rows(&mut self.f_plus, &self.held);
             self.nonfinite_x(t, &self.f_plus, || {
                 format!("flow of mode `{}`", info.modes[mode_after])
             })?;
@@ -441,7 +441,8 @@ where
         });
     }
 
-    /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump.
+    /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t' (the masked flows
+    /// during a hold), ℓ jump.
     pub(super) fn apply_switch(&mut self, j: usize, t: f64) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
@@ -455,6 +456,8 @@ where
             Point::new(self.mode, &self.sw_next, t, &self.y.x, p),
             &mut self.f_plus,
         );
+        zero_rows(&mut self.f_minus, &self.held);
+        zero_rows(&mut self.f_plus, &self.held);
         self.nonfinite_x(t, &self.f_plus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;

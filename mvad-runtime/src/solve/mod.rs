@@ -16,8 +16,9 @@
 //!    first step seeded with the length of the step that contained the event.
 //! 4. At T the final terms (see [`crate::reduce`]).
 //!
-//! Zeno accumulations and resets that leave the state on its guard end the run at the limit
-//! (see `zeno`).
+//! At a Zeno accumulation, or a reset that leaves the state on its guard, the run restarts
+//! from the limit with the states the accumulation constrains held there and the others
+//! following their flow (see `zeno`).
 //!
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
@@ -313,6 +314,9 @@ where
     diagnostics: Vec<Diagnostic>,
     switch_crossings: usize,
     zeno: Zeno<M>,
+    /// The states held at the limit of an accumulation (ascending; empty but during a hold,
+    /// see `zeno`): the rows of the flow the integrator and every jump hold at zero.
+    held: Vec<usize>,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
     zeno_stop: Option<(f64, f64)>,
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
@@ -400,6 +404,7 @@ where
             diagnostics: Vec::new(),
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
+            held: Vec::new(),
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),
@@ -513,23 +518,33 @@ where
         self.affine_watch = watch.affine;
         self.scanner.begin_restart();
         for &w in &watch.list {
+            // An event whose accumulation is held at its limit is not watched: its guard
+            // stays on zero, where it could only fire again.
+            if self.zeno.holds_event(w) {
+                continue;
+            }
             let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x);
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
             }
-            let fired = if w < nev { self.fired[w] } else { None };
+            let fired = if w < nev {
+                self.fired[w].or(self.zeno.released_firing_value(w))
+            } else {
+                None
+            };
             self.scanner.restart_one(w, v, fired);
         }
-        // Only the events applied at this instant (in `scanner.found`) have a firing value.
-        // (A Zeno hold relies on this: the accumulating event's firing value outlives the
-        // hold, keeping it disarmed when a time event restarts the held state on its guard.)
+        // Only the events applied at this instant (in `scanner.found`) and those whose
+        // holds it released have a firing value.
         for c in &self.scanner.found {
             if c.w < nev {
                 self.fired[c.w] = None;
             }
         }
+        self.zeno.forget_released();
         self.resolution.forget();
-        self.integ.restart(t, &self.y, self.mode, &self.sw);
+        self.integ
+            .restart_holding(t, &self.y, self.mode, &self.sw, &self.held);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
         }
@@ -571,9 +586,7 @@ where
                     rec.close_segment(t, self.mode, &self.sw);
                 }
                 self.scanner.found.clear();
-                if self.fire_at(t, sink)? {
-                    return Ok(());
-                }
+                self.fire_at(t, sink)?;
                 continue;
             }
             if t >= self.t_end {
@@ -613,9 +626,7 @@ where
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(te, self.mode, &self.sw);
             }
-            if self.fire_at(te, sink)? {
-                return Ok(());
-            }
+            self.fire_at(te, sink)?;
         }
     }
 
@@ -661,9 +672,9 @@ where
     /// Applies everything that fires at t, `self.y` holding x(t⁻): the crossings in
     /// `scanner.found` and the time events armed in the current mode that are due by
     /// t + [`time_resolution`]; user events in declaration order, switch flips only when
-    /// no user event fires. Then checks the event budget and restarts. Returns true when the
-    /// run has ended (held at the limit of an accumulation up to T).
-    fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<bool, SolveError> {
+    /// no user event fires. Then checks the event budget and restarts: at t, or at t* when
+    /// the events accumulate (the hold begins, see `zeno`).
+    fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<(), SolveError> {
         // A time event joins this instant only if it is due within the resolution of t (a
         // step to it would be too short to take); one a little later fires at its own time.
         let due = t + time_resolution(t);
@@ -682,12 +693,11 @@ where
         }
         let nfound = self.scanner.found.len();
         let mut user = 0;
-        let mut stop = false;
         for i in 0..nfound {
             let c = self.scanner.found[i];
             if let Watch::Event(k) = self.scanner.watch(c.w) {
                 user += 1;
-                stop |= self.apply_event(k, t, sink)?;
+                self.apply_event(k, t, sink)?;
             }
         }
         if user == 0 {
@@ -711,9 +721,15 @@ where
                 count: self.opts.max_events,
             });
         }
-        if stop {
-            // Held at the accumulation's limit until T, or until a time event resumes the run.
-            return self.after_accumulation(sink);
+        if let Some(verdict) = self.zeno_stop.take() {
+            // The constrained states are held at the accumulation's limit from t* on; the
+            // others follow their flow.
+            let t_star = self.begin_hold(verdict)?;
+            return self.restart(t_star);
+        }
+        if self.zeno.holding() {
+            // Whether the events at t left the held states at their limit.
+            self.review_holds(t);
         }
         // Seed the first step after the jump with the step size in use before it (the
         // error control still shrinks a seed that is too long): Hairer's start-up
@@ -724,7 +740,7 @@ where
         if self.integ.scheme() != Scheme::Exact {
             self.integ.set_step_size(h_seed);
         }
-        Ok(false)
+        Ok(())
     }
 
     /// At an instant of time events only (no crossing scanned), the armed state events whose
