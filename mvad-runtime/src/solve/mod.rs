@@ -39,7 +39,7 @@ pub(crate) use conditioning::judge;
 use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
 use crate::event::{Crossing, Scanner, Watch};
-use crate::integrate::{AugState, Forward, Integrator, OdeSystem, Scheme};
+use crate::integrate::{zero_rows, AugState, Forward, Integrator, OdeSystem, Scheme};
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::reduce::CompensatedSum;
 use crate::sink::EventSink;
@@ -469,6 +469,7 @@ where
                 Point::new(self.mode, &self.sw_next, t, &x, self.p),
                 &mut self.work,
             );
+            zero_rows(&mut self.work, &self.held);
             for j in 0..nsw {
                 if self.sw_undecided.get(j) {
                     let st = self.model.switch_grad(

@@ -405,7 +405,7 @@ where
         let constrained = self.constrained_states(k, t_star);
         if let Some(rec) = &mut self.rec {
             // The unresolved tail [t_k, t*] of the accumulation, as the limit.
-            rec.hold(t_star, &self.y.x, &self.y.s, self.mode, &self.sw);
+            rec.bridge(t_star, &self.y.x, &self.y.s);
         }
         self.zeno.holds.push(Hold {
             event: k,
