@@ -25,12 +25,15 @@ fn both<M: HybridModel>(macro_model: &M, file: &str, p: &[f64]) -> Vec<(&'static
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let loaded: InterpretedModel = loaded_test_model(file);
     let o = Options::default();
-    vec![
-        ("macro", solve_at(macro_model, p, &o).expect("macro runs")),
-        ("loaded", solve_at(&loaded, p, &o).expect("loaded runs")),
-    ]
+    let by_macro = solve_at(macro_model, p, &o).expect("macro runs");
+    vec![("macro", by_macro), ("loaded", loaded(file, p, &o))]
+}
+
+/// The loaded door.
+fn loaded(file: &str, p: &[f64], o: &Options) -> Solution {
+    let model: InterpretedModel = loaded_test_model(file);
+    solve_at(&model, p, o).expect("loaded runs")
 }
 
 /// C and every dC/dθ_j within `tol`·max(|C|, 1) of the closed form (an absolute error
