@@ -426,24 +426,31 @@ where
         self.zeno.count = 0;
         self.fired[k] = None;
         self.collect_held_rows();
+        // The masked flow and the running cost at the limit.
+        let at = Point::new(self.mode, &self.sw, t_star, &self.y.x, p);
+        model.rhs(at, &mut self.work);
+        zero_rows(&mut self.work, &self.held);
+        self.nonfinite_x(t_star, &self.work, || {
+            format!("flow of mode `{}`", model.info().modes[self.mode])
+        })?;
+        let l = if model.info().has_running_cost {
+            model.running_cost(&self.sw, At::new(t_star, &self.y.x, p))
+        } else {
+            0.0
+        };
+        if !l.is_finite() {
+            return Err(SolveError::NonFinite {
+                t: t_star,
+                what: "cost".into(),
+            });
+        }
         if self.sens {
-            let at = Point::new(self.mode, &self.sw, t_star, &self.y.x, p);
-            model.rhs(at, &mut self.work);
-            zero_rows(&mut self.work, &self.held);
-            self.nonfinite_x(t_star, &self.work, || {
-                format!("flow of mode `{}`", model.info().modes[self.mode])
-            })?;
             self.y.s.ger(-1.0, &self.work, &dt_star, 1.0);
-            if model.info().has_running_cost {
-                let l = model.running_cost(&self.sw, At::new(t_star, &self.y.x, p));
-                if !l.is_finite() {
-                    return Err(SolveError::NonFinite {
-                        t: t_star,
-                        what: "cost".into(),
-                    });
-                }
-                self.y.qp.axpy(-l, &dt_star, 1.0);
-            }
+            self.y.qp.axpy(-l, &dt_star, 1.0);
+        }
+        if let Some(ge) = self.integ.global_error_mut() {
+            model.guard_grad(k, At::new(t_star, &self.y.x, p), &mut self.gx, &mut self.gp);
+            ge.onto_guard(&self.work, l, &self.gx, self.sens);
         }
         Ok(t_star.min(self.t_end))
     }
