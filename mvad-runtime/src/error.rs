@@ -12,6 +12,10 @@ use crate::qp::QpError;
 use crate::solution::{Diagnostic, DiagnosticKind};
 use std::fmt;
 
+/// Events that pass [`SolveError::MaxEvents`]'s limit within this fraction of max(|t|, 1) for
+/// their second half chatter (a sliding mode): 10⁻⁶, a million times the resolution of t.
+pub const CHATTER_SPAN: f64 = 1e-6;
+
 /// A run that could not produce a cost and a gradient.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SolveError {
@@ -79,6 +83,9 @@ pub enum SolveError {
         t: f64,
         /// The limit that was hit.
         count: usize,
+        /// How long the second half of those events took (from the time the count passed
+        /// half the limit to `t`): a span within [`CHATTER_SPAN`] of t says they chatter.
+        span: f64,
     },
     /// The model's structure is unusable (more switching functions than bits, an event
     /// target that is not a mode, ...).
@@ -203,8 +210,19 @@ impl fmt::Display for SolveError {
                     )
                 }
             }
-            SolveError::MaxEvents { t, count } => {
-                write!(f, "stopped after {count} events at t = {t} (max_events)")
+            SolveError::MaxEvents { t, count, span } => {
+                write!(f, "stopped after {count} events at t = {t} (max_events)")?;
+                if *span <= CHATTER_SPAN * t.abs().max(1.0) {
+                    write!(
+                        f,
+                        ": the last {} took {span:.1e} time units; the events chatter: the flow \
+                         on both sides of a guard or a kink points into it (a sliding mode, which \
+                         the event loop does not follow; a guard with hysteresis, or a flow \
+                         that stays on the surface, avoids it)",
+                        count - count / 2
+                    )?;
+                }
+                Ok(())
             }
             SolveError::BadModel { what } => write!(f, "unusable model: {what}"),
             SolveError::BadSchedule { event, what } => {

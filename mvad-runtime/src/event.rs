@@ -213,6 +213,10 @@ pub struct Track {
     pub start_val: f64,
     /// The bracket of the current step, if any.
     bracket: Option<(f64, f64, f64, f64)>,
+    /// The highest maximum (t, v) the dip search evaluated on the current step, if it ran:
+    /// v ≥ 0 when it closed a bracket (a crossing found as a dip), v < 0 when it did not (a
+    /// near miss if v lies within the guard's uncertainty of zero; see [`Scanner::peak`]).
+    peak: Option<(f64, f64)>,
 }
 
 /// Per-run event-detection state: which functions are watched, armed flags, the values at
@@ -232,6 +236,9 @@ pub struct Scanner {
     vals: Vec<[f64; NSAMP]>,
     /// One sample of every function, as written by the caller.
     tmp: Vec<f64>,
+    /// Some watched event's dip search evaluated a maximum on the current step (see
+    /// [`Scanner::peak`]).
+    peaked: bool,
 }
 
 impl Scanner {
@@ -245,6 +252,7 @@ impl Scanner {
             found: Vec::with_capacity(nw),
             vals: vec![[0.0; NSAMP]; nw],
             tmp: vec![0.0; nw],
+            peaked: false,
         }
     }
 
@@ -265,6 +273,21 @@ impl Scanner {
         } else {
             Watch::Switch(w - self.nevents)
         }
+    }
+
+    /// The highest maximum (t, v) of function w's signed value that the dip search of the
+    /// last scan evaluated, if it ran: v ≥ 0 when that maximum closed w's bracket (the
+    /// crossing is a dip's: the trajectory reaches the surface only by v over it), v < 0 when
+    /// it did not (the trajectory turned back v short of the surface). Either is undecided
+    /// when |v| is within what the tolerances allow the guard to err by.
+    pub fn peak(&self, w: usize) -> Option<(f64, f64)> {
+        self.tracks[w].peak
+    }
+
+    /// Whether the last scan's dip search evaluated a maximum of an event's guard (see
+    /// [`Scanner::peak`]).
+    pub fn peaked(&self) -> bool {
+        self.peaked
     }
 
     /// Whether function `w` triggers on v > 0 (switches) rather than v ≥ 0 (events).
@@ -302,6 +325,7 @@ impl Scanner {
             self.watched.push(w);
         }
         tr.start_val = v;
+        tr.peak = None;
         tr.rising = false;
         tr.last_rise = 0.0;
         tr.last_span = 1.0;
@@ -362,6 +386,7 @@ impl Scanner {
         E: FnMut(usize, f64) -> f64,
     {
         self.found.clear();
+        self.peaked = false;
         if self.watched.is_empty() {
             return Ok(());
         }
@@ -433,6 +458,7 @@ impl Scanner {
             let b = self.tmp[w];
             let tr = &mut self.tracks[w];
             tr.bracket = None;
+            tr.peak = None;
             let a = tr.start_val;
             if a.is_nan() || b.is_nan() {
                 // Where the interpolated samples would first have been NaN.
@@ -516,6 +542,7 @@ impl Scanner {
             } = self.tracks[w];
             let mut armed_from = if armed { Some(0) } else { None };
             let mut bracket = None;
+            let mut peak = None;
             for i in 1..NSAMP {
                 let vi = v[i];
                 if !armed {
@@ -530,7 +557,8 @@ impl Scanner {
             }
             if bracket.is_none() {
                 if let Some(i0) = armed_from {
-                    bracket = dip(&v, times, i0, rising, strict, |t| eval(w, t));
+                    (bracket, peak) = dip(&v, times, i0, rising, strict, |t| eval(w, t));
+                    self.peaked |= w < self.nevents && peak.is_some();
                 } else if fresh {
                     // The event fired at t₀ and no sample went below its re-arming level:
                     // the whole excursion to the negative side and back (a short hop of a
@@ -549,6 +577,7 @@ impl Scanner {
             let tr = &mut self.tracks[w];
             tr.fresh = false;
             tr.bracket = bracket;
+            tr.peak = peak;
         }
         Ok(first_right)
     }
@@ -573,7 +602,9 @@ fn sample_times(t0: f64, t1: f64) -> [f64; NSAMP] {
 /// Looks for a double crossing hidden between the samples `v` of one function (armed from
 /// sample i0 on): an interior local maximum of v that is close to zero relative to v's
 /// variation over the step, or a maximum just after t₀ when v was `rising` at the end of the
-/// last step. Returns the bracket [left sample, argmax] if the maximum has triggered.
+/// last step. Returns the bracket [left sample, argmax] if a maximum has triggered, and the
+/// highest maximum evaluated (t, v) (the one that triggered, if one did).
+#[allow(clippy::type_complexity)]
 fn dip<E: FnMut(f64) -> f64>(
     v: &[f64; NSAMP],
     times: &[f64; NSAMP],
@@ -581,7 +612,7 @@ fn dip<E: FnMut(f64) -> f64>(
     rising: bool,
     strict: bool,
     mut eval: E,
-) -> Option<(f64, f64, f64, f64)> {
+) -> (Option<(f64, f64, f64, f64)>, Option<(f64, f64)>) {
     let (lo, hi) = v
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
@@ -610,15 +641,19 @@ fn dip<E: FnMut(f64) -> f64>(
         candidates[nc] = last;
         nc += 1;
     }
+    let mut peak: Option<(f64, f64)> = None;
     for &i in &candidates[..nc] {
         let left = i.saturating_sub(1);
         let right = if i == 0 { 1 } else { (i + 1).min(last) };
         let (tm, vm) = maximize(&mut eval, times[left], times[right]);
         if triggered(vm, strict) {
-            return Some((times[left], v[left], tm, vm));
+            return (Some((times[left], v[left], tm, vm)), Some((tm, vm)));
+        }
+        if peak.is_none_or(|(_, best)| vm > best) {
+            peak = Some((tm, vm));
         }
     }
-    None
+    (None, peak)
 }
 
 /// Whether the parabola through the last three (equispaced) samples of `v` is concave with

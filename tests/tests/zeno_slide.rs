@@ -40,7 +40,11 @@ fn loaded(file: &str, p: &[f64], o: &Options) -> Solution {
 /// relative to the size of C, so a zero derivative is held to the same standard).
 fn assert_closed_form(sol: &Solution, c: f64, grad: &[f64], tol: f64, what: &str) {
     let scale = c.abs().max(1.0);
-    assert!((sol.cost - c).abs() <= tol * scale, "{what}: C = {:e} vs {c:e}", sol.cost);
+    assert!(
+        (sol.cost - c).abs() <= tol * scale,
+        "{what}: C = {:e} vs {c:e}",
+        sol.cost
+    );
     for (j, (&a, &b)) in sol.gradient.iter().zip(grad).enumerate() {
         assert!(
             (a - b).abs() <= tol * scale,
@@ -57,7 +61,10 @@ fn assert_held_to_t(sol: &Solution, t_star: f64, what: &str) {
     assert_eq!(zeno.len(), 1, "{what}: {zeno:?}");
     assert_near(zeno[0].t, t_star, 1e-9, format_args!("{what}: t*"));
     let m = &zeno[0].message;
-    assert!(m.contains("states `h`, `v` are held") && m.contains("[t*, T]"), "{what}: {m}");
+    assert!(
+        m.contains("states `h`, `v` are held") && m.contains("[t*, T]"),
+        "{what}: {m}"
+    );
     assert!(m.contains("other states follow their flow"), "{what}: {m}");
     assert!(!m.contains("held too"), "{what}: {m}");
 }
@@ -97,7 +104,10 @@ fn a_state_event_of_a_free_state_fires_during_the_hold() {
     for (door, sol) in both(&ZenoSlideStop::new(), "zeno_slide_stop.hyb", &p) {
         assert_closed_form(&sol, 48.0, &[0.0, 0.0, 0.0, 32.0], 1e-8, door);
         assert_held_to_t(&sol, t_star(0.8, 9.81, 2.0), door);
-        let stop = ZenoSlideStop::new().info().event_index("stop").expect("stop");
+        let stop = ZenoSlideStop::new()
+            .info()
+            .event_index("stop")
+            .expect("stop");
         let fired: Vec<_> = sol.events.iter().filter(|ev| ev.event == stop).collect();
         assert_eq!(fired.len(), 1, "{door}: {fired:?}");
         assert_near(fired[0].t, 8.0, 1e-12, format_args!("{door}: t_s"));

@@ -60,6 +60,9 @@ where
         let timed = info.events[k].is_time_event();
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
+        if timed && t == 0.0 && self.sens && self.dt.iter().any(|&v| v != 0.0) {
+            self.report_time_event_at_start(k);
+        }
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
         let l_plus = self.event_costs(k, j, t, approach.still)?;
@@ -82,8 +85,13 @@ where
             && info.events[k].armed_in(mode_after)
             && t < self.t_end
             && self.stuck_after_reset(k, t, mode_after, approach.rate);
-        if approach.grazing && zeno_stop.is_none() && !stuck {
-            self.report_grazing(k, t, approach);
+        let undecided = self.take_undecided(k);
+        if zeno_stop.is_none() && !stuck {
+            if approach.grazing {
+                self.report_grazing(k, t, approach);
+            } else if let Some(d) = undecided {
+                self.diagnostics.push(d);
+            }
         }
         if let Some(rec) = &mut self.rec {
             let modes = (mode_before, mode_after);
@@ -119,6 +127,25 @@ where
             self.stuck = Some(k);
         }
         Ok(())
+    }
+
+    /// The `kink` diagnostic for time event k firing at t = 0 with a time that moves with θ
+    /// (τ' ≠ 0): on one side of θ it fires at the start of the run, on the other before it
+    /// (never), so C jumps or kinks there and dC/dθ is its one-sided value (the side on
+    /// which the event fires).
+    #[cold]
+    #[inline(never)]
+    fn report_time_event_at_start(&mut self, k: usize) {
+        self.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::Kink,
+            t: 0.0,
+            message: format!(
+                "time event `{}` fires at t = 0 and its time moves with the params: on one side \
+                 it falls before the run and does not fire, so C is not differentiable here and \
+                 the gradient is the one-sided value with the event",
+                self.event_name(k)
+            ),
+        });
     }
 
     /// f⁻, ∇g and ∂g/∂t at (t, x⁻), whether the crossing grazes and, with sensitivities, the

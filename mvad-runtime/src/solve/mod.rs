@@ -22,7 +22,8 @@
 //!
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
-//! `zeno` accumulations; `record` the trajectory record; `finish` the end of the run.
+//! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
+//! `record` the trajectory record; `finish` the end of the run.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
 mod conditioning;
@@ -32,6 +33,7 @@ mod qp;
 mod record;
 mod resolution;
 mod schedule;
+mod undecided;
 mod zeno;
 
 pub(crate) use conditioning::judge;
@@ -312,6 +314,13 @@ where
     /// `max_events`: their number is the model's, T/period or a table's rows.
     scheduled_events: usize,
     diagnostics: Vec<Diagnostic>,
+    /// The `grazing` diagnostics of crossings found at a turning point within the guard's
+    /// uncertainty on the step just scanned, by event (see `undecided`): reported when the
+    /// event is applied, unless its crossing cosine already grazes.
+    undecided: Vec<(usize, Diagnostic)>,
+    /// The time at which the count of events towards `Options::max_events` passed half its
+    /// limit (see [`SolveError::MaxEvents`]).
+    flood_half: Option<f64>,
     switch_crossings: usize,
     zeno: Zeno<M>,
     /// The states held at the limit of an accumulation (ascending; empty but during a hold,
@@ -402,6 +411,8 @@ where
             nevents: 0,
             scheduled_events: 0,
             diagnostics: Vec::new(),
+            undecided: Vec::new(),
+            flood_half: None,
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
             held: Vec::new(),
@@ -544,6 +555,7 @@ where
         }
         self.zeno.forget_released();
         self.resolution.forget();
+        self.undecided.clear();
         self.integ
             .restart_holding(t, &self.y, self.mode, &self.sw, &self.held);
         if let Some(rec) = &mut self.rec {
@@ -660,7 +672,11 @@ where
             Self::signed(model, p, nev, sw, w, t, xe)
         };
         let res = self.scanner.scan(t0, t1, linear, sample, eval, sim_tol);
-        res.map_err(|(w, t)| self.guard_nonfinite(w, t))
+        res.map_err(|(w, t)| self.guard_nonfinite(w, t))?;
+        if self.scanner.peaked() {
+            self.judge_peaks(t1);
+        }
+        Ok(())
     }
 
     /// The window within which events at t count as simultaneous: relative to the time
@@ -716,10 +732,15 @@ where
         // not a flood. Nor does one state event (or switch crossing) per scheduled occurrence:
         // a queue drains once per arrival at most. A flood is many more than that.
         let total = self.nevents - self.scheduled_events + self.switch_crossings;
-        if total > self.opts.max_events.saturating_add(self.scheduled_events) {
+        let limit = self.opts.max_events.saturating_add(self.scheduled_events);
+        if total > limit / 2 && self.flood_half.is_none() {
+            self.flood_half = Some(t);
+        }
+        if total > limit {
             return Err(SolveError::MaxEvents {
                 t,
                 count: self.opts.max_events,
+                span: t - self.flood_half.unwrap_or(t),
             });
         }
         if let Some(verdict) = self.zeno_stop.take() {

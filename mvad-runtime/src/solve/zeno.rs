@@ -62,8 +62,8 @@
 
 use super::Driver;
 use crate::error::SolveError;
-use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::integrate::zero_rows;
+use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::reduce::{aitken_iterated_weights, CompensatedSum};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
@@ -465,14 +465,17 @@ where
     pub(super) fn review_holds(&mut self, t: f64) {
         let (model, p, mode) = (self.model, self.p, self.mode);
         // The full flow at the state the events left (what a released state follows).
-        model.rhs(Point::new(mode, &self.sw, t, &self.y.x, p), &mut self.f_plus);
+        model.rhs(
+            Point::new(mode, &self.sw, t, &self.y.x, p),
+            &mut self.f_plus,
+        );
         let mut i = 0;
         let mut released = false;
         while i < self.zeno.holds.len() {
             let h = &self.zeno.holds[i];
             let k = h.event;
-            let kept = (0..h.constrained.len())
-                .all(|j| !h.constrained[j] || self.y.x[j] == h.x_limit[j]);
+            let kept =
+                (0..h.constrained.len()).all(|j| !h.constrained[j] || self.y.x[j] == h.x_limit[j]);
             let armed = model.info().events[k].armed_in(mode);
             if kept && armed && self.flows_back_through(k, t, mode, false) {
                 i += 1;

@@ -146,13 +146,16 @@ where
         "param", "MV-AD", "FD", "FD ±", "step", "abs err", "rel err", "agree",
     ]);
     let mut disagree = Vec::new();
+    let mut undecided = Vec::new();
     let mut failures = String::new();
     for (i, &k) in s.wrt.iter().enumerate() {
         match &fd[i] {
             Ok(f) => {
                 let agree = consistent(mvad[i], f, own[i]);
-                if agree == Some(false) {
-                    disagree.push(format!("`{}`", info.params[k]));
+                match agree {
+                    Some(false) => disagree.push(format!("`{}`", info.params[k])),
+                    None => undecided.push(format!("`{}`", info.params[k])),
+                    Some(true) => {}
                 }
                 t.row(vec![
                     info.params[k].clone(),
@@ -190,6 +193,13 @@ where
             "\nMV-AD and FD differ by more than twice the FD's uncertainty plus MV-AD's own \
              error at this tolerance for {}\n",
             disagree.join(", ")
+        ));
+    }
+    if !undecided.is_empty() {
+        out.push_str(&format!(
+            "\nthe differences decide nothing for {}: their uncertainty is unknown or larger \
+             than the derivative (C may have a kink or a jump in the parameter there)\n",
+            undecided.join(", ")
         ));
     }
     out.push_str(&format!("\ncosine similarity  {}\n", g(cos, 10)));
@@ -245,12 +255,14 @@ where
 }
 
 /// Whether the MV-AD value `a` agrees with the difference `f`: within twice the difference's
-/// uncertainty plus `a`'s own, `own` (see [`own_error`]); None when the difference's
-/// uncertainty is unknown.
+/// uncertainty plus `a`'s own, `own` (see [`own_error`]). None when the comparison decides
+/// nothing: the difference's uncertainty is unknown, or twice it exceeds both values and
+/// `own` (the steps of the ladder disagree by more than the derivative itself, as they do
+/// where C has a kink or a jump in θ: any value would pass).
 fn consistent(a: f64, f: &FdEstimate, own: f64) -> Option<bool> {
-    f.uncertainty
-        .is_finite()
-        .then(|| (a - f.value).abs() <= 2.0 * f.uncertainty + own)
+    let u = f.uncertainty;
+    let decides = u.is_finite() && 2.0 * u <= a.abs().max(f.value.abs()).max(own);
+    decides.then(|| (a - f.value).abs() <= 2.0 * u + own)
 }
 
 /// The error MV-AD's value `a` of dC/dθ_k may have at the run's tolerances: ten times
@@ -373,6 +385,40 @@ mod tests {
                 assert!((fd - 1.5).abs() <= 2.0 * unc, "{tau}");
             }
         }
+    }
+
+    /// Where C jumps in a parameter (a sample at t = 0 that a smaller `offset` moves before
+    /// the run) the ladder's steps disagree by more than the derivative: the row decides
+    /// nothing (null, `?`), not `yes`, and the run itself reports the kink.
+    #[test]
+    fn a_jump_in_the_parameter_decides_nothing() {
+        let src = "model Sampled {
+            param period = 0.25; param offset = 0; param k = 0.5;
+            state y = 1; state u = 0;
+            flow { der(y) = u - y; der(u) = 0; }
+            event sample every period from offset { u = -k * y; }
+            cost = integral(y^2);
+            horizon 1;
+        }";
+        let m = mvad::load::load_str("s.hyb", src).expect("valid model");
+        let v = json(&run(&m, "s.hyb", &args(&["--json"])).expect("runs"));
+        let rows = v["rows"].as_array().expect("rows");
+        let row = |name: &str| rows.iter().find(|r| r["param"] == name).expect("row");
+        let offset = row("offset");
+        assert!(offset["consistent"].is_null(), "{offset}");
+        assert!(
+            offset["fd_uncertainty"].as_f64().expect("n") > 1.0,
+            "{offset}"
+        );
+        assert_eq!(row("k")["consistent"], true, "{}", row("k"));
+        assert_eq!(row("period")["consistent"], true, "{}", row("period"));
+        let text = run(&m, "s.hyb", &args(&[])).expect("runs");
+        assert!(text.contains("decide nothing for `offset`"), "{text}");
+        assert!(text.contains("warning: kink at t = 0"), "{text}");
+        assert!(
+            text.contains("time event `sample` fires at t = 0"),
+            "{text}"
+        );
     }
 
     /// With `--step H` the difference is the one at H and its uncertainty the difference
