@@ -127,9 +127,9 @@ fn a_kick_after_the_accumulation_still_releases_the_hold() {
     let c = 3.006_100_133_879_137_4;
     let grad = [
         14.706_311_836_063_266,
-        -0.198_612_016_919_303_79,
+        -0.198_612_016_919_303_8,
         1.978_460_851_440_411_1,
-        0.332_520_772_325_561_82,
+        0.332_520_772_325_561_8,
     ];
     for (door, sol) in both(&ZenoThenKick::new(), "zeno_then_kick.hyb", &p) {
         assert_closed_form(&sol, c, &grad, 1e-8, door);
