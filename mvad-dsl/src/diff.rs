@@ -19,7 +19,7 @@
 //! | qp solution u*_k | w.r.t. x, θ, t: the leaf ∂u*_k/∂w (`Node::QpDeriv`); w.r.t. the qp variable u_k: 1 |
 //! | ∂u*_k/∂w | 0 (only first derivatives are taken of expressions reading qp solutions) |
 
-use crate::ir::{ExprArena, ExprId, Func, Node, Wrt};
+use crate::ir::{Cmp, ExprArena, ExprId, Func, Node, Wrt};
 
 /// A variable to differentiate with respect to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -131,17 +131,18 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
                         let p = ar.pow(a, bm1);
                         ar.mul(b, p)
                     }),
-                    (true, false) => chain(ar, db, |ar| {
-                        let ln = ar.call(Func::Log, a);
-                        ar.mul(e, ln)
-                    }),
+                    (true, false) => chain(ar, db, |ar| exponent_derivative(ar, a, e)),
                     (false, false) => {
-                        let ln = ar.call(Func::Log, a);
-                        let t1 = ar.mul(db, ln);
-                        let bda = ar.mul(b, da);
-                        let t2 = ar.div(bda, a);
-                        let s = ar.add(t1, t2);
-                        ar.mul(e, s)
+                        // ∂/∂b a^b · b' + b a^(b−1) · a' (not a^b (b' ln a + b a'/a), which is
+                        // 0/0 at a = 0).
+                        let t1 = exponent_derivative(ar, a, e);
+                        let t1 = ar.mul(t1, db);
+                        let one = ar.constant(1.0);
+                        let bm1 = ar.sub(b, one);
+                        let p = ar.pow(a, bm1);
+                        let bp = ar.mul(b, p);
+                        let t2 = ar.mul(bp, da);
+                        ar.add(t1, t2)
                     }
                 }
             }
@@ -158,6 +159,16 @@ pub fn diff(ar: &mut ExprArena, root: ExprId, var: Var) -> ExprId {
         d[i] = r;
     }
     d[root.index()]
+}
+
+/// ∂(a^b)/∂b = a^b ln a for `e` = a^b, taken as 0 where a^b = 0 (a = 0, b > 0: a^b is 0 for
+/// every such b, the limit of a^b ln a as a → 0⁺), where the product would be 0·(−∞): t^p at
+/// t = 0 has ∂/∂p = 0, not NaN. A NaN a^b (a < 0) stays NaN in the value itself.
+fn exponent_derivative(ar: &mut ExprArena, a: ExprId, e: ExprId) -> ExprId {
+    let ln = ar.call(Func::Log, a);
+    let d = ar.mul(e, ln);
+    let zero = ar.constant(0.0);
+    ar.select(Cmp::Gt, e, d, zero)
 }
 
 /// The chain rule f'(a)·a' for an outer function f of one argument a, with a' = `da` and

@@ -16,6 +16,21 @@ use std::fmt;
 /// their second half chatter (a sliding mode): 10⁻⁶, a million times the resolution of t.
 pub const CHATTER_SPAN: f64 = 1e-6;
 
+/// A time as a message prints it: the shortest decimal that reads back as t, in exponent form
+/// when that decimal would be long (|t| < 10⁻⁴ or ≥ 10¹⁶; `{}` of 2.3e-310 is 310 digits).
+pub struct Time(pub f64);
+
+impl fmt::Display for Time {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let t = self.0;
+        if t != 0.0 && t.is_finite() && !(1e-4..1e16).contains(&t.abs()) {
+            write!(f, "{t:e}")
+        } else {
+            write!(f, "{t}")
+        }
+    }
+}
+
 /// A run that could not produce a cost and a gradient.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SolveError {
@@ -179,9 +194,11 @@ impl fmt::Display for SolveError {
                 write!(f, "parameter {index} is not finite ({value})")
             }
             SolveError::BadOption { what } => write!(f, "bad option: {what}"),
-            SolveError::NonFinite { t, what } => write!(f, "non-finite value in {what} at t = {t}"),
+            SolveError::NonFinite { t, what } => {
+                write!(f, "non-finite value in {what} at t = {}", Time(*t))
+            }
             SolveError::StepSizeUnderflow { t, h, largest } => {
-                write!(f, "step size underflow at t = {t} (step {h:e}")?;
+                write!(f, "step size underflow at t = {} (step {h:e}", Time(*t))?;
                 write_largest(f, *largest)
             }
             SolveError::MaxSteps {
@@ -193,7 +210,8 @@ impl fmt::Display for SolveError {
             } => {
                 write!(
                     f,
-                    "gave up after {steps} steps at t = {t} (max_steps, last step {h:e}"
+                    "gave up after {steps} steps at t = {} (max_steps, last step {h:e}",
+                    Time(*t)
                 )?;
                 write_largest(f, *largest)?;
                 if *not_stiff {
@@ -211,7 +229,11 @@ impl fmt::Display for SolveError {
                 }
             }
             SolveError::MaxEvents { t, count, span } => {
-                write!(f, "stopped after {count} events at t = {t} (max_events)")?;
+                write!(
+                    f,
+                    "stopped after {count} events at t = {} (max_events)",
+                    Time(*t)
+                )?;
                 if *span <= CHATTER_SPAN * t.abs().max(1.0) {
                     write!(
                         f,
@@ -240,7 +262,7 @@ impl fmt::Display for SolveError {
             SolveError::NoSuchParam { index, count } => {
                 write!(f, "parameter {index} out of range (the model has {count})")
             }
-            SolveError::Qp { t, qp, error } => write!(f, "qp `{qp}` at t = {t}: {error}"),
+            SolveError::Qp { t, qp, error } => write!(f, "qp `{qp}` at t = {}: {error}", Time(*t)),
         }
     }
 }
@@ -251,3 +273,29 @@ fn write_largest(f: &mut fmt::Formatter<'_>, largest: f64) -> fmt::Result {
 }
 
 impl std::error::Error for SolveError {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Times print as the shortest decimal that reads back, in exponent form where that
+    /// would be long: an adjoint failure near t = 0 once printed 330 digits.
+    #[test]
+    fn times_in_messages_are_short() {
+        let shown = |t: f64| Time(t).to_string();
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(2.5), "2.5");
+        assert_eq!(shown(1e6), "1000000");
+        assert_eq!(shown(3.187270310537978e-300), "3.187270310537978e-300");
+        assert_eq!(shown(-2e-7), "-2e-7");
+        assert_eq!(shown(1e20), "1e20");
+        for t in [3.187270310537978e-300, 0.1 + 0.2, 5.7469577113268375, 1e300] {
+            assert_eq!(shown(t).parse::<f64>().expect("reads back"), t);
+        }
+        let e = SolveError::NonFinite {
+            t: 2.3e-310,
+            what: "x".into(),
+        };
+        assert_eq!(e.to_string(), "non-finite value in x at t = 2.3e-310");
+    }
+}
