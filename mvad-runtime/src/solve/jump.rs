@@ -60,8 +60,8 @@ where
         let timed = info.events[k].is_time_event();
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
-        if timed && t == 0.0 && self.sens && self.dt.iter().any(|&v| v != 0.0) {
-            self.report_time_event_at_start(k);
+        if timed && self.sens && (t == 0.0 || t == self.t_end) && self.moves_off_an_end(t) {
+            self.report_time_event_at_an_end(k, t);
         }
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
@@ -129,20 +129,44 @@ where
         Ok(())
     }
 
-    /// The `kink` diagnostic for time event k firing at t = 0 with a time that moves with θ
-    /// (τ' ≠ 0): on one side of θ it fires at the start of the run, on the other before it
-    /// (never), so C jumps or kinks there and dC/dθ is its one-sided value (the side on
-    /// which the event fires).
+    /// Whether the time event just approached at t = 0 or t = T (its t' in `self.dt`) moves
+    /// relative to that end: t' ≠ 0 at the start, t' ≠ dT/dθ at the horizon (an event at a
+    /// horizon that moves with it stays on it).
+    fn moves_off_an_end(&self, t: f64) -> bool {
+        if t == 0.0 {
+            self.dt.iter().any(|&v| v != 0.0)
+        } else {
+            self.dt.iter().zip(self.dt_end.iter()).any(|(a, b)| a != b)
+        }
+    }
+
+    /// The `kink` diagnostic for time event k firing at an end of the run (t = 0 or t = T)
+    /// with a time that moves with θ (τ' ≠ 0): on one side of θ it fires at the end, on the
+    /// other outside the run (never), so C jumps or kinks there and dC/dθ is its one-sided
+    /// value (the side on which the event fires). At T only an event that changes something
+    /// (a reset, a cost, a mode) is reported: one that does nothing leaves C as it is.
     #[cold]
     #[inline(never)]
-    fn report_time_event_at_start(&mut self, k: usize) {
+    fn report_time_event_at_an_end(&mut self, k: usize, t: f64) {
+        let ev = &self.model.info().events[k];
+        let (side, changes) = if t == 0.0 {
+            ("before the run", true)
+        } else {
+            (
+                "after the horizon",
+                ev.has_reset || ev.has_cost || ev.target.is_some(),
+            )
+        };
+        if !changes {
+            return;
+        }
         self.diagnostics.push(Diagnostic {
             kind: DiagnosticKind::Kink,
-            t: 0.0,
+            t,
             message: format!(
-                "time event `{}` fires at t = 0 and its time moves with the params: on one side \
-                 it falls before the run and does not fire, so C is not differentiable here and \
-                 the gradient is the one-sided value with the event",
+                "time event `{}` fires at t = {t}, an end of the run, and its time moves with the \
+                 params: on one side it falls {side} and does not fire, so C is not \
+                 differentiable here and the gradient is the one-sided value with the event",
                 self.event_name(k)
             ),
         });
