@@ -23,7 +23,8 @@
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
 //! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
-//! `record` the trajectory record; `finish` the end of the run.
+//! `record` the trajectory record; `finish` the end of the run; `watch` what each mode
+//! watches.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
 mod conditioning;
@@ -34,6 +35,7 @@ mod record;
 mod resolution;
 mod schedule;
 mod undecided;
+mod watch;
 mod zeno;
 
 pub(crate) use conditioning::judge;
@@ -50,6 +52,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 use record::Recorder;
 use schedule::Schedule;
 use std::time::Instant;
+use watch::ModeWatch;
 use zeno::Zeno;
 
 /// Simulates `model` at `params` and returns the cost, dC/dθ, the full event table and
@@ -199,58 +202,6 @@ fn nonfinite(t: f64, what: impl FnOnce() -> String) -> SolveError {
 /// event due that soon after an instant joins it (no step that short can be taken).
 fn time_resolution(t: f64) -> f64 {
     16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE
-}
-
-/// What the scanner watches in one mode: every switching function and the state events armed
-/// there (time events are not watched: the loop steps onto their times), and whether all of
-/// them are affine guards (a mode with a switching function is not).
-struct ModeWatch {
-    /// The functions active in the mode, ascending.
-    list: Vec<usize>,
-    /// Some function is active.
-    any: bool,
-    /// Every active function is an affine guard.
-    affine: bool,
-    /// The active functions that are not affine guards: steps are cut until they are
-    /// resolved (see `resolution`).
-    unresolved: Vec<usize>,
-}
-
-impl ModeWatch {
-    /// The watch of every mode of `model`.
-    fn of_modes<M: HybridModel>(model: &M) -> Vec<ModeWatch>
-    where
-        DefaultAllocator: ModelAlloc<M::N, M::P>,
-    {
-        let info = model.info();
-        let nev = info.events.len();
-        (0..info.modes.len())
-            .map(|mode| {
-                let active: Vec<bool> = (0..nev + info.switches)
-                    .map(|w| {
-                        w >= nev
-                            || (info.events[w].armed_in(mode) && !info.events[w].is_time_event())
-                    })
-                    .collect();
-                let affine = active
-                    .iter()
-                    .enumerate()
-                    .all(|(w, &a)| !a || (w < nev && model.guard_is_affine(w)));
-                let list: Vec<usize> = (0..active.len()).filter(|&w| active[w]).collect();
-                let unresolved = list
-                    .iter()
-                    .copied()
-                    .filter(|&w| w >= nev || !model.guard_is_affine(w))
-                    .collect();
-                ModeWatch {
-                    any: !list.is_empty(),
-                    list,
-                    affine,
-                    unresolved,
-                }
-            })
-            .collect()
-    }
 }
 
 /// All state and buffers of one run (allocated once in `new`).
