@@ -607,11 +607,12 @@ where
         // Still in the same constant-rate mode under the same bits and held rows (a time
         // event that changed none of them): k₀ = F stays where the last exact step left it.
         let rhs = &self.sys.rhs;
+        let same_held = held == rhs.held.as_slice();
         if self.scheme == Scheme::Exact
             && self.dense_scheme == Scheme::Exact
             && mode == rhs.flow.mode
             && *sw == rhs.flow.sw
-            && held == rhs.held.as_slice()
+            && same_held
         {
             self.restart_exact_keeping_rate(t, y);
             return;
@@ -619,8 +620,10 @@ where
         let rhs = &mut self.sys.rhs;
         rhs.flow.mode = mode;
         rhs.flow.sw.clone_from(sw);
-        rhs.held.clear();
-        rhs.held.extend_from_slice(held);
+        if !same_held {
+            rhs.held.clear();
+            rhs.held.extend_from_slice(held);
+        }
         self.restart_at(t, y);
         if self.scheme == Scheme::Exact && held.is_empty() {
             self.reuse_constant_rate();

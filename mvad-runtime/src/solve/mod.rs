@@ -480,20 +480,22 @@ where
         let watch = &self.watch[self.mode];
         self.affine_watch = watch.affine;
         self.scanner.begin_restart();
+        // (Asked once: the loop below runs at every restart.)
+        let (holding, released) = (self.zeno.holding(), self.zeno.released_any());
         for &w in &watch.list {
             // An event whose accumulation is held at its limit is not watched: its guard
             // stays on zero, where it could only fire again.
-            if self.zeno.holds_event(w) {
+            if holding && self.zeno.holds_event(w) {
                 continue;
             }
             let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x);
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
             }
-            let fired = if w < nev {
-                self.fired[w].or(self.zeno.released_firing_value(w))
-            } else {
-                None
+            let fired = match (w < nev, released) {
+                (false, _) => None,
+                (true, false) => self.fired[w],
+                (true, true) => self.fired[w].or(self.zeno.released_firing_value(w)),
             };
             self.scanner.restart_one(w, v, fired);
         }
@@ -504,7 +506,9 @@ where
                 self.fired[c.w] = None;
             }
         }
-        self.zeno.forget_released();
+        if released {
+            self.zeno.forget_released();
+        }
         self.resolution.forget();
         self.undecided.clear();
         self.integ

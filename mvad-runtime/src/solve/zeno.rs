@@ -187,6 +187,12 @@ where
         self.released.contains(&w).then_some(0.0)
     }
 
+    /// Whether some hold ended at the instant just applied.
+    #[inline]
+    pub(super) fn released_any(&self) -> bool {
+        !self.released.is_empty()
+    }
+
     /// The restart after the holds released at an instant has been made.
     pub(super) fn forget_released(&mut self) {
         self.released.clear();
