@@ -457,3 +457,47 @@ fn time_events_in_adjoint_mode_match_forward_mode_through_both_doors() {
         assert!(rel(sol.gradient[1], dscs) < 1e-12, "{:?}", sol.gradient);
     }
 }
+
+/// A time event exactly at an end of the run whose time moves with θ makes C jump there (on one
+/// side it falls outside [0, T] and does not fire): a `kink` diagnostic at t = 0 and at t = T,
+/// the gradient the one-sided value with the event. At a horizon that moves with the event
+/// (`horizon tau`) it stays on the end: no kink.
+#[test]
+fn a_time_event_at_an_end_of_the_run_moving_with_the_params_is_a_kink() {
+    let model = |at: &str, horizon: &str| {
+        InterpretedModel::from_source(&format!(
+            "model EndEvent {{
+                param tau = {at}; param b = 1; param x0 = 1;
+                state x = x0;
+                flow {{ der(x) = 0; }}
+                event kick at tau {{ x = x + b; }}
+                cost = final(x) + integral(x);
+                horizon {horizon};
+            }}"
+        ))
+        .expect("valid")
+    };
+    let kinks = |m: &InterpretedModel| {
+        let sol = mvad_tests::solve_at_defaults(m, &Options::default());
+        let ts: Vec<f64> = sol
+            .diagnostics
+            .iter()
+            .filter(|d| d.kind == mvad::runtime::solution::DiagnosticKind::Kink)
+            .map(|d| d.t)
+            .collect();
+        (ts, sol)
+    };
+    // At T = 2: C = (x0 + b) + x0 τ + (x0 + b)(T − τ) for τ ≤ T: 4 at τ = T, dC/dτ = −b from
+    // the side where it fires (x0 + b + x0 T = 3 for τ > T).
+    let (ts, sol) = kinks(&model("2", "2"));
+    assert_eq!(ts, vec![2.0]);
+    assert_near(sol.cost, 4.0, 1e-12, "C at T");
+    assert_near(sol.gradient[0], -1.0, 1e-12, "dC/dtau at T");
+    // At t = 0: the kick fires at the start, x = x0 + b on [0, 2]: C = 2 (x0 + b) + (x0 + b).
+    let (ts, sol) = kinks(&model("0", "2"));
+    assert_eq!(ts, vec![0.0]);
+    assert_near(sol.cost, 6.0, 1e-12, "C at 0");
+    // The horizon moves with the event: no kink.
+    let (ts, _) = kinks(&model("2", "tau"));
+    assert!(ts.is_empty(), "{ts:?}");
+}

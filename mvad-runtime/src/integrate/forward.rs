@@ -38,6 +38,15 @@
 //! nothing here takes a difference quotient (a hand-written model without them gets the
 //! trait's central-difference defaults).
 //! The S and q_θ orders are verified empirically in the tests.
+//!
+//! ## Held rows
+//! After a Zeno accumulation the states the accumulation constrains are held at its limit
+//! (see `solve/zeno.rs`): the system then integrates the *masked* flow, the rows `held` of f
+//! and of f_x S + f_θ set to zero after the model's evaluation (and the same rows of f_x,
+//! ∂ₜf, ∂ₜ(f_x S + f_θ) and B K_x in the Rosenbrock stages and the global error estimate),
+//! so the held states keep their values exactly while the others follow their flow, reading
+//! the held values, and q, q_θ integrate ℓ along that. With every row held and no running
+//! cost F = 0: a constant rate, one exact step.
 
 use super::aug::{weighted_rms, AugState};
 use super::global_error::GlobalError;
@@ -48,7 +57,7 @@ use super::{Integrator, Scheme};
 use crate::model::ModelSecondOrder;
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::solution::{Method, Options};
-use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
+use nalgebra::{Const, DefaultAllocator, Dim, Matrix, OMatrix, OVector, StorageMut};
 
 /// The forward augmented system (x, S, q, q_θ) of `model` at parameters θ in one mode with
 /// frozen switch bits (see the module doc).
@@ -139,6 +148,9 @@ where
     flow: ModeFlow<'a, M>,
     /// S and q_θ are integrated.
     sens: bool,
+    /// The rows of f (and of f_x S + f_θ) held at zero, ascending (see the module doc):
+    /// empty but during the hold after an accumulation.
+    held: Vec<usize>,
     /// ℓ_x scratch.
     lx: OVector<f64, M::N>,
     /// ℓ_θ scratch.
@@ -204,6 +216,7 @@ where
             rhs: Rhs {
                 flow: ModeFlow::new(model, p),
                 sens: opts.sensitivities,
+                held: Vec::new(),
                 lx: OVector::zeros_generic(n, Const::<1>),
                 lp: OVector::zeros_generic(np, Const::<1>),
             },
@@ -233,10 +246,38 @@ where
     }
 }
 
+/// Sets the rows `rows` of `m` (a flow vector, a Jacobian or a matrix of sensitivity rates)
+/// to zero: the masked flow of held states (see the module doc).
+#[inline]
+pub(crate) fn zero_rows<R: Dim, C: Dim, S>(m: &mut Matrix<f64, R, C, S>, rows: &[usize])
+where
+    S: StorageMut<f64, R, C>,
+{
+    for &i in rows {
+        m.row_mut(i).fill(0.0);
+    }
+}
+
 impl<M: HybridModel> Rhs<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    /// f_x at `pt` into `jac`, its held rows zero.
+    #[inline]
+    fn jac_x(&self, pt: Point<'_, M::N, M::P>, jac: &mut OMatrix<f64, M::N, M::N>) {
+        self.flow.model.rhs_jac_x(pt, jac);
+        zero_rows(jac, &self.held);
+    }
+
+    /// Whether F is constant until the next restart: a constant-rate mode (its masked flow
+    /// is as constant), or every row held and no running cost (F = 0).
+    fn constant(&self, has_slot: bool) -> bool {
+        has_slot
+            || (!self.flow.has_rc
+                && !self.held.is_empty()
+                && self.held.len() == self.flow.model.nstates().value())
+    }
+
     /// out = F(t, y): (f, f_x S + f_θ, ℓ, ℓ_x S + ℓ_θ).
     #[inline]
     fn eval(&mut self, t: f64, y: &AugState<M::N, M::P>, out: &mut AugState<M::N, M::P>) {
@@ -247,6 +288,12 @@ where
                 .rhs_sens(self.flow.point(t, &y.x), &y.s, &mut out.x, &mut out.s);
         } else {
             self.flow.model.rhs(self.flow.point(t, &y.x), &mut out.x);
+        }
+        if !self.held.is_empty() {
+            zero_rows(&mut out.x, &self.held);
+            if self.sens {
+                zero_rows(&mut out.s, &self.held);
+            }
         }
         if !self.flow.has_rc {
             out.q = 0.0;
@@ -305,11 +352,13 @@ where
     }
 
     /// A mode whose flow is a function of θ alone ([`HybridModel::flow_is_constant`]) and no
-    /// running cost: F = (f(θ), f_θ(θ), 0, 0).
+    /// running cost: F = (f(θ), f_θ(θ), 0, 0) (its held rows zero); or every row held and no
+    /// running cost: F = 0.
     #[inline]
     fn constant_rate(&self) -> bool {
         // `rates` holds a slot exactly for the modes with !has_rc && flow_is_constant.
-        matches!(self.rates.get(self.rhs.flow.mode), Some(Some(_)))
+        let slot = matches!(self.rates.get(self.rhs.flow.mode), Some(Some(_)));
+        self.rhs.constant(slot)
     }
 
     #[inline]
@@ -376,11 +425,13 @@ where
         let (model, p, mode) = (rhs.flow.model, rhs.flow.p, rhs.flow.mode);
         let pt = rhs.flow.point(t0, &y0.x);
         let lin = &mut w.lin;
-        model.rhs_jac_x(pt, &mut lin.w.jac);
+        rhs.jac_x(pt, &mut lin.w.jac);
         lin.w.power_iteration();
         model.rhs_dt(pt, &mut lin.dt.x);
+        zero_rows(&mut lin.dt.x, &rhs.held);
         if rhs.sens && model.rhs_depends_on_t(mode) {
             model.rhs_sens_dt(pt, &y0.s, &mut lin.dt.s);
+            zero_rows(&mut lin.dt.s, &rhs.held);
         } else {
             lin.dt.s.fill(0.0);
         }
@@ -435,6 +486,7 @@ where
         // K_S = W⁻¹ hγ (R_S + B K_x), B K_x at (t0, x0, S0); D K_x likewise.
         let pt = rhs.flow.point(t0, &y0.x);
         rhs.flow.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
+        zero_rows(&mut k.s, &rhs.held);
         k.s += &r.s;
         if rhs.flow.has_rc {
             rhs.flow.model.running_cost_sens_dir_x(
@@ -480,7 +532,7 @@ where
         };
         let (model, p) = (rhs.flow.model, rhs.flow.p);
         let pt = rhs.flow.point(t0, &y0.x);
-        model.rhs_jac_x(pt, &mut imp.lin.w.jac);
+        rhs.jac_x(pt, &mut imp.lin.w.jac);
         if rhs.flow.has_rc {
             model.running_cost_grad_x(&rhs.flow.sw, At::new(t0, &y0.x, p), &mut imp.lx0);
         }
@@ -506,9 +558,7 @@ where
     fn spectral_radius_at(&mut self, t: f64, y: &Self::Vector) -> f64 {
         let rhs = &self.rhs;
         let w = &mut self.imp.lin.w;
-        rhs.flow
-            .model
-            .rhs_jac_x(rhs.flow.point(t, &y.x), &mut w.jac);
+        rhs.jac_x(rhs.flow.point(t, &y.x), &mut w.jac);
         w.power_iteration()
     }
 }
@@ -531,7 +581,7 @@ where
     }
 
     /// Forget all history (no FSAL reuse, no old Jacobian, no step-size memory) and restart at
-    /// (t, y) in `mode` with frozen switch bits `sw`.
+    /// (t, y) in `mode` with frozen switch bits `sw`, no row held.
     ///
     /// Must be called at the start and after every event, mode switch or switch flip. Under
     /// `auto` the method in use (explicit or implicit) is kept: stiffness is a property of the
@@ -540,26 +590,49 @@ where
     /// In a constant-rate mode the first step's k₀ = F is the mode's F as first evaluated
     /// under the same switch bits (F does not depend on t or Y there), not a new evaluation.
     pub fn restart(&mut self, t: f64, y: &AugState<M::N, M::P>, mode: usize, sw: &Switches) {
-        // Still in the same constant-rate mode under the same bits (a time event that
-        // changed neither): k₀ = F stays where the last exact step left it.
+        self.restart_holding(t, y, mode, sw, &[]);
+    }
+
+    /// [`Integrator::restart`] with the rows `held` (ascending state indices) of the flow and
+    /// of its sensitivity rate held at zero until the next restart (the masked flow after an
+    /// accumulation, see the module doc of `forward.rs`).
+    pub fn restart_holding(
+        &mut self,
+        t: f64,
+        y: &AugState<M::N, M::P>,
+        mode: usize,
+        sw: &Switches,
+        held: &[usize],
+    ) {
+        // Still in the same constant-rate mode under the same bits and held rows (a time
+        // event that changed none of them): k₀ = F stays where the last exact step left it.
+        let rhs = &self.sys.rhs;
+        let same_held = held == rhs.held.as_slice();
         if self.scheme == Scheme::Exact
             && self.dense_scheme == Scheme::Exact
-            && mode == self.sys.rhs.flow.mode
-            && *sw == self.sys.rhs.flow.sw
+            && mode == rhs.flow.mode
+            && *sw == rhs.flow.sw
+            && same_held
         {
             self.restart_exact_keeping_rate(t, y);
             return;
         }
-        self.sys.rhs.flow.mode = mode;
-        self.sys.rhs.flow.sw.clone_from(sw);
+        let rhs = &mut self.sys.rhs;
+        rhs.flow.mode = mode;
+        rhs.flow.sw.clone_from(sw);
+        if !same_held {
+            rhs.held.clear();
+            rhs.held.extend_from_slice(held);
+        }
         self.restart_at(t, y);
-        if self.scheme == Scheme::Exact {
+        if self.scheme == Scheme::Exact && held.is_empty() {
             self.reuse_constant_rate();
         }
     }
 
     /// k₀ = the mode's constant F, evaluated here on the first restart into the mode under
-    /// these bits. A non-finite F is not kept: the first step evaluates it again and reports it.
+    /// these bits (with no row held: a masked F is evaluated by the first step, not cached).
+    /// A non-finite F is not kept: the first step evaluates it again and reports it.
     fn reuse_constant_rate(&mut self) {
         let sys = &mut self.sys;
         let Some(Some(c)) = sys.rates.get_mut(sys.rhs.flow.mode) else {
@@ -585,6 +658,11 @@ where
     /// Current frozen switch bits.
     pub fn switches(&self) -> &Switches {
         &self.sys.rhs.flow.sw
+    }
+    /// The rows of the flow held at zero since the last restart (empty but after an
+    /// accumulation).
+    pub fn held(&self) -> &[usize] {
+        &self.sys.rhs.held
     }
     /// The run's global error estimate (`None` when `Options::global_error` is off); the
     /// last accepted step may still be pending ([`Integrator::close_step`]).

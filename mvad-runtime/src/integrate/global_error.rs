@@ -420,6 +420,29 @@ where
         self.beta.fill(0.0);
     }
 
+    /// At the limit of an accumulation, which the driver snaps onto the accumulating guard
+    /// (x* ← x* − ∇g g/|∇g|², S* onto the guard's tangent): the time shifts become the errors
+    /// they are at the limit, under the flow f the hold follows there (its held rows zero) and
+    /// running cost ℓ, and the errors of x and of S's columns lose their components along ∇g,
+    /// which the snap makes exact (the resting ball's h* = 0: a held h with an estimated error
+    /// would otherwise grow the estimate of ∫h by that error times T − t*).
+    pub fn onto_guard(&mut self, f: &OVector<f64, N>, l: f64, gx: &OVector<f64, N>, sens: bool) {
+        if self.zero {
+            return;
+        }
+        self.materialise(f, l, sens);
+        let n2 = gx.norm_squared();
+        if !(n2 > 0.0 && n2.is_finite()) {
+            return;
+        }
+        let along = gx.dot(&self.r.x) / n2;
+        self.r.x.axpy(-along, gx, 1.0);
+        if sens {
+            self.dts.gemv_tr(1.0 / n2, &self.r.s, gx, 0.0);
+            self.r.s.ger(-1.0, gx, &self.dts, 1.0);
+        }
+    }
+
     /// The linearised jump at an event (see the module doc); the time shifts are turned into
     /// the errors they are at t⁻ first (the linearised jump maps them exactly).
     pub fn jump(&mut self, s: &Saltation<'_, N>, sens: bool) {

@@ -73,6 +73,7 @@ pub use adjoint::Backward;
 pub use adjoint_error::{AdjointError, LamGrad};
 pub(crate) use aug::sens_weight;
 pub use aug::AugState;
+pub(crate) use forward::zero_rows;
 pub use forward::Forward;
 pub use global_error::{EventRounding, GlobalError, JumpOf, ResetSecant, Saltation};
 pub use scheme::Scheme;

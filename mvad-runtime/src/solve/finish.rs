@@ -1,10 +1,11 @@
 //! The end of a run: C and dC/dθ at T (see [`crate::reduce::final_terms`]), or at the limit
 //! of an accumulation (see [`super::zeno`]), and the [`Solution`].
 
-use super::zeno::ZENO_RATIOS;
+use super::zeno::{Hold, ZENO_RATIOS};
 use super::Driver;
 use crate::adjoint::record::Tape;
 use crate::error::SolveError;
+use crate::integrate::zero_rows;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{final_terms, FinalWork};
 use crate::solution::{Diagnostic, DiagnosticKind, Solution, Stats};
@@ -22,15 +23,13 @@ where
         let (model, p, t_end, sens) = (self.model, self.p, self.t_end, self.sens);
         let mut fw = FinalWork::new(model);
         self.integ.close_step();
-        // After an accumulation the run's state is the held limit in `self.y` (see
-        // `after_accumulation`), whose flow is zero; otherwise the integrator's at T.
-        let held = self.zeno.holding();
-        if !held {
-            self.y.copy_from(self.integ.y());
-            if let Some(rec) = &mut self.rec {
-                rec.close_segment(t_end, self.mode, &self.sw);
-                rec.finish(t_end, &self.y.x, self.mode, &self.sw);
-            }
+        self.y.copy_from(self.integ.y());
+        if let Some(rec) = &mut self.rec {
+            rec.close_segment(t_end, self.mode, &self.sw);
+            rec.finish(t_end, &self.y.x, self.mode, &self.sw);
+        }
+        for h in self.zeno.take_holds() {
+            self.report_accumulation(&h, None);
         }
         let x_final = self.y.x.clone();
         let s_final = self.y.s.clone();
@@ -40,14 +39,12 @@ where
             grad.copy_from(&self.y.qp);
             grad += &self.g_ev;
         }
-        if held {
-            fw.f.fill(0.0);
-        } else {
-            model.rhs(
-                Point::new(self.mode, &self.sw, t_end, &x_final, p),
-                &mut fw.f,
-            );
-        }
+        // f(T): the masked flow if states are held at the limit of an accumulation.
+        model.rhs(
+            Point::new(self.mode, &self.sw, t_end, &x_final, p),
+            &mut fw.f,
+        );
+        zero_rows(&mut fw.f, &self.held);
         let f_end = fw.f.clone();
         cost += final_terms(
             model,
@@ -98,47 +95,40 @@ where
         Ok((sol, tape))
     }
 
-    /// The `zeno` diagnostic of an accumulation of event k's occurrences at t* (`stuck`: at
-    /// a single instant, the state stuck on the guard), held at its limit on [t*, T] or, when
-    /// `released_at` is τ, until a time event at τ moved it off (the run went on from there);
-    /// `frozen` names the states held although the accumulation does not constrain them.
-    pub(super) fn report_accumulation(
-        &mut self,
-        k: usize,
-        stuck: bool,
-        t_star: f64,
-        ratio: f64,
-        released_at: Option<f64>,
-        frozen: &[String],
-    ) {
-        let n = self.nevents;
-        let name = self.event_name(k);
-        let held = match released_at {
+    /// The `zeno` diagnostic of the accumulation `h` (of event k's occurrences at t*, or at
+    /// a single instant when stuck on the guard): the states it constrains held at the limit
+    /// on [t*, T] or, when `released_at` is τ, until events at τ moved them off (the run went
+    /// on from there); the others followed their flow.
+    pub(super) fn report_accumulation(&mut self, h: &Hold<M>, released_at: Option<f64>) {
+        let info = self.model.info();
+        let name = self.event_name(h.event);
+        let (t_star, ratio, n) = (h.t_star, h.ratio, h.events);
+        let span = match released_at {
             None => "[t*, T]".to_string(),
-            Some(tau) => format!(
-                "[t*, {tau}], where a time event moved it off the guard and the run went on"
-            ),
+            Some(tau) => format!("[t*, {tau}], where an event moved them off and the run went on"),
         };
-        let message = if stuck {
+        let held: Vec<String> = (0..h.constrained.len())
+            .filter(|&i| h.constrained[i])
+            .map(|i| format!("`{}`", info.states[i]))
+            .collect();
+        let free = if held.len() == h.constrained.len() {
+            String::new()
+        } else {
+            "; the other states follow their flow".to_string()
+        };
+        let held = held.join(", ");
+        let message = if h.stuck {
             format!(
                 "after event `{name}` at t* = {t_star} the flow carries the state straight back \
-                 through its guard: events accumulate there; the state is held at rest on {held}"
+                 through its guard: events accumulate there; states {held} are held at rest on \
+                 {span}{free}"
             )
         } else {
             format!(
                 "events of `{name}` accumulate (dwell-time ratio {ratio:.4} over the last \
                  {ZENO_RATIOS} dwells) at the estimated accumulation time t* = {t_star} after {n} \
-                 events; the tail was extrapolated (Aitken) and the state held at its limit on {held}"
-            )
-        };
-        let message = if frozen.is_empty() {
-            message
-        } else {
-            format!(
-                "{message}; states {} take no part in the accumulation and have a non-zero flow \
-                 at t*, yet were held too: their values after t*, and what reads them, are \
-                 those of a frozen state, not of their flow",
-                frozen.join(", ")
+                 events; the tail was extrapolated (Aitken) and states {held} are held at its \
+                 limit on {span}{free}"
             )
         };
         self.diagnostics.push(Diagnostic {

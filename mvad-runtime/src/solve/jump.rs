@@ -5,6 +5,7 @@
 use super::Driver;
 use crate::adjoint::record::JumpKind;
 use crate::error::SolveError;
+use crate::integrate::zero_rows;
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::sens;
 use crate::sink::{EventSink, EventView};
@@ -47,20 +48,20 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     /// Applies user event k at time t to `self.y` (the state at t⁻) and hands it to `sink`.
-    /// Returns true when the run must stop here: a Zeno accumulation has been reached or
-    /// the reset left the state stuck on its guard.
+    /// Sets `self.zeno_stop` when the run must restart from a limit: a Zeno accumulation has
+    /// been reached or the reset left the state stuck on its guard.
     pub(super) fn apply_event(
         &mut self,
         k: usize,
         t: f64,
         sink: &mut impl EventSink,
-    ) -> Result<bool, SolveError> {
+    ) -> Result<(), SolveError> {
         let info = self.model.info();
         let timed = info.events[k].is_time_event();
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
-        if timed && t == 0.0 && self.sens && self.dt.iter().any(|&v| v != 0.0) {
-            self.report_time_event_at_start(k);
+        if timed && self.sens && (t == 0.0 || t == self.t_end) && self.moves_off_an_end(t) {
+            self.report_time_event_at_an_end(k, t);
         }
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
@@ -125,23 +126,47 @@ where
             self.zeno_stop = Some((t, 0.0));
             self.stuck = Some(k);
         }
-        Ok(self.zeno_stop.is_some())
+        Ok(())
     }
 
-    /// The `kink` diagnostic for time event k firing at t = 0 with a time that moves with θ
-    /// (τ' ≠ 0): on one side of θ it fires at the start of the run, on the other before it
-    /// (never), so C jumps or kinks there and dC/dθ is its one-sided value (the side on
-    /// which the event fires).
+    /// Whether the time event just approached at t = 0 or t = T (its t' in `self.dt`) moves
+    /// relative to that end: t' ≠ 0 at the start, t' ≠ dT/dθ at the horizon (an event at a
+    /// horizon that moves with it stays on it).
+    fn moves_off_an_end(&self, t: f64) -> bool {
+        if t == 0.0 {
+            self.dt.iter().any(|&v| v != 0.0)
+        } else {
+            self.dt.iter().zip(self.dt_end.iter()).any(|(a, b)| a != b)
+        }
+    }
+
+    /// The `kink` diagnostic for time event k firing at an end of the run (t = 0 or t = T)
+    /// with a time that moves with θ (τ' ≠ 0): on one side of θ it fires at the end, on the
+    /// other outside the run (never), so C jumps or kinks there and dC/dθ is its one-sided
+    /// value (the side on which the event fires). At T only an event that changes something
+    /// (a reset, a cost, a mode) is reported: one that does nothing leaves C as it is.
     #[cold]
     #[inline(never)]
-    fn report_time_event_at_start(&mut self, k: usize) {
+    fn report_time_event_at_an_end(&mut self, k: usize, t: f64) {
+        let ev = &self.model.info().events[k];
+        let (side, changes) = if t == 0.0 {
+            ("before the run", true)
+        } else {
+            (
+                "after the horizon",
+                ev.has_reset || ev.has_cost || ev.target.is_some(),
+            )
+        };
+        if !changes {
+            return;
+        }
         self.diagnostics.push(Diagnostic {
             kind: DiagnosticKind::Kink,
-            t: 0.0,
+            t,
             message: format!(
-                "time event `{}` fires at t = 0 and its time moves with the params: on one side \
-                 it falls before the run and does not fire, so C is not differentiable here and \
-                 the gradient is the one-sided value with the event",
+                "time event `{}` fires at t = {t}, an end of the run, and its time moves with the \
+                 params: on one side it falls {side} and does not fire, so C is not \
+                 differentiable here and the gradient is the one-sided value with the event",
                 self.event_name(k)
             ),
         });
@@ -206,18 +231,15 @@ where
         Ok(approach)
     }
 
-    /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite.
+    /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite: the
+    /// masked flow during a hold (the held rows zero; see `zeno`).
     fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
         let info = self.model.info();
-        if self.zeno.holding() {
-            // Held at the limit of an accumulation: the state does not move.
-            self.f_minus.fill(0.0);
-            return Ok(());
-        }
         self.model.rhs(
             Point::new(self.mode, &self.sw, t, &self.y.x, self.p),
             &mut self.f_minus,
         );
+        zero_rows(&mut self.f_minus, &self.held);
         self.nonfinite_x(t, &self.f_minus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })
@@ -308,7 +330,7 @@ where
     }
 
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
-    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (zero unless `flows`, see
+    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (masked during a hold; zero unless `flows`, see
     /// [`Approach::flows`]) and, with sensitivities, S⁺ by the saltation jump (see
     /// [`sens::jump`]) into `self.s_plus`.
     fn event_reset(&mut self, k: usize, j: usize, t: f64, flows: bool) -> Result<(), SolveError> {
@@ -329,6 +351,8 @@ where
                 Point::new(mode_after, &self.sw_next, t, &self.x_plus, p),
                 &mut self.f_plus,
             );
+            // During a hold the masked flow (released rows are corrected in `review_holds`).
+            zero_rows(&mut self.f_plus, &self.held);
             self.nonfinite_x(t, &self.f_plus, || {
                 format!("flow of mode `{}`", info.modes[mode_after])
             })?;
@@ -472,7 +496,8 @@ where
         });
     }
 
-    /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump.
+    /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t' (the masked flows
+    /// during a hold), ℓ jump.
     pub(super) fn apply_switch(&mut self, j: usize, t: f64) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
@@ -486,6 +511,8 @@ where
             Point::new(self.mode, &self.sw_next, t, &self.y.x, p),
             &mut self.f_plus,
         );
+        zero_rows(&mut self.f_minus, &self.held);
+        zero_rows(&mut self.f_plus, &self.held);
         self.nonfinite_x(t, &self.f_plus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;

@@ -16,13 +16,15 @@
 //!    first step seeded with the length of the step that contained the event.
 //! 4. At T the final terms (see [`crate::reduce`]).
 //!
-//! Zeno accumulations and resets that leave the state on its guard end the run at the limit
-//! (see `zeno`).
+//! At a Zeno accumulation, or a reset that leaves the state on its guard, the run restarts
+//! from the limit with the states the accumulation constrains held there and the others
+//! following their flow (see `zeno`).
 //!
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
 //! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
-//! `record` the trajectory record; `finish` the end of the run.
+//! `record` the trajectory record; `finish` the end of the run; `watch` what each mode
+//! watches.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
 mod conditioning;
@@ -33,6 +35,7 @@ mod record;
 mod resolution;
 mod schedule;
 mod undecided;
+mod watch;
 mod zeno;
 
 pub(crate) use conditioning::judge;
@@ -40,7 +43,7 @@ pub(crate) use conditioning::judge;
 use crate::adjoint::record::{Tape, MAX_COEFS};
 use crate::error::SolveError;
 use crate::event::{Crossing, Scanner, Watch};
-use crate::integrate::{AugState, Forward, Integrator, OdeSystem, Scheme};
+use crate::integrate::{zero_rows, AugState, Forward, Integrator, OdeSystem, Scheme};
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use crate::reduce::CompensatedSum;
 use crate::sink::EventSink;
@@ -49,6 +52,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 use record::Recorder;
 use schedule::Schedule;
 use std::time::Instant;
+use watch::ModeWatch;
 use zeno::Zeno;
 
 /// Simulates `model` at `params` and returns the cost, dC/dθ, the full event table and
@@ -200,58 +204,6 @@ fn time_resolution(t: f64) -> f64 {
     16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE
 }
 
-/// What the scanner watches in one mode: every switching function and the state events armed
-/// there (time events are not watched: the loop steps onto their times), and whether all of
-/// them are affine guards (a mode with a switching function is not).
-struct ModeWatch {
-    /// The functions active in the mode, ascending.
-    list: Vec<usize>,
-    /// Some function is active.
-    any: bool,
-    /// Every active function is an affine guard.
-    affine: bool,
-    /// The active functions that are not affine guards: steps are cut until they are
-    /// resolved (see `resolution`).
-    unresolved: Vec<usize>,
-}
-
-impl ModeWatch {
-    /// The watch of every mode of `model`.
-    fn of_modes<M: HybridModel>(model: &M) -> Vec<ModeWatch>
-    where
-        DefaultAllocator: ModelAlloc<M::N, M::P>,
-    {
-        let info = model.info();
-        let nev = info.events.len();
-        (0..info.modes.len())
-            .map(|mode| {
-                let active: Vec<bool> = (0..nev + info.switches)
-                    .map(|w| {
-                        w >= nev
-                            || (info.events[w].armed_in(mode) && !info.events[w].is_time_event())
-                    })
-                    .collect();
-                let affine = active
-                    .iter()
-                    .enumerate()
-                    .all(|(w, &a)| !a || (w < nev && model.guard_is_affine(w)));
-                let list: Vec<usize> = (0..active.len()).filter(|&w| active[w]).collect();
-                let unresolved = list
-                    .iter()
-                    .copied()
-                    .filter(|&w| w >= nev || !model.guard_is_affine(w))
-                    .collect();
-                ModeWatch {
-                    any: !list.is_empty(),
-                    list,
-                    affine,
-                    unresolved,
-                }
-            })
-            .collect()
-    }
-}
-
 /// All state and buffers of one run (allocated once in `new`).
 struct Driver<'a, M: HybridModel>
 where
@@ -322,6 +274,9 @@ where
     flood_half: Option<f64>,
     switch_crossings: usize,
     zeno: Zeno<M>,
+    /// The states held at the limit of an accumulation (ascending; empty but during a hold,
+    /// see `zeno`): the rows of the flow the integrator and every jump hold at zero.
+    held: Vec<usize>,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
     zeno_stop: Option<(f64, f64)>,
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
@@ -411,6 +366,7 @@ where
             flood_half: None,
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
+            held: Vec::new(),
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),
@@ -475,6 +431,7 @@ where
                 Point::new(self.mode, &self.sw_next, t, &x, self.p),
                 &mut self.work,
             );
+            zero_rows(&mut self.work, &self.held);
             for j in 0..nsw {
                 if self.sw_undecided.get(j) {
                     let st = self.model.switch_grad(
@@ -523,25 +480,39 @@ where
         let watch = &self.watch[self.mode];
         self.affine_watch = watch.affine;
         self.scanner.begin_restart();
+        // (Asked once: the loop below runs at every restart.)
+        let (holding, released) = (self.zeno.holding(), self.zeno.released_any());
         for &w in &watch.list {
+            // An event whose accumulation is held at its limit is not watched: its guard
+            // stays on zero, where it could only fire again.
+            if holding && self.zeno.holds_event(w) {
+                continue;
+            }
             let v = Self::signed(self.model, self.p, nev, &self.sw, w, t, &self.y.x);
             if v.is_nan() {
                 return Err(self.guard_nonfinite(w, t));
             }
-            let fired = if w < nev { self.fired[w] } else { None };
+            let fired = match (w < nev, released) {
+                (false, _) => None,
+                (true, false) => self.fired[w],
+                (true, true) => self.fired[w].or(self.zeno.released_firing_value(w)),
+            };
             self.scanner.restart_one(w, v, fired);
         }
-        // Only the events applied at this instant (in `scanner.found`) have a firing value.
-        // (A Zeno hold relies on this: the accumulating event's firing value outlives the
-        // hold, keeping it disarmed when a time event restarts the held state on its guard.)
+        // Only the events applied at this instant (in `scanner.found`) and those whose
+        // holds it released have a firing value.
         for c in &self.scanner.found {
             if c.w < nev {
                 self.fired[c.w] = None;
             }
         }
+        if released {
+            self.zeno.forget_released();
+        }
         self.resolution.forget();
         self.undecided.clear();
-        self.integ.restart(t, &self.y, self.mode, &self.sw);
+        self.integ
+            .restart_holding(t, &self.y, self.mode, &self.sw, &self.held);
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
         }
@@ -583,9 +554,7 @@ where
                     rec.close_segment(t, self.mode, &self.sw);
                 }
                 self.scanner.found.clear();
-                if self.fire_at(t, sink)? {
-                    return Ok(());
-                }
+                self.fire_at(t, sink)?;
                 continue;
             }
             if t >= self.t_end {
@@ -625,9 +594,7 @@ where
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(te, self.mode, &self.sw);
             }
-            if self.fire_at(te, sink)? {
-                return Ok(());
-            }
+            self.fire_at(te, sink)?;
         }
     }
 
@@ -677,9 +644,9 @@ where
     /// Applies everything that fires at t, `self.y` holding x(t⁻): the crossings in
     /// `scanner.found` and the time events armed in the current mode that are due by
     /// t + [`time_resolution`]; user events in declaration order, switch flips only when
-    /// no user event fires. Then checks the event budget and restarts. Returns true when the
-    /// run has ended (held at the limit of an accumulation up to T).
-    fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<bool, SolveError> {
+    /// no user event fires. Then checks the event budget and restarts: at t, or at t* when
+    /// the events accumulate (the hold begins, see `zeno`).
+    fn fire_at(&mut self, t: f64, sink: &mut impl EventSink) -> Result<(), SolveError> {
         // A time event joins this instant only if it is due within the resolution of t (a
         // step to it would be too short to take); one a little later fires at its own time.
         let due = t + time_resolution(t);
@@ -698,12 +665,11 @@ where
         }
         let nfound = self.scanner.found.len();
         let mut user = 0;
-        let mut stop = false;
         for i in 0..nfound {
             let c = self.scanner.found[i];
             if let Watch::Event(k) = self.scanner.watch(c.w) {
                 user += 1;
-                stop |= self.apply_event(k, t, sink)?;
+                self.apply_event(k, t, sink)?;
             }
         }
         if user == 0 {
@@ -732,9 +698,15 @@ where
                 span: t - self.flood_half.unwrap_or(t),
             });
         }
-        if stop {
-            // Held at the accumulation's limit until T, or until a time event resumes the run.
-            return self.after_accumulation(sink);
+        if let Some(verdict) = self.zeno_stop.take() {
+            // The constrained states are held at the accumulation's limit from t* on; the
+            // others follow their flow.
+            let t_star = self.begin_hold(verdict)?;
+            return self.restart(t_star);
+        }
+        if self.zeno.holding() {
+            // Whether the events at t left the held states at their limit.
+            self.review_holds(t);
         }
         // Seed the first step after the jump with the step size in use before it (the
         // error control still shrinks a seed that is too long): Hairer's start-up
@@ -745,7 +717,7 @@ where
         if self.integ.scheme() != Scheme::Exact {
             self.integ.set_step_size(h_seed);
         }
-        Ok(false)
+        Ok(())
     }
 
     /// At an instant of time events only (no crossing scanned), the armed state events whose

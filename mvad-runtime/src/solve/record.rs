@@ -16,6 +16,9 @@ pub(super) struct Recorder {
     tape: Option<Tape>,
     segment_start: f64,
     segment_first_step: usize,
+    /// A constant step over the unresolved tail of an accumulation (see
+    /// [`Recorder::bridge`]), which the next segment opens with: (its start, its index).
+    bridge: Option<(f64, usize)>,
 }
 
 impl Recorder {
@@ -27,6 +30,7 @@ impl Recorder {
             tape: tape.then(|| Tape::new(n)),
             segment_start: 0.0,
             segment_first_step: 0,
+            bridge: None,
         }
     }
 
@@ -35,11 +39,14 @@ impl Recorder {
         (self.traj, self.tape)
     }
 
-    /// Opens a segment at t (after a restart).
+    /// Opens a segment at t (after a restart), or at the start of a pending bridge step.
     pub(super) fn open_segment(&mut self, t: f64) {
         self.segment_start = t;
         if let Some(traj) = &self.traj {
             self.segment_first_step = traj.len();
+        }
+        if let Some((t0, first)) = self.bridge.take() {
+            (self.segment_start, self.segment_first_step) = (t0, first);
         }
         if let Some(tape) = &mut self.tape {
             tape.open_segment(t);
@@ -176,15 +183,15 @@ impl Recorder {
         }
     }
 
-    /// Appends one step holding x and S constant from the last recorded time to `t_end`
-    /// (the state at rest after an accumulation), as its own segment of the trajectory.
-    pub(super) fn hold<N: Dim, P: Dim>(
+    /// Appends one step holding x and S constant from the last recorded time to `t_end`:
+    /// the unresolved tail [t_k, t*] of an accumulation, as its limit (x*, dx*/dθ). It opens
+    /// the segment of the hold that follows (see [`Recorder::open_segment`]), so the
+    /// segments stay contiguous.
+    pub(super) fn bridge<N: Dim, P: Dim>(
         &mut self,
         t_end: f64,
         x: &OVector<f64, N>,
         s: &OMatrix<f64, N, P>,
-        mode: usize,
-        sw: &Switches,
     ) where
         DefaultAllocator: ModelAlloc<N, P>,
     {
@@ -195,22 +202,14 @@ impl Recorder {
         if t_end <= t0 {
             return;
         }
+        self.bridge = Some((t0, traj.len()));
         traj.t0.push(t0);
         traj.t1.push(t_end);
-        let first = traj.len() - 1;
         for _ in 0..TRAJ_NODES {
             traj.data.extend_from_slice(x.as_slice());
             if traj.p > 0 {
                 traj.data.extend_from_slice(s.as_slice());
             }
         }
-        traj.segments.push(Segment {
-            t_start: t0,
-            t_end,
-            mode,
-            switches: sw.clone(),
-            first_step: first,
-            end_step: first + 1,
-        });
     }
 }

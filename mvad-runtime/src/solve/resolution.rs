@@ -24,6 +24,7 @@
 //! crossing, as always); each piece starts at twice the length of the last one that passed.
 
 use super::{time_resolution, Driver};
+use crate::integrate::zero_rows;
 use crate::model::{At, HybridModel, ModelAlloc, Point};
 use nalgebra::DefaultAllocator;
 
@@ -151,10 +152,16 @@ where
             self.integ.dense_x(t1, &mut self.xs);
         }
         let n = self.watch[mode].unresolved.len();
+        let mut eval_f = true;
         for i in 0..n {
             let w = self.watch[mode].unresolved[i];
+            if self.zeno.holds_event(w) {
+                // Not watched while its accumulation is held.
+                continue;
+            }
             // The rates at t1 need f there once; `value_and_rate` evaluates it on the first.
-            let (v1, s1) = self.value_and_rate(w, t1, i == 0);
+            let (v1, s1) = self.value_and_rate(w, t1, eval_f);
+            eval_f = false;
             (self.resolution.v1[i], self.resolution.s1[i]) = (v1, s1);
             let (v0, s0) = (self.resolution.v0[i], self.resolution.s0[i]);
             let mut defect: f64 = 0.0;
@@ -178,8 +185,8 @@ where
     }
 
     /// The signed watched value v of function w at (t, `self.xs`) and its rate
-    /// v̇ = ±(∇g·f + ∂g/∂t), with f = f(t, `self.xs`) evaluated into `self.work` when `eval_f`
-    /// (else the f already there).
+    /// v̇ = ±(∇g·f + ∂g/∂t), with f = f(t, `self.xs`) (the masked flow during a hold)
+    /// evaluated into `self.work` when `eval_f` (else the f already there).
     fn value_and_rate(&mut self, w: usize, t: f64, eval_f: bool) -> (f64, f64) {
         let (model, p) = (self.model, self.p);
         let nev = self.scanner.nevents;
@@ -188,6 +195,7 @@ where
                 Point::new(self.mode, &self.sw, t, &self.xs, p),
                 &mut self.work,
             );
+            zero_rows(&mut self.work, &self.held);
         }
         let v = Self::signed(model, p, nev, &self.sw, w, t, &self.xs);
         let rate = if w < nev {

@@ -98,10 +98,7 @@ impl Schedule {
                 if !(t0.is_finite() && period.is_finite() && period > 0.0) {
                     return Err(SolveError::BadSchedule {
                         event: ev.name.clone(),
-                        what: format!(
-                            "its period is {period} and its first time {t0}; the period must be \
-                             positive and both finite"
-                        ),
+                        what: bad_period(t0, period),
                     });
                 }
                 let count = ((t_end - t0.max(0.0)) / period).floor() + 1.0;
@@ -267,6 +264,27 @@ fn decreasing_times(name: &str, j: usize, before: f64, tau: f64) -> SolveError {
     }
 }
 
+/// Why `every` times with first time t0 and period τ₁ − τ₀ = `period` are unusable. The period
+/// is read as the difference of the first two times, so a period below the resolution of t0
+/// (`every 1 from -1e20`: ulp 1.6e4) comes out 0 although the model's is not.
+fn bad_period(t0: f64, period: f64) -> String {
+    use crate::error::Time;
+    if t0.is_finite() && period == 0.0 && t0 != 0.0 {
+        return format!(
+            "its first time {} and the next coincide in floating point: the period is below the \
+             resolution of times that large (about {:.1e}), so its occurrences cannot be told \
+             apart",
+            Time(t0),
+            f64::EPSILON * t0.abs()
+        );
+    }
+    format!(
+        "its period is {} and its first time {}; the period must be positive and both finite",
+        Time(period),
+        Time(t0)
+    )
+}
+
 /// The first time and the period of `every` event k: τ_k0 and τ_k1 − τ_k0.
 fn first_and_period<M: HybridModel>(model: &M, p: &OVector<f64, M::P>, k: usize) -> (f64, f64)
 where
@@ -274,4 +292,28 @@ where
 {
     let t0 = model.event_time(Occurrence::new(k, 0), p);
     (t0, model.event_time(Occurrence::new(k, 1), p) - t0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::bad_period;
+
+    /// `every 1 from -1e20` has τ₁ − τ₀ = 0 in floating point: the message says why, not that
+    /// the period is 0; a period that really is not positive is named as such.
+    #[test]
+    fn a_period_lost_in_the_first_times_rounding_is_named() {
+        let t0 = -1e20;
+        let msg = bad_period(t0, (t0 + 1.0) - t0);
+        assert!(
+            msg.contains("first time -1e20 and the next coincide"),
+            "{msg}"
+        );
+        assert!(msg.contains("about 2.2e4"), "{msg}");
+        let msg = bad_period(0.0, -1.0);
+        assert_eq!(
+            msg,
+            "its period is -1 and its first time 0; the period must be positive and both finite"
+        );
+        assert!(bad_period(f64::NAN, 1.0).contains("first time NaN"));
+    }
 }

@@ -19,8 +19,10 @@
 //!   ρ = (a_k − a_{k−1}) / (a_{k−1} − a_{k−2})                        (Aitken's Δ²),
 //! ```
 //!
-//! applied twice over the last [`ZENO_SNAPS`] snapshots (the second pass removes a slowly
-//! drifting ratio). B and ρ both depend on θ, so the derivative of the limit is the derivative
+//! applied three times over the last [`ZENO_SNAPS`] snapshots (the later passes remove a
+//! slowly drifting ratio and the faster rates ρ², ρ³, … of a quantity that is smooth in t
+//! near t*: t_k − t* ∝ ρᵏ, so ∫x dt of a state the accumulation does not constrain has
+//! terms in ρᵏ and ρ²ᵏ). B and ρ both depend on θ, so the derivative of the limit is the derivative
 //! of this sum, by the chain rule through it:
 //!
 //! ```text
@@ -33,21 +35,36 @@
 //! instead is not, since da_k/dθ − da_∞/dθ = (B' + B k ρ'/ρ) ρᵏ has the factor k (for the
 //! ball, d/de of ∫v dt came out −3e-4 instead of 0 that way).
 //!
-//! ## After the accumulation
+//! ## After the accumulation: the masked flow
 //! The limit x* lies on the accumulating guard (x_k⁻ is on it and x_k⁺ − x_k⁻ → 0); it is
 //! snapped there, and dx*/dθ onto the guard's tangent, so that no rounding of the
-//! extrapolation is integrated over [t*, T]. The state is then held at x* (∂x/∂θ = dx*/dθ,
-//! flow zero) and ∫ ℓ(t, x*, θ) dt added with its derivative −ℓ(t*, x*) dt*/dθ +
-//! ∫ (ℓ_x dx*/dθ + ℓ_θ) dt, up to T or to the next time event τ ≤ T. That event fires from the
-//! held state (f⁻ = 0); if the state it leaves flows straight back through the guard the hold
-//! goes on, otherwise the event loop resumes at τ. A cost whose increments per event do not
-//! shrink (an event sum whose term does not vanish at the limit) diverges: an error.
+//! extrapolation is integrated over [t*, T]. The states the accumulation constrains (those
+//! k's guard reads, those its reset writes, and those their flow reads; see
+//! [`Driver::constrained_states`]) are then held at x*: the event loop runs on from t* with
+//! the *masked flow*, their rows of f and of f_x S + f_θ zero (the integrator's held rows),
+//! while every other state follows its flow, reading the held values, and the running cost
+//! is integrated along that like anywhere else. At t*(θ) the run restarts from
+//!
+//! ```text
+//!   x(t*) = x*,   S(t*) = dx*/dθ − f_m(t*, x*) dt*/dθᵀ,   dC/dθ −= ℓ(t*, x*) dt*/dθ,
+//! ```
+//!
+//! f_m the masked flow: the limit's total derivative already contains a free state's own
+//! motion over the θ-dependent t*, and the held rows of f_m are zero, so a held state's
+//! sensitivity is its total derivative. The accumulating event is not watched while held.
+//! Every other event fires as usual, its saltation read with the masked flow on both sides;
+//! after an instant of events the hold goes on if they left the constrained states at the
+//! limit and the flow still carries them straight back through k's guard (a sampler, an
+//! event of a free state); otherwise (a kick) it is released: those rows follow their full
+//! flow again (S⁺ −= f⁺ t' on them, their f⁺ in the jump having been masked) and the Zeno
+//! detector starts afresh. A cost whose increments per event do not shrink (an event sum
+//! whose term does not vanish at the limit) diverges: an error.
 
 use super::Driver;
 use crate::error::SolveError;
+use crate::integrate::zero_rows;
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
-use crate::reduce::{aitken_iterated_weights, CompensatedSum, GL8};
-use crate::sink::EventSink;
+use crate::reduce::{aitken_iterated_weights, CompensatedSum};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// How many dwell ratios must agree before a Zeno accumulation is declared.
@@ -63,10 +80,13 @@ const ZENO_GRAZE: f64 = 1e-3;
 /// crossing due within it could not be resolved as a new event.
 const STUCK_PROBE: f64 = 1e3;
 
-/// Post-event snapshots kept for the Zeno limit: five, so Aitken's Δ² can be applied twice
-/// (per-bounce terms of the form (a + bk)ρᵏ, as derivatives w.r.t. a restitution give,
-/// need the second pass).
-const ZENO_SNAPS: usize = 5;
+/// Post-event snapshots kept for the Zeno limit: seven, so Aitken's Δ² can be applied
+/// three times (per-bounce terms of the form (a + bk)ρᵏ, as derivatives w.r.t. a
+/// restitution give, need a second pass; a cost smooth in t near t* has terms ρᵏ and ρ²ᵏ:
+/// ∫x dt of the sliding ball, x = vx t, came out with dC/de = 9.5e-6 for 0 after two
+/// passes, 2.5e-8 after three). The detector's [`ZENO_RATIOS`] + 2 event times are at
+/// least as many.
+const ZENO_SNAPS: usize = 7;
 
 /// Buffers for the snapshots of one user event, for the Zeno limit.
 pub(super) struct Snapshot<M: HybridModel>
@@ -91,11 +111,33 @@ where
     snaps: [Snapshot<M>; ZENO_SNAPS],
     /// The state event whose occurrences are being recorded (the last one).
     event: usize,
-    /// The run's state is held at the limit of an accumulation (in `Driver::y`): a time
-    /// event fired from it sees the held state's flow, zero (f⁻ = 0).
-    holding: bool,
+    /// The accumulations whose constrained states are held at their limits now (the union of
+    /// their constrained states are the run's held rows).
+    holds: Vec<Hold<M>>,
+    /// The events whose holds ended at the instant just applied (until the restart there).
+    released: Vec<usize>,
     /// Accumulations the run has passed through (its adjoint tape is then not swept).
     passed: usize,
+}
+
+/// One accumulation held at its limit.
+pub(super) struct Hold<M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// The accumulating event.
+    pub(super) event: usize,
+    /// It accumulated at one instant (a reset left the state stuck on its guard).
+    pub(super) stuck: bool,
+    /// The accumulation time and the dwell-time ratio (0 when stuck).
+    pub(super) t_star: f64,
+    pub(super) ratio: f64,
+    /// User events applied up to t*.
+    pub(super) events: usize,
+    /// The states it constrains (see [`Driver::constrained_states`]).
+    pub(super) constrained: Vec<bool>,
+    /// The state at the limit (the constrained entries are held at theirs).
+    x_limit: OVector<f64, M::N>,
 }
 
 impl<M: HybridModel> Zeno<M>
@@ -119,14 +161,46 @@ where
             count: 0,
             snaps: std::array::from_fn(|_| snap()),
             event: 0,
-            holding: false,
+            holds: Vec::new(),
+            released: Vec::new(),
             passed: 0,
         }
     }
 
-    /// Whether the state is held at the limit of an accumulation (its flow is zero).
+    /// Whether some states are held at the limit of an accumulation.
     pub(super) fn holding(&self) -> bool {
-        self.holding
+        !self.holds.is_empty()
+    }
+
+    /// Whether event w's accumulation is held at its limit (then it is not watched).
+    #[inline]
+    pub(super) fn holds_event(&self, w: usize) -> bool {
+        self.holds.iter().any(|h| h.event == w)
+    }
+
+    /// The firing value event w restarts with if its hold ended at this instant: it sits on
+    /// its guard as if it had just fired from there, so it is disarmed until its guard has
+    /// been below zero (the state moving off the guard), as after any firing. `None` for any
+    /// other event.
+    #[inline]
+    pub(super) fn released_firing_value(&self, w: usize) -> Option<f64> {
+        self.released.contains(&w).then_some(0.0)
+    }
+
+    /// Whether some hold ended at the instant just applied.
+    #[inline]
+    pub(super) fn released_any(&self) -> bool {
+        !self.released.is_empty()
+    }
+
+    /// The restart after the holds released at an instant has been made.
+    pub(super) fn forget_released(&mut self) {
+        self.released.clear();
+    }
+
+    /// Ends the holds (at T): they are returned for their diagnostics.
+    pub(super) fn take_holds(&mut self) -> Vec<Hold<M>> {
+        std::mem::take(&mut self.holds)
     }
 
     /// Whether the run passed through an accumulation (it did not reach T by its flow and
@@ -316,6 +390,10 @@ where
         self.xs.copy_from(x);
         self.xs.axpy(delta, &self.f_plus, 1.0);
         model.rhs(Point::new(mode, sw, t + delta, &self.xs, p), &mut self.work);
+        if !self.zeno.holds_event(k) {
+            // Another event during a hold: the states held stay so.
+            zero_rows(&mut self.work, &self.held);
+        }
         self.xe.copy_from(x);
         self.xe.axpy(0.5 * delta, &self.f_plus, 1.0);
         self.xe.axpy(0.5 * delta, &self.work, 1.0);
@@ -323,76 +401,121 @@ where
         v2 > 0.0 && v2 > v_plus
     }
 
-    /// What follows an accumulation of event k's occurrences (`self.zeno_stop` set by the
-    /// event just applied): the run's state becomes the limit (see [`Driver::take_limit`]) and
-    /// is held there (flow zero, running cost ℓ(t, x*) integrated) until T or the next time
-    /// event armed in the mode, whichever comes first. A time event due by T fires from the
-    /// held state (f⁻ = 0: S⁺ = R_x S* + R_θ − f⁺t'); if its reset leaves the states the
-    /// accumulation constrains ([`Driver::constrained_states`]) as they were and the flow
-    /// carries them straight back through k's guard (a sampler that only reads the state)
-    /// the hold goes on, S being the total derivative dx⁺/dθ = S⁺ + f⁺t'; otherwise (a kick)
-    /// the run resumes from there with the event loop, the Zeno detector starting afresh.
-    /// Returns true when the run ends (held to T), false when it resumes at a time event's
-    /// time (the integrator restarted there).
-    pub(super) fn after_accumulation(
-        &mut self,
-        sink: &mut impl EventSink,
-    ) -> Result<bool, SolveError> {
-        let (model, p, t_end) = (self.model, self.p, self.t_end);
-        let Some((t_star_geo, ratio)) = self.zeno_stop.take() else {
-            return Ok(true);
-        };
+    /// The start of the hold after an accumulation of event k's occurrences (`verdict` =
+    /// (t*, ρ) from the event just applied): the run's state becomes the limit (see
+    /// [`Driver::take_limit`]), the states the accumulation constrains
+    /// ([`Driver::constrained_states`]) join the held rows, and S and q_θ restart at t* as
+    /// the module doc says (S(t*) = dx*/dθ − f_m dt*/dθᵀ, q_θ −= ℓ dt*/dθ). Returns the time
+    /// the run restarts at: t* (not beyond T).
+    pub(super) fn begin_hold(&mut self, verdict: (f64, f64)) -> Result<f64, SolveError> {
+        let (model, p) = (self.model, self.p);
+        let (t_star_geo, ratio) = verdict;
         let stuck = self.stuck.take();
         let k = stuck.unwrap_or(self.zeno.event);
         let (t_star, dt_star) = self.take_limit(k, stuck.is_some(), t_star_geo)?;
         let constrained = self.constrained_states(k, t_star);
-        let frozen = self.frozen_free_states(&constrained, t_star);
-        let mut x_held = self.y.x.clone();
-        self.zeno.holding = true;
-        self.zeno.passed += 1;
-        let mut from = t_star;
-        let mut d_from = Some(dt_star);
-        loop {
-            let tau = self.schedule.next_in_mode(model, p, self.mode, from)?;
-            let until = tau.min(t_end);
-            if until > from {
-                self.hold_cost(from, until, d_from.take().as_ref());
-            }
-            if let Some(rec) = &mut self.rec {
-                rec.hold(until, &self.y.x, &self.y.s, self.mode, &self.sw);
-            }
-            if tau > t_end {
-                self.report_accumulation(k, stuck.is_some(), t_star, ratio, None, &frozen);
-                return Ok(true);
-            }
-            // The time events due at τ fire from the held state; fire_at restarts there.
-            self.scanner.found.clear();
-            if self.fire_at(tau, sink)? {
-                return Ok(true);
-            }
-            let mode = self.mode;
-            let armed = model.info().events[k].armed_in(mode);
-            // f⁺ (the event may have left it unevaluated when t' = 0).
-            model.rhs(
-                Point::new(mode, &self.sw, tau, &self.y.x, p),
-                &mut self.f_plus,
-            );
-            // Held on only if the event left the states the accumulation constrains as they
-            // were (its limit is theirs) and the flow still carries them through k's guard.
-            let kept = (0..constrained.len()).all(|i| !constrained[i] || self.y.x[i] == x_held[i]);
-            if !(kept && armed && self.flows_back_through(k, tau, mode, false)) {
-                self.report_accumulation(k, stuck.is_some(), t_star, ratio, Some(tau), &frozen);
-                self.zeno.holding = false;
-                self.zeno.count = 0;
-                return Ok(false);
-            }
-            if self.sens && self.dt.iter().any(|&v| v != 0.0) {
-                // Held: x no longer moves with the flow, so its sensitivity is dx⁺/dθ.
-                self.y.s.ger(1.0, &self.f_plus, &self.dt, 1.0);
-            }
-            x_held.copy_from(&self.y.x);
-            from = from.max(tau);
+        if let Some(rec) = &mut self.rec {
+            // The unresolved tail [t_k, t*] of the accumulation, as the limit.
+            rec.bridge(t_star, &self.y.x, &self.y.s);
         }
+        self.zeno.holds.push(Hold {
+            event: k,
+            stuck: stuck.is_some(),
+            t_star,
+            ratio,
+            events: self.nevents,
+            constrained,
+            x_limit: self.y.x.clone(),
+        });
+        self.zeno.passed += 1;
+        // The detector starts afresh: the events of the free states may accumulate in turn.
+        self.zeno.count = 0;
+        self.fired[k] = None;
+        self.collect_held_rows();
+        // The masked flow and the running cost at the limit.
+        let at = Point::new(self.mode, &self.sw, t_star, &self.y.x, p);
+        model.rhs(at, &mut self.work);
+        zero_rows(&mut self.work, &self.held);
+        self.nonfinite_x(t_star, &self.work, || {
+            format!("flow of mode `{}`", model.info().modes[self.mode])
+        })?;
+        let l = if model.info().has_running_cost {
+            model.running_cost(&self.sw, At::new(t_star, &self.y.x, p))
+        } else {
+            0.0
+        };
+        if !l.is_finite() {
+            return Err(SolveError::NonFinite {
+                t: t_star,
+                what: "cost".into(),
+            });
+        }
+        if self.sens {
+            self.y.s.ger(-1.0, &self.work, &dt_star, 1.0);
+            self.y.qp.axpy(-l, &dt_star, 1.0);
+        }
+        if let Some(ge) = self.integ.global_error_mut() {
+            model.guard_grad(k, At::new(t_star, &self.y.x, p), &mut self.gx, &mut self.gp);
+            ge.onto_guard(&self.work, l, &self.gx, self.sens);
+        }
+        Ok(t_star.min(self.t_end))
+    }
+
+    /// After the events at t during a hold: every accumulation whose constrained states the
+    /// events moved off the limit, whose event is no longer armed in the mode, or from which
+    /// the flow no longer carries the state straight back through its guard (see
+    /// [`Driver::flows_back_through`]) is released (its `zeno` diagnostic reported). The
+    /// rows it held follow their full flow from t on: their f⁺ in the jump was the masked
+    /// flow's, zero, so S⁺ −= f⁺ t' on them (t' of the last event at t). With no hold left the
+    /// Zeno detector starts afresh.
+    pub(super) fn review_holds(&mut self, t: f64) {
+        let (model, p, mode) = (self.model, self.p, self.mode);
+        // The full flow at the state the events left (what a released state follows).
+        model.rhs(
+            Point::new(mode, &self.sw, t, &self.y.x, p),
+            &mut self.f_plus,
+        );
+        let mut i = 0;
+        let mut released = false;
+        while i < self.zeno.holds.len() {
+            let h = &self.zeno.holds[i];
+            let k = h.event;
+            let kept =
+                (0..h.constrained.len()).all(|j| !h.constrained[j] || self.y.x[j] == h.x_limit[j]);
+            let armed = model.info().events[k].armed_in(mode);
+            if kept && armed && self.flows_back_through(k, t, mode, false) {
+                i += 1;
+                continue;
+            }
+            let h = self.zeno.holds.remove(i);
+            self.zeno.released.push(h.event);
+            self.report_accumulation(&h, Some(t));
+            released = true;
+        }
+        if !released {
+            return;
+        }
+        let before = std::mem::take(&mut self.held);
+        self.collect_held_rows();
+        if self.sens {
+            for &r in before.iter().filter(|r| !self.held.contains(r)) {
+                for j in 0..self.y.s.ncols() {
+                    self.y.s[(r, j)] -= self.f_plus[r] * self.dt[j];
+                }
+            }
+        }
+        if !self.zeno.holding() {
+            self.zeno.count = 0;
+        }
+    }
+
+    /// The run's held rows: the union of the states the accumulations held now constrain.
+    fn collect_held_rows(&mut self) {
+        self.held.clear();
+        let n = self.y.x.len();
+        let holds = &self.zeno.holds;
+        self.held
+            .extend((0..n).filter(|&i| holds.iter().any(|h| h.constrained[i])));
     }
 
     /// Replaces the run's state by the limit of the accumulation of event k:
@@ -480,40 +603,6 @@ where
         Ok((t_star, dt_star))
     }
 
-    /// Adds the running cost of the held state x_h = `self.y.x` (∂x_h/∂θ = `self.y.s`) on
-    /// [a, b] to `self.y.q`, ∫ ℓ(t, x_h, θ) dt by 8-point Gauss–Legendre (exact for ℓ
-    /// polynomial in t up to degree 15, and for ℓ independent of t whatever b − a), and its
-    /// derivative ∫ (ℓ_x ∂x_h/∂θ + ℓ_θ) dt − ℓ(a, x_h) da/dθ to `self.y.qp` (`da` only for the
-    /// accumulation time: where a hold starts at a time event, that event's running-cost
-    /// jump (ℓ⁻ − ℓ⁺)t' already carries it).
-    fn hold_cost(&mut self, a: f64, b: f64, da: Option<&OVector<f64, M::P>>) {
-        let (model, p, sens) = (self.model, self.p, self.sens);
-        if !model.info().has_running_cost {
-            return;
-        }
-        if let (true, Some(da)) = (sens, da) {
-            let l_a = model.running_cost(&self.sw, At::new(a, &self.y.x, p));
-            self.y.qp.axpy(-l_a, da, 1.0);
-        }
-        let (c0, r0) = (0.5 * (a + b), 0.5 * (b - a));
-        let mut sum = CompensatedSum::default();
-        for &(xi, wi) in &GL8 {
-            let t = c0 + r0 * xi;
-            let l = model.running_cost_value_grad(
-                &self.sw,
-                At::new(t, &self.y.x, p),
-                &mut self.cx,
-                &mut self.cp,
-            );
-            sum.add(wi * r0 * l);
-            if sens {
-                self.y.qp.gemv_tr(wi * r0, &self.y.s, &self.cx, 1.0);
-                self.y.qp.axpy(wi * r0, &self.cp, 1.0);
-            }
-        }
-        self.y.q += sum.value();
-    }
-
     /// The states the accumulation of event k constrains: those k's guard reads (∇g ≠ 0),
     /// those its reset writes (a row of R_x or R_θ that is not the identity's) and,
     /// transitively, those the flow of a constrained state reads (f_x ≠ 0). Evaluated at the
@@ -550,21 +639,5 @@ where
             }
         }
         constrained
-    }
-
-    /// The names of the states outside `constrained` whose flow at (t, `self.y.x`) is not
-    /// zero: held with the rest although the accumulation does not hold them, so their values
-    /// after t* are those of a frozen state, not of their flow.
-    fn frozen_free_states(&mut self, constrained: &[bool], t: f64) -> Vec<String> {
-        let (model, p) = (self.model, self.p);
-        let info = model.info();
-        model.rhs(
-            Point::new(self.mode, &self.sw, t, &self.y.x, p),
-            &mut self.work,
-        );
-        (0..constrained.len())
-            .filter(|&i| !constrained[i] && self.work[i] != 0.0)
-            .map(|i| format!("`{}`", info.states[i]))
-            .collect()
     }
 }
