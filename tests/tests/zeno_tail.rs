@@ -307,3 +307,21 @@ fn a_convergent_event_sum_over_the_accumulation_is_summed() {
     let sol = run(&m, &[e, g, h0], &opts(GradientMode::Forward)).expect("runs");
     assert_solution(&sol, c, &grad, 1e-8, "Σ v²");
 }
+
+/// An accumulation whose limit lies within rounding of T (e = 1/2, g = 9, h0 = 2: t* = 2 = T):
+/// the hold's last step to T is a few ulp long and is taken (it was a "step size underflow"
+/// in a primal run), and C = ∫h = 8/7 with or without sensitivities.
+#[test]
+fn an_accumulation_within_rounding_of_the_horizon_ends_the_run() {
+    let m = mvad_tests::loaded_test_model("../../models/bouncing_ball.hyb");
+    for sensitivities in [false, true] {
+        let opts = Options {
+            rtol: 1e-10,
+            atol: 1e-12,
+            sensitivities,
+            ..Options::default()
+        };
+        let sol = solve_at(&m, &[0.5, 9.0, 2.0, 0.0], &opts).expect("runs");
+        assert_near(sol.cost, 8.0 / 7.0, 1e-12, format!("sens {sensitivities}"));
+    }
+}
