@@ -43,7 +43,7 @@ where
         let (model, p) = (self.model, self.p);
         let (atol, rtol) = (self.opts.atol, self.opts.rtol);
         let first = self.scanner.found.iter().map(|c| c.t).fold(until, f64::min);
-        let mut x = self.xs.clone();
+        // x at the turning point in `xs`, the scan's scratch (the scan is over).
         for i in 0..self.scanner.watched().len() {
             let w = self.scanner.watched()[i];
             let Watch::Event(k) = self.scanner.watch(w) else {
@@ -56,12 +56,12 @@ where
             if !(fires || (vm < 0.0 && tm <= first)) {
                 continue;
             }
-            self.integ.dense_x(tm, &mut x);
-            model.guard_grad(k, At::new(tm, &x, p), &mut self.gx, &mut self.gp);
+            self.integ.dense_x(tm, &mut self.xs);
+            model.guard_grad(k, At::new(tm, &self.xs, p), &mut self.gx, &mut self.gp);
             let dg: f64 = self
                 .gx
                 .iter()
-                .zip(x.iter())
+                .zip(self.xs.iter())
                 .map(|(g, xi)| g.abs() * (atol + rtol * xi.abs()))
                 .sum();
             if vm.abs() > dg {
