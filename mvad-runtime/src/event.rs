@@ -219,6 +219,41 @@ pub struct Track {
     peak: Option<(f64, f64)>,
 }
 
+impl Track {
+    /// Commits the line from v₀ = `a` at the start of a step to v₁ = `b` at its end, `span`
+    /// later, on which the function has not crossed: it re-arms if the line went below its
+    /// re-arming level (a line that fired at t₀ and starts below that level was armed at
+    /// the restart; one that starts above it and falls re-arms only past t₁: a line has its
+    /// minimum at an end), and v₁, the rise over the last sample interval (the one
+    /// `bracket_curve` would have interpolated) and the rise over the step start the next.
+    #[inline]
+    fn commit_line(&mut self, a: f64, b: f64, span: f64) {
+        let below = self.rearm_below;
+        if !self.armed && (a < below || b < below) {
+            self.armed = true;
+        }
+        self.start_val = b;
+        self.rising = b > line_sample(a, b, NSAMP - 2);
+        self.last_rise = b - a;
+        self.last_span = span;
+    }
+}
+
+/// Where the watched lines of a segment first reach zero, predicted from their values at its
+/// start and their rates (see [`Scanner::first_line_root`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LineRoot {
+    /// No armed line reaches zero before the segment's stop.
+    Beyond,
+    /// Line w is the first to reach zero, at the predicted time t (t₀ − v₀/v̇ as rounded),
+    /// and no other line reaches it within the simultaneity window after t.
+    At(usize, f64),
+    /// The closed form does not decide alone: an armed line on or past zero at t₀ (it fires
+    /// there, or its value is NaN), or a second line reaching zero within the simultaneity
+    /// window of the first. The step is scanned as any other.
+    Scan,
+}
+
 /// Per-run event-detection state: which functions are watched, armed flags, the values at
 /// the start of the current step, and scratch for the samples (all allocated once).
 #[derive(Clone, Debug)]
@@ -460,26 +495,12 @@ impl Scanner {
             tr.bracket = None;
             tr.peak = None;
             let a = tr.start_val;
-            if a.is_nan() || b.is_nan() {
-                // Where the interpolated samples would first have been NaN.
-                let i = if a.is_nan() { 0 } else { 1 };
-                return Err((w, sample_times(t0, t1)[i]));
+            if let Some(t) = line_nan_at(t0, t1, a, b) {
+                return Err((w, t));
             }
-            // A line that fired at t₀ and starts below its re-arming level was armed at the
-            // restart; one that starts above it and falls re-arms only past t₁ (a line has
-            // its minimum at an end).
             tr.fresh = false;
             if !(tr.armed && triggered(b, strict)) {
-                // The line from v₀ to v₁: negative somewhere iff at an end; its last
-                // interior sample as `bracket_curve` would have interpolated it.
-                let below = tr.rearm_below;
-                if !tr.armed && (a < below || b < below) {
-                    tr.armed = true;
-                }
-                tr.start_val = b;
-                tr.rising = b > line_sample(a, b, NSAMP - 2);
-                tr.last_rise = b - a;
-                tr.last_span = t1 - t0;
+                tr.commit_line(a, b, t1 - t0);
                 continue;
             }
             let times = sample_times(t0, t1);
@@ -499,6 +520,77 @@ impl Scanner {
             }
         }
         Ok(first_right)
+    }
+
+    /// On a segment on which every watched value is a line, v_w(t) = v_w(t₀) + v̇_w (t − t₀)
+    /// with v_w(t₀) the start value and v̇_w = `slope[w]` (an exact segment of a constant flow
+    /// and affine guards): where the first armed line reaches zero, t₀ − v_w(t₀)/v̇_w, if before
+    /// `t_stop`. Only an armed line rising towards zero can cross: a falling or flat line
+    /// stays below zero, and a disarmed line does not fire on the segment (it re-arms only
+    /// below its re-arming level ≤ 0, and a line that went there cannot come back up). A line
+    /// has no turning point, so there is no dip to search and no near miss to judge, and its
+    /// crossing is transversal unless v̇ = 0, which never crosses.
+    pub fn first_line_root(&self, t0: f64, t_stop: f64, slope: &[f64], sim_tol: f64) -> LineRoot {
+        let (mut first, mut t_first, mut t_second) = (usize::MAX, f64::INFINITY, f64::INFINITY);
+        for &w in &self.watched {
+            let tr = &self.tracks[w];
+            if !tr.armed {
+                continue;
+            }
+            let v0 = tr.start_val;
+            if !(v0 < 0.0) {
+                return LineRoot::Scan;
+            }
+            let rate = slope[w];
+            if !(rate > 0.0) {
+                continue;
+            }
+            let t = t0 + (-v0) / rate;
+            if t < t_first {
+                (first, t_first, t_second) = (w, t, t_first);
+            } else if t < t_second {
+                t_second = t;
+            }
+        }
+        if t_first > t_stop {
+            LineRoot::Beyond
+        } else if t_second <= t_first + sim_tol {
+            LineRoot::Scan
+        } else {
+            LineRoot::At(first, t_first)
+        }
+    }
+
+    /// Closes a segment of lines at its end t₁ (see [`Scanner::first_line_root`]): `sample`
+    /// writes every watched value at t₁ (as for [`Scanner::scan`]); an armed line that has
+    /// triggered there is a crossing at t₁ (into `found`), every other line is committed for
+    /// the next step. Returns `Err((w, t))` when a watched value is NaN.
+    pub fn close_lines<S>(&mut self, t0: f64, t1: f64, mut sample: S) -> Result<(), (usize, f64)>
+    where
+        S: FnMut(f64, bool, &[usize], &mut [f64]),
+    {
+        self.found.clear();
+        self.peaked = false;
+        sample(t1, true, &self.watched, &mut self.tmp);
+        for i in 0..self.watched.len() {
+            let w = self.watched[i];
+            let strict = self.strict(w);
+            let b = self.tmp[w];
+            let tr = &mut self.tracks[w];
+            tr.bracket = None;
+            tr.peak = None;
+            tr.fresh = false;
+            let a = tr.start_val;
+            if let Some(t) = line_nan_at(t0, t1, a, b) {
+                return Err((w, t));
+            }
+            if tr.armed && triggered(b, strict) {
+                self.found.push(Crossing { w, t: t1 });
+            } else {
+                tr.commit_line(a, b, t1 - t0);
+            }
+        }
+        Ok(())
     }
 
     /// The brackets of a step of a curve: v sampled at t₀ (the start value), the interior
@@ -587,6 +679,18 @@ impl Scanner {
 #[inline]
 fn line_sample(a: f64, b: f64, i: usize) -> f64 {
     a + (b - a) * (i as f64 / (NSAMP - 1) as f64)
+}
+
+/// Where the samples of the line from `a` (at t₀) to `b` (at t₁) would first be NaN, if
+/// either is: t₀, or the first interior sample time.
+fn line_nan_at(t0: f64, t1: f64, a: f64, b: f64) -> Option<f64> {
+    if a.is_nan() {
+        Some(t0)
+    } else if b.is_nan() {
+        Some(sample_times(t0, t1)[1])
+    } else {
+        None
+    }
 }
 
 /// The sample times of a step: t₀, the interior points, t₁ (exactly).

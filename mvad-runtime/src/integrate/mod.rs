@@ -315,6 +315,15 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.h
     }
 
+    /// F of the segment of exact steps in progress ([`Scheme::Exact`]: constant along it,
+    /// `k[0]` from the restart that began it, where every exact step leaves it), or `None`
+    /// when the scheme is adaptive or F is not known yet (a masked or non-finite F is
+    /// evaluated by the first step).
+    pub fn exact_rate(&self) -> Option<&Sys::Vector> {
+        let known = self.k0_valid || self.fsal_slot == Some(0);
+        (self.scheme == Scheme::Exact && known).then(|| &self.k[0])
+    }
+
     /// Raises the budget of step attempts by `extra` (the driver grants each row of a data
     /// table its own allowance: a long table needs at least one step per row).
     pub fn extend_step_budget(&mut self, extra: usize) {

@@ -30,6 +30,7 @@
 mod conditioning;
 mod finish;
 mod jump;
+mod line;
 mod qp;
 mod record;
 mod resolution;
@@ -233,6 +234,8 @@ where
     /// Every watched function active since the last restart is an affine guard (see
     /// [`HybridModel::guard_is_affine`]): on an exact step the scanner needs only its ends.
     affine_watch: bool,
+    /// The watched lines of exact segments (see `line`).
+    lines: line::Lines,
     xs: OVector<f64, M::N>,
     xe: OVector<f64, M::N>,
     x_plus: OVector<f64, M::N>,
@@ -337,6 +340,7 @@ where
             resolution: resolution::Resolution::new(&watch),
             watch,
             affine_watch: false,
+            lines: line::Lines::new(info.modes.len()),
             xs: vn(),
             xe: vn(),
             x_plus: vn(),
@@ -516,6 +520,7 @@ where
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
         }
+        self.begin_lines(t);
         Ok(())
     }
 
@@ -560,7 +565,11 @@ where
             if t >= self.t_end {
                 return Ok(());
             }
-            self.integ.step(self.t_end.min(t_next))?;
+            let t_stop = self.t_end.min(t_next);
+            if self.lines.on && self.line_segment(t_stop, sink)? {
+                continue;
+            }
+            self.integ.step(t_stop)?;
             // The step's full dense output is needed only to sample guards or to record.
             if self.rec.is_some() || self.watch[self.mode].any {
                 self.integ.ensure_dense();
