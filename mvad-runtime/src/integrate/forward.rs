@@ -607,7 +607,7 @@ where
         // Still in the same constant-rate mode under the same bits and held rows (a time
         // event that changed none of them): k₀ = F stays where the last exact step left it.
         let rhs = &self.sys.rhs;
-        let same_held = held == rhs.held.as_slice();
+        let same_held = held.is_empty() && rhs.held.is_empty() || held == rhs.held.as_slice();
         if self.scheme == Scheme::Exact
             && self.dense_scheme == Scheme::Exact
             && mode == rhs.flow.mode

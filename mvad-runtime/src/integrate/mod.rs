@@ -506,9 +506,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.sys.linearisation_mut().invalidate();
         self.dense_pending = false;
         self.stats.rhs_evals = self.sys.evals();
-        // Pending like any accepted step: `close_step` carries no global error over an
-        // exact step but adds its quadrature (the adjoint's g += −h λᵀf_θ).
-        self.carry_pending = Some(h);
+        // Pending like any accepted step when the system keeps a quadrature outside its
+        // vector: `close_step` carries no global error over an exact step but adds that
+        // quadrature (the adjoint's g += −h λᵀf_θ). Without one there is nothing to close.
+        if self.sys.has_quadrature() {
+            self.carry_pending = Some(h);
+        }
         Ok(())
     }
 
@@ -546,7 +549,16 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// y_prev, the stages k (`k[0]` = F(t_prev, y_prev)) and the local error estimate are the
     /// step's. An exact step makes no error, and its flow (a function of θ alone) moves none:
     /// it carries nothing, but adds its quadrature.
+    #[inline]
     pub fn close_step(&mut self) {
+        if self.carry_pending.is_some() {
+            self.close_pending_step();
+        }
+    }
+
+    /// [`Integrator::close_step`] of a step that is pending.
+    #[inline(never)]
+    fn close_pending_step(&mut self) {
         if let Some(h) = self.carry_pending.take() {
             let exact = self.dense_scheme == Scheme::Exact;
             if !exact {

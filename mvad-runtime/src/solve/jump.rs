@@ -36,7 +36,11 @@ struct Approach {
     signed_guard: f64,
     /// f⁻ (and, by the reset, f⁺) were evaluated. A time event whose time does not move
     /// with θ (t' = 0) skips both when nothing else reads them (no global error estimate
-    /// to carry): every term they enter is multiplied by t' = 0, so they are zero instead.
+    /// to carry): every term they enter is multiplied by t' = 0. Nothing reads them then:
+    /// the saltation's time term and the total derivative S⁺ + f⁺t' are left out of a still
+    /// event, and the estimate takes no jump (it is absent or zero, and a still event, or
+    /// one without sensitivities, adds no rounding to a zero estimate:
+    /// `GlobalError::takes_event_rounding`), so f⁻, f⁺, ∇g = 0 and ∂g/∂θ are not written.
     flows: bool,
     /// With sensitivities, t' = 0 exactly (a time event whose time does not move with θ):
     /// every term multiplied by t' is left out (S⁺ = R_x S⁻ + R_θ, dx⁺/dθ = S⁺).
@@ -250,7 +254,8 @@ where
     /// tolerance exceeds 1), g = 0 at the state it fires from, and t' = −(∇g·S⁻ + ∂g/∂θ)/1 =
     /// ∂τ/∂θ, written straight into `self.dt` (`gp` = −t', `gx` = 0 as the error estimate
     /// reads them). f⁻ is evaluated only when something reads it (see
-    /// [`Approach::flows`]); when t' = 0 the event is `still`.
+    /// [`Approach::flows`]); when t' = 0 the event is `still`. Without `flows` nothing reads
+    /// ∇g, ∂g/∂θ, f⁻ or f⁺ of this event (see [`Approach::flows`]), and none is written.
     fn time_event_approach(&mut self, k: usize, j: usize, t: f64) -> Result<Approach, SolveError> {
         let (model, p) = (self.model, self.p);
         let info = model.info();
@@ -261,9 +266,6 @@ where
                 what: format!("guard of event `{}`", info.events[k].name),
             });
         }
-        self.gx.fill(0.0);
-        self.gp.copy_from(&self.dt);
-        self.gp.neg_mut();
         let still = !self.dt.iter().any(|&v| v != 0.0);
         let flows = (self.sens && !still)
             || self
@@ -271,9 +273,10 @@ where
                 .global_error_mut()
                 .is_some_and(|ge| !ge.is_zero());
         if flows {
+            self.gx.fill(0.0);
+            self.gp.copy_from(&self.dt);
+            self.gp.neg_mut();
             self.flow_before(t)?;
-        } else {
-            self.f_minus.fill(0.0);
         }
         let cosine = sens::cosine_of(1.0, 1.0);
         Ok(Approach {
@@ -330,7 +333,7 @@ where
     }
 
     /// x⁺ = R_k(t, x⁻) into `self.x_plus`, the new mode (set) and switch bits (into
-    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (masked during a hold; zero unless `flows`, see
+    /// `self.sw_next`, bits with σ_j = 0 keep their old value), f⁺ (masked during a hold; not written unless `flows`, see
     /// [`Approach::flows`]) and, with sensitivities, S⁺ by the saltation jump (see
     /// [`sens::jump`]) into `self.s_plus`.
     fn event_reset(&mut self, k: usize, j: usize, t: f64, flows: bool) -> Result<(), SolveError> {
@@ -356,8 +359,6 @@ where
             self.nonfinite_x(t, &self.f_plus, || {
                 format!("flow of mode `{}`", info.modes[mode_after])
             })?;
-        } else {
-            self.f_plus.fill(0.0);
         }
         if self.sens {
             model.reset_jac(

@@ -236,6 +236,10 @@ where
     affine_watch: bool,
     /// The watched lines of exact segments (see `line`).
     lines: line::Lines,
+    /// The mode whose whole watch list the scanner holds from the last restart (`None` before
+    /// the first and after a restart during a hold, which leaves held events out): a restart
+    /// in the same mode outside a hold restarts the same functions in place.
+    watching: Option<usize>,
     xs: OVector<f64, M::N>,
     xe: OVector<f64, M::N>,
     x_plus: OVector<f64, M::N>,
@@ -341,6 +345,7 @@ where
             watch,
             affine_watch: false,
             lines: line::Lines::new(info.modes.len()),
+            watching: None,
             xs: vn(),
             xe: vn(),
             x_plus: vn(),
@@ -483,9 +488,12 @@ where
         let nev = self.scanner.nevents;
         let watch = &self.watch[self.mode];
         self.affine_watch = watch.affine;
-        self.scanner.begin_restart();
         // (Asked once: the loop below runs at every restart.)
         let (holding, released) = (self.zeno.holding(), self.zeno.released_any());
+        if self.watching != Some(self.mode) || holding {
+            self.scanner.begin_restart();
+        }
+        self.watching = (!holding).then_some(self.mode);
         for &w in &watch.list {
             // An event whose accumulation is held at its limit is not watched: its guard
             // stays on zero, where it could only fire again.
@@ -673,11 +681,12 @@ where
             self.scanner.found.sort_unstable_by_key(|c| c.w);
         }
         let nfound = self.scanner.found.len();
-        let mut user = 0;
+        let (mut user, mut timed) = (0, 0);
         for i in 0..nfound {
             let c = self.scanner.found[i];
             if let Watch::Event(k) = self.scanner.watch(c.w) {
                 user += 1;
+                timed += usize::from(self.model.info().events[k].is_time_event());
                 self.apply_event(k, t, sink)?;
             }
         }
@@ -694,18 +703,11 @@ where
         }
         // Time events never count: their number is the schedule's (a table's rows, T/period),
         // not a flood. Nor does one state event (or switch crossing) per scheduled occurrence:
-        // a queue drains once per arrival at most. A flood is many more than that.
-        let total = self.nevents - self.scheduled_events + self.switch_crossings;
-        let limit = self.opts.max_events.saturating_add(self.scheduled_events);
-        if total > limit / 2 && self.flood_half.is_none() {
-            self.flood_half = Some(t);
-        }
-        if total > limit {
-            return Err(SolveError::MaxEvents {
-                t,
-                count: self.opts.max_events,
-                span: t - self.flood_half.unwrap_or(t),
-            });
+        // a queue drains once per arrival at most. A flood is many more than that. An instant
+        // of time events alone leaves the count as it was and raises the limit, so neither
+        // check can newly hold there.
+        if user > timed || user == 0 {
+            self.check_event_budget(t)?;
         }
         if let Some(verdict) = self.zeno_stop.take() {
             // The constrained states are held at the accumulation's limit from t* on; the
@@ -725,6 +727,25 @@ where
         // An exact segment takes no seed (one step reaches its stop).
         if self.integ.scheme() != Scheme::Exact {
             self.integ.set_step_size(h_seed);
+        }
+        Ok(())
+    }
+
+    /// The event budget (`Options::max_events`) after an instant at t: the state events and
+    /// switch crossings so far against the limit raised by one per scheduled occurrence;
+    /// the time at which the count passed half the limit is kept for the error.
+    fn check_event_budget(&mut self, t: f64) -> Result<(), SolveError> {
+        let total = self.nevents - self.scheduled_events + self.switch_crossings;
+        let limit = self.opts.max_events.saturating_add(self.scheduled_events);
+        if total > limit / 2 && self.flood_half.is_none() {
+            self.flood_half = Some(t);
+        }
+        if total > limit {
+            return Err(SolveError::MaxEvents {
+                t,
+                count: self.opts.max_events,
+                span: t - self.flood_half.unwrap_or(t),
+            });
         }
         Ok(())
     }
