@@ -557,7 +557,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     }
 
     /// [`Integrator::close_step`] of a step that is pending.
-    #[inline(never)]
     fn close_pending_step(&mut self) {
         if let Some(h) = self.carry_pending.take() {
             let exact = self.dense_scheme == Scheme::Exact;

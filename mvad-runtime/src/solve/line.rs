@@ -49,10 +49,11 @@ pub(super) struct Lines {
 }
 
 impl Lines {
-    /// Nothing computed yet, for `nmodes` modes.
-    pub(super) fn new(nmodes: usize) -> Self {
+    /// Nothing computed (and nothing allocated) yet: the slopes are made on the first
+    /// segment of lines of the run.
+    pub(super) fn new() -> Self {
         Lines {
-            slopes: vec![None; nmodes],
+            slopes: Vec::new(),
             on: false,
         }
     }
@@ -77,6 +78,9 @@ where
         let Some(rate) = self.integ.exact_rate() else {
             return;
         };
+        if self.lines.slopes.is_empty() {
+            self.lines.slopes.resize(self.watch.len(), None);
+        }
         if self.lines.slopes[mode].is_none() {
             let (model, p) = (self.model, self.p);
             let info = model.info();

@@ -344,7 +344,7 @@ where
             resolution: resolution::Resolution::new(&watch),
             watch,
             affine_watch: false,
-            lines: line::Lines::new(info.modes.len()),
+            lines: line::Lines::new(),
             watching: None,
             xs: vn(),
             xe: vn(),

@@ -159,7 +159,9 @@ where
         Zeno {
             times: [0.0; ZENO_RATIOS + 2],
             count: 0,
-            snaps: std::array::from_fn(|_| snap()),
+            // Written out (not `array::from_fn`, whose temporary array the optimiser may copy
+            // into place: a kilobyte per run).
+            snaps: [snap(), snap(), snap(), snap(), snap(), snap(), snap()],
             event: 0,
             holds: Vec::new(),
             released: Vec::new(),
