@@ -220,3 +220,70 @@ fn a_linear_step_evaluates_only_its_end_and_finds_the_crossing() {
     assert_relative_eq!(sc.found[0].t, 0.1, max_relative = 1e-14);
     assert!(f(sc.found[0].t) >= 0.0);
 }
+
+/// The closed-form root of the watched lines: the first armed line rising towards zero, its
+/// root t₀ − v₀/v̇; a falling line, a disarmed one and one whose root lies past the stop do
+/// not count; a line already on zero at t₀ or two roots within the simultaneity window are
+/// left to the scan.
+#[test]
+fn the_first_line_root_is_the_earliest_armed_rising_line() {
+    // Four events: v₀ = −1 rising at 2 (root 0.5), −1 rising at 1 (root 1), −1 falling,
+    // and a disarmed one (fired from 0 at the restart, v₀ = 0.5 ≥ its level 0).
+    let mut sc = Scanner::new(4, 0);
+    sc.restart_one(0, -1.0, None);
+    sc.restart_one(1, -1.0, None);
+    sc.restart_one(2, -1.0, None);
+    sc.restart_one(3, 0.5, Some(0.0));
+    let slope = [2.0, 1.0, -3.0, 5.0];
+    assert_eq!(
+        sc.first_line_root(0.0, 2.0, &slope, 1e-12),
+        LineRoot::At(0, 0.5)
+    );
+    assert_eq!(
+        sc.first_line_root(0.0, 0.4, &slope, 1e-12),
+        LineRoot::Beyond
+    );
+    // The second root within the window of the first: scanned.
+    assert_eq!(sc.first_line_root(0.0, 2.0, &slope, 0.6), LineRoot::Scan);
+    // Only falling lines: beyond any stop.
+    assert_eq!(
+        sc.first_line_root(0.0, 1e300, &[-2.0, -1.0, -3.0, 5.0], 0.0),
+        LineRoot::Beyond
+    );
+    // An armed line exactly on zero at t₀ fires there: scanned.
+    let mut sc = Scanner::new(1, 0);
+    sc.restart_one(0, 0.0, None);
+    assert_eq!(sc.first_line_root(0.0, 1.0, &[1.0], 0.0), LineRoot::Scan);
+}
+
+/// Closing a segment of lines: an armed line that has triggered at the end is a crossing
+/// there; the others are committed (the start value, the rise and the span for the next
+/// step, a falling disarmed line re-armed), and a NaN is reported where the samples would
+/// first have been NaN.
+#[test]
+fn closing_lines_finds_the_triggered_and_commits_the_rest() {
+    let mut sc = Scanner::new(3, 0);
+    sc.restart_one(0, -1.0, None);
+    sc.restart_one(1, -1.0, None);
+    sc.restart_one(2, 0.25, Some(0.0));
+    let end = [0.0, -0.5, -0.25];
+    sc.close_lines(0.0, 2.0, |t, is_end, watched, out| {
+        assert!(is_end && t == 2.0);
+        for &w in watched {
+            out[w] = end[w];
+        }
+    })
+    .unwrap();
+    assert_eq!(sc.found, vec![Crossing { w: 0, t: 2.0 }]);
+    let tr = sc.tracks[1];
+    assert_eq!((tr.start_val, tr.last_rise, tr.last_span), (-0.5, 0.5, 2.0));
+    assert!(tr.armed && tr.rising);
+    assert!(
+        sc.tracks[2].armed,
+        "a disarmed line that fell below its level re-arms"
+    );
+    let mut sc = Scanner::new(1, 0);
+    sc.restart_one(0, -1.0, None);
+    let err = sc.close_lines(0.0, 1.0, |_, _, _, out| out[0] = f64::NAN);
+    assert_eq!(err, Err((0, 0.2)));
+}
