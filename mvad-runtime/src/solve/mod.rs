@@ -24,7 +24,8 @@
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
 //! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
 //! `record` the trajectory record; `finish` the end of the run; `watch` what each mode
-//! watches.
+//! watches; `line` the exact segments whose watched guards are lines, taken to their first
+//! root in closed form instead of being stepped and scanned.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
 
 mod conditioning;
