@@ -538,11 +538,13 @@ impl Scanner {
                 continue;
             }
             let v0 = tr.start_val;
-            if !(v0 < 0.0) {
+            // On or past zero (or NaN): not below it.
+            if v0 >= 0.0 || v0.is_nan() {
                 return LineRoot::Scan;
             }
             let rate = slope[w];
-            if !(rate > 0.0) {
+            // Falling, flat (or NaN: the slopes are checked finite when they are made).
+            if rate <= 0.0 || rate.is_nan() {
                 continue;
             }
             let t = t0 + (-v0) / rate;
