@@ -309,6 +309,9 @@ pub struct Stats {
 pub struct Solution {
     /// The horizon T the cost refers to.
     pub t_end: f64,
+    /// dT/dθ, one entry per parameter: the horizon's gradient when T comes from the model's
+    /// `horizon` (zeros when `Options::t_end` fixes it or the horizon reads no param).
+    pub dt_end: Vec<f64>,
     /// The parameter values of the run.
     pub params: Vec<f64>,
     /// C(θ) = ∫₀ᵀ ℓ dt + Σ_k φ_k + Φ(T, x(T)).
