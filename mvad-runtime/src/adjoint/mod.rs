@@ -91,21 +91,34 @@ where
 }
 
 /// Why the adjoint hands a run over to forward mode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Handover {
     /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
     /// with a state stuck on its guard: reported in the `zeno` diagnostic.
     Accumulation,
+    /// The record passed [`Options::max_record_bytes`] at time t: reported in a
+    /// `record_budget` diagnostic.
+    RecordBudget { t: f64, budget: usize },
 }
 
 impl Handover {
     /// The diagnostic that carries the note, and the note.
-    fn note(self) -> (DiagnosticKind, &'static str) {
+    fn note(self) -> (DiagnosticKind, String) {
         match self {
             Handover::Accumulation => (
                 DiagnosticKind::Zeno,
                 "adjoint mode does not sweep back through an accumulation: \
-                 the gradient was computed in forward mode",
+                 the gradient was computed in forward mode"
+                    .into(),
+            ),
+            Handover::RecordBudget { t, budget } => (
+                DiagnosticKind::RecordBudget,
+                format!(
+                    "adjoint mode's record of the run passed its budget of {budget} bytes at \
+                     t = {}: the gradient was computed in forward mode, whose memory does not \
+                     grow with the number of events",
+                    crate::error::Time(t)
+                ),
             ),
         }
     }
@@ -246,6 +259,10 @@ where
         ..opts.clone()
     };
     let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;
+    if let Some(t) = tape.as_ref().and_then(Tape::overflowed_at) {
+        let budget = opts.max_record_bytes;
+        return Ok(Err(Handover::RecordBudget { t, budget }));
+    }
     Ok(match tape.filter(|t| t.final_state().is_some()) {
         Some(tape) => Ok((sol, tape)),
         None => Err(Handover::Accumulation),
@@ -286,12 +303,12 @@ pub(crate) fn note_fallback(sol: &mut Solution, handover: Handover) {
     match sol.diagnostics.iter_mut().rfind(|d| d.kind == kind) {
         Some(d) => {
             d.message.push_str("; ");
-            d.message.push_str(note);
+            d.message.push_str(&note);
         }
         None => sol.diagnostics.push(Diagnostic {
             kind,
             t: sol.t_end,
-            message: note.into(),
+            message: note,
         }),
     }
 }
