@@ -477,8 +477,23 @@ fn a_time_event_at_an_end_of_the_run_moving_with_the_params_is_a_kink() {
         ))
         .expect("valid")
     };
+    // Adjoint mode reports it too (its primal run computes τ'), with the same one-sided value.
+    let adjoint = |m: &InterpretedModel| {
+        let opts = Options {
+            gradient_mode: GradientMode::Adjoint,
+            ..Options::default()
+        };
+        let sol = mvad_tests::solve_at_defaults(m, &opts);
+        assert_eq!(sol.stats.mode, GradientMode::Adjoint);
+        sol
+    };
     let kinks = |m: &InterpretedModel| {
         let sol = mvad_tests::solve_at_defaults(m, &Options::default());
+        let adj = adjoint(m);
+        assert_eq!(adj.diagnostics.len(), sol.diagnostics.len(), "{adj:?}");
+        for (a, f) in adj.gradient.iter().zip(&sol.gradient) {
+            assert_near(*a, *f, 1e-9, "adjoint gradient");
+        }
         let ts: Vec<f64> = sol
             .diagnostics
             .iter()

@@ -64,7 +64,8 @@ where
         let timed = info.events[k].is_time_event();
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
-        if timed && self.sens && (t == 0.0 || t == self.t_end) && self.moves_off_an_end(t) {
+        // (τ' is computed in a primal run too: adjoint mode reports it as forward mode does.)
+        if timed && (t == 0.0 || t == self.t_end) && self.moves_off_an_end(t) {
             self.report_time_event_at_an_end(k, t);
         }
         let mode_before = self.mode;
@@ -84,6 +85,10 @@ where
         }
         self.schedule.advance(self.model, self.p, k)?;
         let mode_after = self.mode;
+        if mode_after != mode_before {
+            let modes = (mode_before, mode_after);
+            self.schedule.enter_mode(self.model, self.p, modes, t)?;
+        }
         let stuck = zeno_stop.is_none()
             && !timed
             && info.events[k].armed_in(mode_after)

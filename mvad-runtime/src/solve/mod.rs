@@ -202,7 +202,7 @@ fn nonfinite(t: f64, what: impl FnOnce() -> String) -> SolveError {
 /// The resolution of the time t in the event loop, 16 ulp: a located crossing is that close
 /// to the true one, a state event's state is snapped onto its guard only that far, and a time
 /// event due that soon after an instant joins it (no step that short can be taken).
-fn time_resolution(t: f64) -> f64 {
+pub(super) fn time_resolution(t: f64) -> f64 {
     16.0 * f64::EPSILON * t.abs() + f64::MIN_POSITIVE
 }
 

@@ -179,6 +179,33 @@ impl Schedule {
         Ok(())
     }
 
+    /// On entering mode `to` from mode `from` at the instant t (an event switched it): every
+    /// time event armed in `to` but not in `from` skips its occurrences up to and including t
+    /// (within [`super::time_resolution`]). They fell while it was not armed: the instant's
+    /// events were decided in `from`, at t⁻, so a row that `from`'s event handled at t is not
+    /// handled again by `to`'s. (Its occurrences before t would otherwise be due at once and
+    /// fire late, at t, with t' = 0: probe3 A1.) Events armed in both modes are left alone:
+    /// their occurrence at t, if any, is among the instant's.
+    pub(super) fn enter_mode<M: HybridModel>(
+        &mut self,
+        model: &M,
+        p: &OVector<f64, M::P>,
+        (from, to): (usize, usize),
+        t: f64,
+    ) -> Result<(), SolveError>
+    where
+        DefaultAllocator: ModelAlloc<M::N, M::P>,
+    {
+        let after = (t + super::time_resolution(t)).next_up();
+        for i in 0..self.armed[to].len() {
+            let k = self.armed[to][i];
+            if !model.info().events[k].armed_in(from) {
+                self.skip_before(model, p, k, after)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Skips the occurrences of time event k before t.
     pub(super) fn skip_before<M: HybridModel>(
         &mut self,
