@@ -19,7 +19,9 @@ use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Inputs, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
-use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
+use mvad_runtime::qp::{
+    ConstraintKind, QpBank, QpError, QpFlowKink, QpLayerInfo, QpOptions, QpState, Side,
+};
 use mvad_runtime::{
     At, EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Occurrence, Switches, Trigger,
 };
@@ -739,6 +741,27 @@ impl HybridModel for InterpretedModel {
     }
     fn qp_failure(&self) -> Option<(usize, QpError)> {
         self.qp_bank.borrow().failure().map(|(q, e)| (q, e.clone()))
+    }
+    fn qp_flow_pieces(
+        &self,
+        pt: mvad_runtime::Point<'_, Self::N, Self::P>,
+        f: &X,
+        s: Option<&M>,
+        pieces: &mut [Switches],
+    ) -> Option<bool> {
+        let at = at_pt(pt);
+        let Point { t, x, p, .. } = at.pt;
+        let s = s.map(|s| s.as_slice());
+        let fill = self.qp_fill(&at);
+        let mut bank = self.qp_bank.borrow_mut();
+        let found = bank.flow_pieces(t, x, p, pt.sw, f.as_slice(), s, pieces, fill);
+        found.ok()
+    }
+    fn qp_flow_kinks(&self) -> Vec<QpFlowKink> {
+        self.qp_bank.borrow().flow_kinks().to_vec()
+    }
+    fn clear_qp_flow_kinks(&self) {
+        self.qp_bank.borrow_mut().clear_flow_kinks();
     }
 }
 

@@ -171,6 +171,25 @@ impl Gen<'_> {
                 fn qp_kink(&self) -> ::core::option::Option<(usize, usize)> {
                     self.qp.borrow().kink()
                 }
+                fn qp_flow_pieces(
+                    &self,
+                    pt: #pr::Point<'_, Self::N, Self::P>,
+                    f: &#pr::OVector<f64, Self::N>,
+                    s: ::core::option::Option<&#pr::OMatrix<f64, Self::N, Self::P>>,
+                    pieces: &mut [#pr::Switches],
+                ) -> ::core::option::Option<bool> {
+                    let (t, x, p) = (pt.t, pt.x.as_slice(), pt.p.as_slice());
+                    self.qp.borrow_mut().flow_pieces(
+                        t, x, p, pt.sw, f.as_slice(), s.map(|s| s.as_slice()), pieces,
+                        |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),
+                    ).ok()
+                }
+                fn qp_flow_kinks(&self) -> ::std::vec::Vec<#pr::QpFlowKink> {
+                    self.qp.borrow().flow_kinks().to_vec()
+                }
+                fn clear_qp_flow_kinks(&self) {
+                    self.qp.borrow_mut().clear_flow_kinks();
+                }
             },
         }
     }

@@ -38,7 +38,11 @@
 //! flow is smooth and its products λᵀf_x, λᵀf_θ carry the qp's KKT derivative; the switch
 //! flips are transposed like any other. At a qp kink at T (a weakly active constraint, a
 //! `kink` diagnostic) `gradient` is the derivative from the right and `gradient_left` comes
-//! from a second sweep over the same record with every qp on its left side.
+//! from a second sweep over the same record with every qp on its left side. A constraint
+//! weakly active *along* a flow (a persistent kink, `crate::qp::FlowPieces`) makes each
+//! parameter's derivative follow the piece its own perturbation selects: not linear in the
+//! cotangent, so the run is handed over to forward mode ([`Handover::QpFlowKink`], said in
+//! the `kink` diagnostic).
 
 pub mod record;
 mod sweep;
@@ -96,6 +100,10 @@ pub(crate) enum Handover {
     /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
     /// with a state stuck on its guard: reported in the `zeno` diagnostic.
     Accumulation,
+    /// A qp read by a flow was weakly active along the flow (a persistent kink, reported in
+    /// a `kink` diagnostic): each parameter's one-sided derivative follows the piece its own
+    /// perturbation selects, which is not linear in a cotangent, so no sweep gives it.
+    QpFlowKink,
 }
 
 impl Handover {
@@ -106,6 +114,12 @@ impl Handover {
                 DiagnosticKind::Zeno,
                 "adjoint mode does not sweep back through an accumulation: \
                  the gradient was computed in forward mode",
+            ),
+            Handover::QpFlowKink => (
+                DiagnosticKind::Kink,
+                "adjoint mode cannot sweep back along a qp kink that persists in a flow \
+                 (the one-sided derivatives are not linear in the cotangent): the gradients \
+                 were computed in forward mode",
             ),
         }
     }
@@ -230,7 +244,8 @@ fn sorted_samples<'a>(cot: &Cotangents<'a>, nobs: usize) -> Vec<Sample<'a>> {
 pub const PRIMAL_TOL_FACTOR: f64 = 0.01;
 
 /// The primal run with the tape; a [`Handover`] when it did not reach T normally (an
-/// accumulation or a stuck state ended it), so forward mode has to take over.
+/// accumulation or a stuck state ended it) or met a qp kink that persists along a flow, so
+/// forward mode has to take over.
 fn primal<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
@@ -246,6 +261,9 @@ where
         ..opts.clone()
     };
     let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;
+    if !model.qp_flow_kinks().is_empty() {
+        return Ok(Err(Handover::QpFlowKink));
+    }
     Ok(match tape.filter(|t| t.final_state().is_some()) {
         Some(tape) => Ok((sol, tape)),
         None => Err(Handover::Accumulation),

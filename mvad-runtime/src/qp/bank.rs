@@ -69,6 +69,21 @@ impl QpState {
     }
 }
 
+/// A constraint of a qp read by a flow that was weakly active *along* the flow (not just
+/// where its switching function crosses zero): a kink of the cost in θ, met between `first`
+/// and `last` (the times of the evaluations that found it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct QpFlowKink {
+    /// The qp's index.
+    pub qp: usize,
+    /// The constraint's index in the qp.
+    pub constraint: usize,
+    /// The earliest time it was met.
+    pub first: f64,
+    /// The latest time it was met.
+    pub last: f64,
+}
+
 /// The qp layers of a model (see the module documentation).
 #[derive(Clone, Debug)]
 pub struct QpBank {
@@ -83,6 +98,8 @@ pub struct QpBank {
     switch_owner: Vec<(usize, usize)>,
     /// Scratch: ∂σ/∂(x, θ, t) of a switching function.
     grad: Vec<f64>,
+    /// The persistent kinks [`QpBank::flow_pieces`] met since [`QpBank::clear_flow_kinks`].
+    flow_kinks: Vec<QpFlowKink>,
 }
 
 impl QpBank {
@@ -128,6 +145,7 @@ impl QpBank {
             },
             switch_owner,
             grad: vec![0.0; nw],
+            flow_kinks: Vec::new(),
         }
     }
 
@@ -184,6 +202,74 @@ impl QpBank {
             ok &= layer.evaluate(t, x, p, frozen, derivs, side, fill_q, u, du);
         }
         ok
+    }
+
+    /// The one-sided derivative of a flow that reads qps of the state, where one of them is
+    /// weakly active along the flow (see `Layer::flow_pieces`): at a point (t, x, θ) of the
+    /// flow with frozen bits `sw` and rate `f`, each qp with switch bits is checked for a
+    /// constraint whose slack and multiplier are both zero at the point and stay zero along
+    /// the flow (a persistent kink: logged, see [`QpBank::flow_kinks`]). There the
+    /// derivative of the solution is one-sided and not linear in the direction: with `s`
+    /// (S = ∂x/∂θ column-major, n × p), `pieces[j]` receives the bits of the smooth piece
+    /// whose derivative is the one-sided derivative along column j's direction
+    /// (dx, dθ) = (S_j, e_j), on the side [`QpBank::set_side`] chose — `sw` with the kink's
+    /// bits set as that derivative holds them. Returns whether there is such a kink
+    /// (`pieces` is untouched otherwise); a qp that fails is `Err` (and its
+    /// [`QpBank::failure`]). Allocates nothing but a log entry per new kink.
+    #[allow(clippy::too_many_arguments)]
+    pub fn flow_pieces(
+        &mut self,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        sw: &Switches,
+        f: &[f64],
+        s: Option<&[f64]>,
+        pieces: &mut [Switches],
+        mut fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
+    ) -> Result<bool, (usize, QpError)> {
+        let side = self.side;
+        let ncols = s.map_or(0, |s| s.len() / x.len().max(1));
+        let mut any = false;
+        let log = &mut self.flow_kinks;
+        for (q, layer) in self.layers.iter_mut().enumerate() {
+            let mut fresh = !any;
+            let found = layer.flow_pieces(
+                (t, x, p),
+                sw,
+                side,
+                f,
+                s,
+                |data, jac| fill(q, data, jac),
+                |i| log_kink(log, q, i, t),
+                |j, bit, held| {
+                    if fresh {
+                        pieces[..ncols].iter_mut().for_each(|pc| pc.clone_from(sw));
+                        fresh = false;
+                    }
+                    pieces[j].set(bit, held);
+                },
+            );
+            match found {
+                Ok(found) => any |= found,
+                Err(e) => {
+                    layer.failure = Some(e.clone());
+                    return Err((q, e));
+                }
+            }
+        }
+        Ok(any)
+    }
+
+    /// The persistent kinks met by [`QpBank::flow_pieces`] since the last
+    /// [`QpBank::clear_flow_kinks`], in the order first met.
+    pub fn flow_kinks(&self) -> &[QpFlowKink] {
+        &self.flow_kinks
+    }
+
+    /// Forgets the persistent kinks met so far (at the start of a run).
+    pub fn clear_flow_kinks(&mut self) {
+        self.flow_kinks.clear();
     }
 
     /// The qp and constraint of the model's switch index j, if it is a qp switch bit.
@@ -278,6 +364,22 @@ impl QpBank {
                 status: l.solver.status().to_vec(),
             })
             .collect())
+    }
+}
+
+/// Records that constraint i of qp q is a persistent kink at time t.
+fn log_kink(log: &mut Vec<QpFlowKink>, q: usize, i: usize, t: f64) {
+    match log.iter_mut().find(|k| k.qp == q && k.constraint == i) {
+        Some(k) => {
+            k.first = k.first.min(t);
+            k.last = k.last.max(t);
+        }
+        None => log.push(QpFlowKink {
+            qp: q,
+            constraint: i,
+            first: t,
+            last: t,
+        }),
     }
 }
 

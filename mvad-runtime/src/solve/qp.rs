@@ -27,6 +27,7 @@ pub(super) fn run<M: HybridModel, K: EventSink>(
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    model.clear_qp_flow_kinks();
     let mut d = Driver::new(model, params, opts, t_end, tape);
     d.run(sink).map_err(|e| explain(model, e))?;
     d.finish().map_err(|e| explain(model, e))
@@ -89,6 +90,23 @@ where
                 ),
             });
         }
+    }
+    for k in model.qp_flow_kinks() {
+        kink = true;
+        sol.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::Kink,
+            t: k.first,
+            message: format!(
+                "qp `{}`, constraint {}: weakly active along the flow from t = {} to t = {} \
+                 (slack and multiplier stay zero), so the cost is a kink of the parameters; \
+                 `gradient` is the derivative from the right, `gradient_left` the one from \
+                 the left",
+                model.qps()[k.qp].name,
+                k.constraint,
+                k.first,
+                k.last
+            ),
+        });
     }
     sol.qp = states;
     if kink && opts.sensitivities {
