@@ -97,14 +97,12 @@ where
             kind: DiagnosticKind::Kink,
             t: k.first,
             message: format!(
-                "qp `{}`, constraint {}: weakly active along the flow from t = {} to t = {} \
-                 (slack and multiplier stay zero), so the cost is a kink of the parameters; \
-                 `gradient` is the derivative from the right, `gradient_left` the one from \
-                 the left",
+                "qp `{}`, constraint {}: weakly active along the flow from t = {} (slack and \
+                 multiplier stay zero), so the cost is a kink of the parameters; `gradient` \
+                 is the derivative from the right, `gradient_left` the one from the left",
                 model.qps()[k.qp].name,
                 k.constraint,
                 k.first,
-                k.last
             ),
         });
     }
