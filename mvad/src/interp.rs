@@ -178,6 +178,8 @@ impl InterpretedModel {
                     .collect(),
                 dynamic: q.dynamic,
                 switches: q.switches,
+                events_before: q.events_before.clone(),
+                events_after: q.events_after.clone(),
             })
             .collect();
         InterpretedModel {

@@ -78,12 +78,16 @@ impl Gen<'_> {
                     }
                     None => quote!(::core::option::Option::None),
                 };
+                let before = q.events_before.iter().map(|&k| usize_lit(k));
+                let after = q.events_after.iter().map(|&k| usize_lit(k));
                 quote!(#pr::QpLayerInfo {
                     name: ::core::convert::From::from(#name),
                     vars: #pr::names(&[#(#vars),*]),
                     kinds: ::core::convert::From::from([#(#kinds),*]),
                     dynamic: #dynamic,
                     switches: #switches,
+                    events_before: ::std::vec![#(#before),*],
+                    events_after: ::std::vec![#(#after),*],
                 })
             })
             .collect();

@@ -38,6 +38,11 @@ pub struct QpLayerInfo {
     /// constraint in order, when a flow reads its solution (its active set is then frozen
     /// along the steps); `None` otherwise.
     pub switches: Option<usize>,
+    /// The events whose guard or reset reads its solution (at the state before the jump):
+    /// a weakly active constraint there is a kink of the cost in θ at the event.
+    pub events_before: Vec<usize>,
+    /// The events whose cost term reads its solution (at the state after the jump).
+    pub events_after: Vec<usize>,
 }
 
 /// A qp's solution at one point: what `grad --json` reports under `"qp"`.
