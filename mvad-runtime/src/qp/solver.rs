@@ -266,6 +266,19 @@ impl QpSolver {
         dual.beta.copy_from_slice(data.b.as_slice());
         for (i, (r, &kind)) in dual.role.iter_mut().zip(&self.kinds).enumerate() {
             *r = role(i, kind);
+            // A row of zeros involves no variable: 0 (= or ≤) bᵢ. Left out when it holds
+            // strictly, an error naming it otherwise.
+            if *r != Role::Off && dual.wnorm[i] == 0.0 {
+                let (equality, rhs) = (kind == ConstraintKind::Eq, data.b[i]);
+                if equality || rhs <= 0.0 {
+                    return Err(QpError::Vanishing {
+                        constraint: i,
+                        equality,
+                        rhs,
+                    });
+                }
+                *r = Role::Off;
+            }
         }
         Ok(())
     }
