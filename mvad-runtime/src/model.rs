@@ -418,6 +418,26 @@ where
     }
     /// Forgets the persistent kinks met so far (at the start of a run).
     fn clear_qp_flow_kinks(&self) {}
+    /// Where qp q, solved pointwise at `at`, has a weakly active constraint: the active set
+    /// of the smooth piece whose derivative is its one-sided derivative (on the side of
+    /// [`HybridModel::set_qp_side`]) along the direction (dx, e_j, dt) of (x, θ, t), into
+    /// `active` (one entry per constraint), and `Some(true)`; `Some(false)` away from a
+    /// kink, `None` when the qp fails (see [`crate::qp::QpBank::pointwise_piece`]).
+    fn qp_piece(
+        &self,
+        q: usize,
+        at: At<'_, Self::N, Self::P>,
+        direction: (&OVector<f64, Self::N>, usize, f64),
+        active: &mut [bool],
+    ) -> Option<bool> {
+        let _ = (q, at, direction, active);
+        Some(false)
+    }
+    /// Pins qp q's pointwise evaluations to the active set `active` (`None` unpins; see
+    /// [`crate::qp::QpBank::pin`]): its solution and derivatives are then that piece's.
+    fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
+        let _ = (q, active);
+    }
 }
 
 /// Capability: the forward-sensitivity right-hand side.

@@ -765,6 +765,23 @@ impl HybridModel for InterpretedModel {
     fn clear_qp_flow_kinks(&self) {
         self.qp_bank.borrow_mut().clear_flow_kinks();
     }
+    fn qp_piece(
+        &self,
+        q: usize,
+        at: At<'_, Self::N, Self::P>,
+        (dx, j, dt): (&X, usize, f64),
+        active: &mut [bool],
+    ) -> Option<bool> {
+        let at = pt0(at);
+        let Point { t, x, p, .. } = at.pt;
+        let fill = self.qp_fill(&at);
+        let mut bank = self.qp_bank.borrow_mut();
+        let found = bank.pointwise_piece(q, (t, x, p), (dx.as_slice(), j, dt), active, fill);
+        found.ok()
+    }
+    fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
+        self.qp_bank.borrow_mut().pin(q, active);
+    }
 }
 
 impl ModelSens for InterpretedModel {

@@ -194,6 +194,22 @@ impl Gen<'_> {
                 fn clear_qp_flow_kinks(&self) {
                     self.qp.borrow_mut().clear_flow_kinks();
                 }
+                fn qp_piece(
+                    &self,
+                    q: usize,
+                    at: #pr::At<'_, Self::N, Self::P>,
+                    (dx, j, dt): (&#pr::OVector<f64, Self::N>, usize, f64),
+                    active: &mut [bool],
+                ) -> ::core::option::Option<bool> {
+                    let (t, x, p) = (at.t, at.x.as_slice(), at.p.as_slice());
+                    self.qp.borrow_mut().pointwise_piece(
+                        q, (t, x, p), (dx.as_slice(), j, dt), active,
+                        |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),
+                    ).ok()
+                }
+                fn pin_qp(&self, q: usize, active: ::core::option::Option<&[bool]>) {
+                    self.qp.borrow_mut().pin(q, active);
+                }
             },
         }
     }

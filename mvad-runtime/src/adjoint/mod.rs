@@ -38,11 +38,12 @@
 //! flow is smooth and its products λᵀf_x, λᵀf_θ carry the qp's KKT derivative; the switch
 //! flips are transposed like any other. At a qp kink at T (a weakly active constraint, a
 //! `kink` diagnostic) `gradient` is the derivative from the right and `gradient_left` comes
-//! from a second sweep over the same record with every qp on its left side. A constraint
-//! weakly active *along* a flow (a persistent kink, `crate::qp::FlowPieces`) makes each
-//! parameter's derivative follow the piece its own perturbation selects: not linear in the
-//! cotangent, so the run is handed over to forward mode ([`Handover::QpFlowKink`], said in
-//! the `kink` diagnostic).
+//! from a second sweep over the same record with every qp on its left side (each the sum
+//! of one-sided derivatives along the data's coordinates). A constraint weakly active
+//! *along* a flow (a persistent kink, `crate::qp::FlowPieces`) or where an event reads its
+//! qp makes each parameter's derivative follow the piece its own perturbation selects: not
+//! linear in the cotangent, so the run is handed over to forward mode
+//! ([`Handover::QpKink`], said in the `kink` diagnostic).
 
 pub mod record;
 mod sweep;
@@ -54,7 +55,7 @@ use crate::qp::Side;
 use crate::sample::check_times;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind, GradientMode, Options, Solution, Stats};
-use crate::solve::{judge, run_loop};
+use crate::solve::{is_event_kink, judge, run_loop};
 use crate::vjp::Cotangents;
 use nalgebra::{Const, DefaultAllocator, OVector};
 use record::{Item, JumpKind, Tape};
@@ -100,10 +101,11 @@ pub(crate) enum Handover {
     /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
     /// with a state stuck on its guard: reported in the `zeno` diagnostic.
     Accumulation,
-    /// A qp read by a flow was weakly active along the flow (a persistent kink, reported in
-    /// a `kink` diagnostic): each parameter's one-sided derivative follows the piece its own
-    /// perturbation selects, which is not linear in a cotangent, so no sweep gives it.
-    QpFlowKink,
+    /// A qp was read at a kink inside the run — weakly active along a flow (a persistent
+    /// kink) or where an event reads it — reported in a `kink` diagnostic: each parameter's
+    /// one-sided derivative follows the piece its own perturbation selects, which is not
+    /// linear in a cotangent, so no sweep gives it.
+    QpKink,
 }
 
 impl Handover {
@@ -115,11 +117,11 @@ impl Handover {
                 "adjoint mode does not sweep back through an accumulation: \
                  the gradient was computed in forward mode",
             ),
-            Handover::QpFlowKink => (
+            Handover::QpKink => (
                 DiagnosticKind::Kink,
-                "adjoint mode cannot sweep back along a qp kink that persists in a flow \
-                 (the one-sided derivatives are not linear in the cotangent): the gradients \
-                 were computed in forward mode",
+                "adjoint mode cannot sweep back through a qp kink inside the run (each \
+                 parameter's one-sided derivative follows its own side of it, which is not \
+                 linear in a cotangent): the gradients were computed in forward mode",
             ),
         }
     }
@@ -261,8 +263,8 @@ where
         ..opts.clone()
     };
     let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;
-    if !model.qp_flow_kinks().is_empty() {
-        return Ok(Err(Handover::QpFlowKink));
+    if !model.qp_flow_kinks().is_empty() || sol.diagnostics.iter().any(is_event_kink) {
+        return Ok(Err(Handover::QpKink));
     }
     Ok(match tape.filter(|t| t.final_state().is_some()) {
         Some(tape) => Ok((sol, tape)),

@@ -19,6 +19,8 @@
 //! [`QpBank::switch_grad`] are its switching functions (see `layer.rs`).
 
 use super::layer::Layer;
+#[cfg(doc)]
+use super::QpSolver;
 use super::{ConstraintKind, ConstraintStatus, QpError, QpOptions, Side};
 use crate::model::Switches;
 
@@ -264,6 +266,41 @@ impl QpBank {
             }
         }
         Ok(any)
+    }
+
+    /// Pins qp q: its pointwise evaluations (not a flow's, whose bits freeze it) solve on
+    /// the active set `active` (m entries, [`QpSolver::solve_frozen`]) until `None` unpins
+    /// it — the smooth piece a one-sided derivative follows ([`QpBank::pointwise_piece`]).
+    pub fn pin(&mut self, q: usize, active: Option<&[bool]>) {
+        if let Some(layer) = self.layers.get_mut(q) {
+            layer.pin(active);
+        }
+    }
+
+    /// Where qp q, solved pointwise at (t, x, θ), has a weakly active constraint: writes
+    /// into `active` (m entries) the active set of the piece whose derivative is the
+    /// one-sided derivative (on the side [`QpBank::set_side`] chose) along the direction dx
+    /// of the state, e_j of the params and dt of time, and returns true; false away from a
+    /// kink. Unpins q. A qp that fails is `Err` (and its [`QpBank::failure`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn pointwise_piece(
+        &mut self,
+        q: usize,
+        (t, x, p): (f64, &[f64], &[f64]),
+        (dx, j, dt): (&[f64], usize, f64),
+        active: &mut [bool],
+        mut fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
+    ) -> Result<bool, QpError> {
+        let side = self.side;
+        let Some(layer) = self.layers.get_mut(q) else {
+            return Ok(false);
+        };
+        let fill_q = |data: &mut [f64], jac: Option<&mut [f64]>| fill(q, data, jac);
+        let found = layer.pointwise_piece((t, x, p), (dx, j, dt), side, fill_q, active);
+        if let Err(e) = &found {
+            layer.failure = Some(e.clone());
+        }
+        found
     }
 
     /// The persistent kinks met by [`QpBank::flow_pieces`] since the last

@@ -61,6 +61,9 @@ pub(super) struct Layer {
     weak: Vec<bool>,
     piece: Vec<bool>,
     again: Vec<bool>,
+    /// A pointwise evaluation solves on `pin_bits` when `pinned` (see `QpBank::pin`).
+    pinned: bool,
+    pin_bits: Vec<bool>,
     key: Key,
 }
 
@@ -90,6 +93,8 @@ impl Layer {
             weak: vec![false; m],
             piece: vec![false; m],
             again: vec![false; m],
+            pinned: false,
+            pin_bits: vec![false; m],
             key: Key {
                 valid: false,
                 derivs: false,
@@ -105,10 +110,14 @@ impl Layer {
     }
 
     /// Reads the frozen active set from `sw` when the layer has switch bits and `sw` is
-    /// given; returns whether the evaluation is frozen.
+    /// given, else the pinned one if the layer is pinned; returns whether the evaluation is
+    /// frozen.
     fn load_bits(&mut self, sw: Option<&Switches>) -> bool {
         let (Some(sw), Some(first)) = (sw, self.info.switches) else {
-            return false;
+            if self.pinned {
+                self.bits.copy_from_slice(&self.pin_bits);
+            }
+            return self.pinned;
         };
         let mut j = first;
         for (bit, kind) in self.bits.iter_mut().zip(&self.info.kinds) {
@@ -264,7 +273,7 @@ impl Layer {
         self.key.valid = false;
         fill(&mut self.flat, Some(&mut self.jac[..]));
         let (n, nw) = (x.len(), x.len() + p.len() + 1);
-        mix(&mut self.dir, &self.jac, nw, f, (nw - 1, 1.0));
+        mix(&mut self.dir, &self.jac, nw, f, &[(nw - 1, 1.0)]);
         let (weak, piece, again) = (&self.weak, &mut self.piece, &mut self.again);
         let dir = &self.dir;
         (self.solver).directional_on_piece(
@@ -294,7 +303,7 @@ impl Layer {
                 &self.jac,
                 nw,
                 &s[j * n..(j + 1) * n],
-                (n + j, 1.0),
+                &[(n + j, 1.0)],
             );
             let (weak, piece, again) = (&self.weak, &mut self.piece, &mut self.again);
             let dir = &self.dir;
@@ -314,6 +323,64 @@ impl Layer {
                 }
             }
         }
+        Ok(true)
+    }
+
+    /// Pins pointwise evaluations to the active set `active` (m entries; `None` unpins).
+    pub(super) fn pin(&mut self, active: Option<&[bool]>) {
+        self.pinned = active.is_some();
+        if let Some(a) = active {
+            self.pin_bits.copy_from_slice(a);
+        }
+    }
+
+    /// At a pointwise solve at (t, x, θ) with a weakly active constraint: the active set of
+    /// the smooth piece whose derivative is the one-sided derivative (on `side`) along the
+    /// direction dx of the state, e_j of the params and dt of time, into `active`; false
+    /// (and `active` untouched) away from a kink. Leaves the cache invalid when it took
+    /// the derivative.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn pointwise_piece(
+        &mut self,
+        (t, x, p): (f64, &[f64], &[f64]),
+        (dx, j, dt): (&[f64], usize, f64),
+        side: Side,
+        mut fill: impl FnMut(&mut [f64], Option<&mut [f64]>),
+        active: &mut [bool],
+    ) -> Result<bool, QpError> {
+        self.pinned = false;
+        self.load_bits(None);
+        if !(self.cached(false, self.key.side, t, x, p) && self.failure.is_none()) {
+            self.key.valid = false;
+            fill(&mut self.flat, None);
+            self.solve(false)?;
+        }
+        if !self.solver.is_kink() {
+            return Ok(false);
+        }
+        self.key.valid = false;
+        fill(&mut self.flat, Some(&mut self.jac[..]));
+        let (n, nw) = (x.len(), x.len() + p.len() + 1);
+        mix(
+            &mut self.dir,
+            &self.jac,
+            nw,
+            dx,
+            &[(n + j, 1.0), (nw - 1, dt)],
+        );
+        for (w, s) in self.weak.iter_mut().zip(self.solver.status()) {
+            *w = *s == ConstraintStatus::WeaklyActive;
+        }
+        let (weak, again, dir) = (&self.weak, &mut self.again, &self.dir);
+        (self.solver).directional_on_piece(
+            dir,
+            side,
+            weak,
+            &mut self.du,
+            &mut self.dm,
+            active,
+            again,
+        )?;
         Ok(true)
     }
 
@@ -392,12 +459,13 @@ impl Directions<'_> {
     }
 }
 
-/// The data direction Σ_k ∂data/∂x_k · dx_k + ∂data/∂w_e · c for `extra` = (w_e, c), from
-/// the Jacobian `jac` (slot d·nw + w): a state direction dx plus one other column.
-fn mix(dir: &mut QpData, jac: &[f64], nw: usize, dx: &[f64], (we, c): (usize, f64)) {
+/// The data direction Σ_k ∂data/∂x_k · dx_k + Σ ∂data/∂w_e · c_e over `extra` = [(w_e, c_e)],
+/// from the Jacobian `jac` (slot d·nw + w): a state direction dx plus other columns.
+fn mix(dir: &mut QpData, jac: &[f64], nw: usize, dx: &[f64], extra: &[(usize, f64)]) {
     unflatten(dir, |d| {
         let row = &jac[d * nw..d * nw + dx.len()];
-        row.iter().zip(dx).map(|(a, b)| a * b).sum::<f64>() + jac[d * nw + we] * c
+        let along_x: f64 = row.iter().zip(dx).map(|(a, b)| a * b).sum();
+        along_x + extra.iter().map(|&(w, c)| jac[d * nw + w] * c).sum::<f64>()
     });
 }
 

@@ -31,6 +31,7 @@ mod conditioning;
 mod finish;
 mod jump;
 mod qp;
+pub(crate) use qp::is_event_kink;
 mod record;
 mod resolution;
 mod schedule;
