@@ -20,7 +20,8 @@ fn adjoint() -> Options {
     }
 }
 
-/// Solves and checks `gradient` (right) and `gradient_left` against closed forms, to `tol`.
+/// Solves and checks `gradient` (right) and `gradient_left` (the same away from a kink,
+/// where the solution leaves it out) against closed forms, to `tol`.
 #[track_caller]
 fn check<M: HybridModel>(
     m: &M,
@@ -34,7 +35,7 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let sol = solve_at(m, p, opts).expect("solves");
-    let gl = sol.gradient_left.clone().expect("gradient_left");
+    let gl = (sol.gradient_left.clone()).unwrap_or_else(|| sol.gradient.clone());
     for i in 0..right.len() {
         assert_near(
             sol.gradient[i],
@@ -70,6 +71,7 @@ fn a_constraint_weakly_active_along_the_whole_run_has_both_one_sided_gradients()
     let compiled = QpWeakFlow::new();
     for opts in [tight(), adjoint()] {
         let a = check(&loaded, &[2.0, 0.0], &opts, &right, &left, 1e-9);
+        assert!(a.gradient_left.is_some());
         let b = check(&compiled, &[2.0, 0.0], &opts, &right, &left, 1e-9);
         for sol in [&a, &b] {
             let d = flow_kink(sol);
@@ -137,6 +139,69 @@ fn a_transversal_qp_crossing_is_not_a_kink() {
     for opts in [tight(), adjoint()] {
         let sol = solve_at(&m, &m.info().param_defaults, &opts).expect("solves");
         assert_eq!(sol.stats.switch_crossings, 3);
+        assert!(!sol
+            .diagnostics
+            .iter()
+            .any(|d| d.kind == DiagnosticKind::Kink));
+        assert_eq!(sol.stats.mode, opts.gradient_mode);
+    }
+}
+
+mvad::hybrid!(include "tests/qp_reset_kink.hyb");
+mvad::hybrid!(include "tests/qp_event_kink.hyb");
+
+/// The `kink` diagnostic of a qp read by an event.
+fn event_kink<'a>(sol: &'a Solution, event: &str) -> &'a mvad::Diagnostic {
+    sol.diagnostics
+        .iter()
+        .find(|d| d.kind == DiagnosticKind::Kink && d.message.contains(&format!("event `{event}`")))
+        .expect("a kink where the event reads the qp is reported")
+}
+
+#[test]
+fn a_qp_read_by_a_reset_at_its_kink_mid_run() {
+    // probe2 q15: C = (5 − c − d)·max(c + d − e, 0) at c + d = e = 3/2.
+    let (right, left) = ([3.5, 3.5, 0.0], [0.0, 0.0, -3.5]);
+    let loaded = loaded_test_model("qp_reset_kink.hyb");
+    let compiled = QpResetKink::new();
+    for opts in [tight(), adjoint()] {
+        for sol in [
+            check(&loaded, &[1.0, 0.5, 1.5], &opts, &right, &left, 1e-12),
+            check(&compiled, &[1.0, 0.5, 1.5], &opts, &right, &left, 1e-12),
+        ] {
+            let d = event_kink(&sol, "hit");
+            assert!(d.message.contains("qp `q2`, constraint 0"), "{}", d.message);
+            assert_near(d.t, 1.5, 1e-14, "the kink's time");
+            assert_eq!(sol.stats.mode, GradientMode::Forward);
+        }
+    }
+}
+
+#[test]
+fn each_parameter_crosses_an_event_kink_on_its_own_side() {
+    // C = 3·max(v·tau − e, 0) at v·tau = e: tau moves x⁻ backwards (f⁻ t' = v < 0), so its
+    // right derivative is 0 and its left one −3, unlike v's.
+    let (right, left) = ([4.5, 0.0, 0.0], [0.0, -3.0, -3.0]);
+    let loaded = loaded_test_model("qp_event_kink.hyb");
+    let compiled = QpEventKink::new();
+    for opts in [tight(), adjoint()] {
+        for sol in [
+            check(&loaded, &[-1.0, 1.5, -1.5], &opts, &right, &left, 1e-12),
+            check(&compiled, &[-1.0, 1.5, -1.5], &opts, &right, &left, 1e-12),
+        ] {
+            assert_eq!(event_kink(&sol, "hit").t, 1.5);
+            assert_eq!(sol.stats.mode, GradientMode::Forward);
+            if opts.gradient_mode == GradientMode::Adjoint {
+                let d = event_kink(&sol, "hit");
+                assert!(d.message.contains("forward mode"), "{}", d.message);
+            }
+        }
+    }
+    // Off the kink (e = −1.6: the argument is 0.1) the run is smooth, in both modes:
+    // ∇C = 3·(tau, v, −1).
+    let smooth = [4.5, -3.0, -3.0];
+    for opts in [tight(), adjoint()] {
+        let sol = check(&loaded, &[-1.0, 1.5, -1.6], &opts, &smooth, &smooth, 1e-12);
         assert!(!sol
             .diagnostics
             .iter()
