@@ -10,6 +10,7 @@ import pytest
 import mvad
 from conftest import BALL, BALL_COST, BALL_DC_DE, TIGHT
 
+REPO_TESTS = BALL.parents[1] / "tests" / "tests"
 G = 9.81
 T1 = math.sqrt(2 * 2.0 / G)  # first impact of the E1 ball (h0 = 2, v0 = 0)
 
@@ -75,6 +76,20 @@ def test_measure_density_and_atoms(ball):
     assert mu["integral_derivative"].shape == (2,)
     default = ball.measure("height", **TIGHT)
     assert default["grid"].shape == (201,) and default["density"].shape == (201, 4)
+
+
+def test_measure_with_a_moving_horizon_has_the_atom_at_t_end():
+    # tests/tests/moving_horizon.hyb: T = Tf, d/dTf ∫0^T x dt = x(T) (the atom at T).
+    m = mvad.load(str(REPO_TESTS / "moving_horizon.hyb"))
+    k, tau, d, tf = 0.8, 0.6, 0.5, 2.5
+    x_end = (math.exp(-k * tau) + d) * math.exp(-k * (tf - tau))
+    mu = m.measure("y", **TIGHT)
+    r = m.grad(**TIGHT)
+    want = [r["gradient"][name] for name in mu["wrt"]]
+    np.testing.assert_allclose(mu["integral_derivative"], want, rtol=1e-9, atol=1e-12)
+    assert mu["atoms"]["t"][-1] == tf
+    i = mu["wrt"].index("Tf")
+    assert mu["atoms"]["values"][-1][i] == pytest.approx(x_end, rel=1e-9)
 
 
 def test_cost_batch_equals_single_runs_in_order(ball):

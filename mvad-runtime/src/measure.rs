@@ -10,8 +10,11 @@
 //! (one such measure per parameter): a density on the smooth segments plus Dirac atoms at
 //! the events and at the switch crossings of kinks where y jumps (`sign`, `if` in an
 //! observable: J = h(sw⁺) − h(sw⁻) at the continuous x(t_c), t_c' the crossing-time
-//! sensitivity; a continuous kink, `max`, `abs`, has J ≈ 0, an atom at rounding level). Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt for
-//! φ independent of θ (and a horizon independent of θ). The density is evaluated at the
+//! sensitivity; a continuous kink, `max`, `abs`, has J ≈ 0, an atom at rounding level).
+//! A horizon T(θ) that moves with θ (`horizon EXPR` of params) ends y's support there:
+//! t ↦ y(t)·1[t < T] drops from y(T⁻) to 0 at T, J = −y(T⁻), so the measure has the atom
+//! α_T = y(T⁻) T' at T. Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt
+//! for φ independent of θ (with a moving horizon, φ continuous at T). The density is evaluated at the
 //! recorded nodes of every step (see [`Trajectory`]) under the frozen switch bits of the
 //! step's segment (a node at a crossing takes the branch of its own step: no step straddles
 //! a kink of h) and interpolated with the same degree-4 polynomial; pairings integrate φ·density step by step with adaptive Gauss–Legendre
@@ -64,6 +67,11 @@ pub enum AtomOrigin {
     },
     /// The effective atom of a Zeno tail at the accumulation time.
     ZenoTail,
+    /// The end of the support at a horizon T(θ) that moves with θ: J = −y(T⁻), α = y(T⁻) T'.
+    Horizon {
+        /// J = −y(T⁻).
+        jump: f64,
+    },
 }
 
 /// Builds μ_y for observable `observable` from a solution run with `Options::record` and
@@ -144,7 +152,38 @@ where
     if let Some(d) = zeno {
         mu.add_zeno_tail_atom(d.t);
     }
+    add_horizon_atom(model, params, solution, traj, &mut mu);
     Ok(mu)
+}
+
+/// Adds the atom α_T = y(T⁻) T' at a horizon that moves with θ (`Solution::dt_end` not all
+/// zero): y(T⁻) is the observable at the last recorded node (the end of the last step, before
+/// any event at T) under that step's switch bits. Appended last: nothing lies after T.
+fn add_horizon_atom<M: HybridModel>(
+    model: &M,
+    params: &OVector<f64, M::P>,
+    solution: &Solution,
+    traj: &Trajectory,
+    mu: &mut Measure,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    if solution.dt_end.iter().all(|&d| d == 0.0) || traj.is_empty() {
+        return;
+    }
+    let n = model.nstates().value();
+    let last = traj.len() - 1;
+    let len = traj.node_len();
+    let at = (last * TRAJ_NODES + TRAJ_NODES - 1) * len;
+    let mut x = OVector::<f64, M::N>::zeros_generic(model.nstates(), Const::<1>);
+    x.as_mut_slice().copy_from_slice(&traj.data[at..at + n]);
+    let mut y = vec![0.0; model.info().nobservables()];
+    let t = traj.t1[last];
+    model.observe(traj.switches_of_step(last), At::new(t, &x, params), &mut y);
+    let y_end = y[mu.observable];
+    let alpha = solution.dt_end.iter().map(|d| y_end * d).collect();
+    mu.atoms.push((solution.t_end, alpha));
+    mu.origins.push(AtomOrigin::Horizon { jump: -y_end });
 }
 
 /// Adds to `atoms` (kept in time order) the atom α = −J t_c' of observable `observable` at

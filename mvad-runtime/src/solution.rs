@@ -137,6 +137,11 @@ pub struct Options {
     pub record: bool,
     /// Events closer than this (relative to the horizon) count as simultaneous.
     pub simultaneous_tol: f64,
+    /// The most memory the adjoint's record of a run may take (2 GiB by default). A run whose
+    /// record grows past it (10⁷ events of a small model take about 4 GB) stops recording and
+    /// is computed in forward mode, whose memory does not grow with the number of events (a
+    /// `record_budget` diagnostic says so).
+    pub max_record_bytes: usize,
     /// How dC/dθ is computed (when `sensitivities` is set); [`Stats::mode`] says which mode
     /// a run used. Adjoint runs leave out the forward quantities: the events' `dt` (and so
     /// their atoms), [`Solution::s_final`], and S in a recorded trajectory.
@@ -154,6 +159,7 @@ impl Default for Options {
             max_events: 100_000,
             max_steps: 1_000_000,
             max_periodic_occurrences: 1_000_000_000,
+            max_record_bytes: 2 << 30,
             sens_error_control: true,
             global_error: true,
             sensitivities: true,
@@ -193,6 +199,9 @@ pub enum DiagnosticKind {
     /// tolerance: the steps' errors reach T amplified (or not damped), so local error control
     /// does not bound the answer's error.
     IllConditioned,
+    /// The adjoint's record of the run passed [`Options::max_record_bytes`]: the gradient was
+    /// computed in forward mode instead.
+    RecordBudget,
 }
 
 impl DiagnosticKind {
@@ -208,6 +217,7 @@ impl DiagnosticKind {
             DiagnosticKind::SimultaneousEvents => "simultaneous_events",
             DiagnosticKind::Kink => "kink",
             DiagnosticKind::IllConditioned => "ill_conditioned",
+            DiagnosticKind::RecordBudget => "record_budget",
         }
     }
 }
@@ -309,6 +319,9 @@ pub struct Stats {
 pub struct Solution {
     /// The horizon T the cost refers to.
     pub t_end: f64,
+    /// dT/dθ, one entry per parameter: the horizon's gradient when T comes from the model's
+    /// `horizon` (zeros when `Options::t_end` fixes it or the horizon reads no param).
+    pub dt_end: Vec<f64>,
     /// The parameter values of the run.
     pub params: Vec<f64>,
     /// C(θ) = ∫₀ᵀ ℓ dt + Σ_k φ_k + Φ(T, x(T)).

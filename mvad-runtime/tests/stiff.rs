@@ -45,6 +45,35 @@ fn prothero_robinson_stiff_with_rosenbrock_and_auto() {
     }
 }
 
+/// Tight tolerances hide stiffness from the stability tests: Tsit5's accuracy alone holds
+/// its step near the stability bound (h·ρ ≈ 0.2–1), where Hairer's test and h·ρ > 0.8 stay
+/// quiet, although y = sin t varies 10⁴ times more slowly than its fast mode. `auto` must still
+/// switch (the slow-solution test in `stiffness.rs`) and take about Rosenbrock's steps, not
+/// Tsit5's (before the test: 36× Rosenbrock's at rtol 1e-10 on a stiff tracking problem).
+#[test]
+fn auto_finds_stiffness_that_tight_tolerances_hide() {
+    let m = prothero_robinson();
+    let p = DVector::from_vec(vec![-1e4, 0.0]);
+    let t_end = 10.0;
+    for rtol in [1e-8, 1e-10, 1e-12] {
+        let steps = |method: Method| {
+            let o = opts(method, rtol, rtol * 1e-2);
+            let mut it = Integrator::new(&m, &p, &o);
+            let mut y0 = AugState::zeros(Dyn(1), Dyn(2));
+            y0.s[(0, 1)] = 1.0;
+            it.restart(0.0, &y0, 0, &mvad_runtime::Switches::default());
+            integrate_to(&mut it, t_end);
+            assert_relative_eq!(it.y().x[0], t_end.sin(), max_relative = 1e3 * rtol);
+            it.stats().steps
+        };
+        let (auto, rosenbrock) = (steps(Method::Auto), steps(Method::Rosenbrock));
+        assert!(
+            auto <= 2 * rosenbrock,
+            "rtol {rtol}: auto took {auto} steps, Rosenbrock {rosenbrock}"
+        );
+    }
+}
+
 /// The stiff lag (τ, k) = (1e-8, 0.5) from (0, 1) over [0, 3] under `auto` at rtol 1e-8
 /// with S under error control or not: asserts that `auto` switches to Rosenbrock within
 /// `max_steps` steps; returns the final state and the accepted steps.

@@ -96,7 +96,7 @@ where
 }
 
 /// Why the adjoint hands a run over to forward mode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Handover {
     /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
     /// with a state stuck on its guard: reported in the `zeno` diagnostic.
@@ -106,22 +106,36 @@ pub(crate) enum Handover {
     /// one-sided derivative follows the piece its own perturbation selects, which is not
     /// linear in a cotangent, so no sweep gives it.
     QpKink,
+    /// The record passed [`Options::max_record_bytes`] at time t: reported in a
+    /// `record_budget` diagnostic.
+    RecordBudget { t: f64, budget: usize },
 }
 
 impl Handover {
     /// The diagnostic that carries the note, and the note.
-    fn note(self) -> (DiagnosticKind, &'static str) {
+    fn note(self) -> (DiagnosticKind, String) {
         match self {
             Handover::Accumulation => (
                 DiagnosticKind::Zeno,
                 "adjoint mode does not sweep back through an accumulation: \
-                 the gradient was computed in forward mode",
+                 the gradient was computed in forward mode"
+                    .into(),
+            ),
+            Handover::RecordBudget { t, budget } => (
+                DiagnosticKind::RecordBudget,
+                format!(
+                    "adjoint mode's record of the run passed its budget of {budget} bytes at \
+                     t = {}: the gradient was computed in forward mode, whose memory does not \
+                     grow with the number of events",
+                    crate::error::Time(t)
+                ),
             ),
             Handover::QpKink => (
                 DiagnosticKind::Kink,
                 "adjoint mode cannot sweep back through a qp kink inside the run (each \
                  parameter's one-sided derivative follows its own side of it, which is not \
-                 linear in a cotangent): the gradients were computed in forward mode",
+                 linear in a cotangent): the gradients were computed in forward mode"
+                    .into(),
             ),
         }
     }
@@ -263,6 +277,10 @@ where
         ..opts.clone()
     };
     let (sol, tape) = run_loop(model, params, &primal, &mut (), true)?;
+    if let Some(t) = tape.as_ref().and_then(Tape::overflowed_at) {
+        let budget = opts.max_record_bytes;
+        return Ok(Err(Handover::RecordBudget { t, budget }));
+    }
     if !model.qp_flow_kinks().is_empty() || sol.diagnostics.iter().any(is_event_kink) {
         return Ok(Err(Handover::QpKink));
     }
@@ -306,12 +324,12 @@ pub(crate) fn note_fallback(sol: &mut Solution, handover: Handover) {
     match sol.diagnostics.iter_mut().rfind(|d| d.kind == kind) {
         Some(d) => {
             d.message.push_str("; ");
-            d.message.push_str(note);
+            d.message.push_str(&note);
         }
         None => sol.diagnostics.push(Diagnostic {
             kind,
             t: sol.t_end,
-            message: note.into(),
+            message: note,
         }),
     }
 }

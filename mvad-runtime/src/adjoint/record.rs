@@ -155,11 +155,22 @@ pub struct Tape {
     /// The local time reached on the open segment.
     clock: f64,
     fin: Option<FinalState>,
+    /// The most bytes the record may hold ([`crate::solution::Options::max_record_bytes`]).
+    budget: usize,
+    /// The record passed `budget` at this time: it was dropped, and records nothing more.
+    overflowed_at: Option<f64>,
 }
 
 impl Tape {
-    /// An empty record for n states.
+    /// An empty record for n states, without a memory budget.
+    #[cfg(test)]
     pub(crate) fn new(n: usize) -> Self {
+        Self::with_budget(n, usize::MAX)
+    }
+
+    /// An empty record for n states that holds at most `budget` bytes: past it, it drops what
+    /// it holds and records nothing more ([`Tape::overflowed_at`]).
+    pub(crate) fn with_budget(n: usize, budget: usize) -> Self {
         Tape {
             n,
             steps: Vec::new(),
@@ -172,6 +183,32 @@ impl Tape {
             open_first: 0,
             clock: 0.0,
             fin: None,
+            budget,
+            overflowed_at: None,
+        }
+    }
+
+    /// When the record passed its budget (it then holds nothing), if it did.
+    pub fn overflowed_at(&self) -> Option<f64> {
+        self.overflowed_at
+    }
+
+    /// The bytes the record's buffers hold, counted as [`Tape::bytes`] counts them but
+    /// without the switch words beyond 64 (O(1): checked at every step and jump).
+    fn bytes_held(&self) -> usize {
+        let f = std::mem::size_of::<f64>();
+        self.steps.len() * std::mem::size_of::<StepPoly>()
+            + (self.nodes.len() + self.jump_x.len()) * f
+            + (self.state_errors.len() + self.jump_shifts.len()) * f
+            + self.items.len() * std::mem::size_of::<Item>()
+    }
+
+    /// Past the budget: drops every buffer (their memory is freed) and records no more.
+    fn check_budget(&mut self, t: f64) {
+        if self.bytes_held() > self.budget {
+            let (n, budget) = (self.n, self.budget);
+            *self = Self::with_budget(n, budget);
+            self.overflowed_at = Some(t);
         }
     }
 
@@ -199,7 +236,7 @@ impl Tape {
             Some(te) => te - t0,
             None => h,
         };
-        if len.is_nan() || len <= 0.0 || h == 0.0 {
+        if len.is_nan() || len <= 0.0 || h == 0.0 || self.overflowed_at.is_some() {
             return;
         }
         let start = self.clock;
@@ -223,10 +260,14 @@ impl Tape {
             self.state_errors.extend_from_slice(rx);
             self.state_errors.push(alpha);
         }
+        self.check_budget(t0 + len);
     }
 
     /// Closes the open segment at t in `mode` with bits `sw` (dropped if it has no steps).
     pub(crate) fn close_segment(&mut self, t: f64, mode: usize, sw: &Switches) {
+        if self.overflowed_at.is_some() {
+            return;
+        }
         let end = self.steps.len();
         if end > self.open_first {
             self.items.push(Item::Segment(SegmentRec {
@@ -255,6 +296,9 @@ impl Tape {
         sw_after: &Switches,
         shift: Option<(&[f64], &[f64], f64)>,
     ) {
+        if self.overflowed_at.is_some() {
+            return;
+        }
         if let Some((d_minus, d_plus, dt)) = shift {
             self.jump_shifts.extend_from_slice(d_minus);
             self.jump_shifts.extend_from_slice(d_plus);
@@ -272,10 +316,14 @@ impl Tape {
             sw_after: sw_after.clone(),
             at,
         }));
+        self.check_budget(t);
     }
 
     /// Records the state at T.
     pub(crate) fn finish(&mut self, t: f64, x: &[f64], mode: usize, sw: &Switches) {
+        if self.overflowed_at.is_some() {
+            return;
+        }
         self.fin = Some(FinalState {
             t,
             x: x.to_vec(),

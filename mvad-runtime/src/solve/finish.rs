@@ -78,6 +78,7 @@ where
         let tape = tape.filter(|_| !self.zeno.passed());
         let sol = Solution {
             t_end,
+            dt_end: self.dt_end.iter().copied().collect(),
             params: p.iter().copied().collect(),
             cost,
             gradient: sens_vec(grad.as_slice()),

@@ -373,7 +373,14 @@ where
             held: Vec::new(),
             zeno_stop: None,
             stuck: None,
-            rec: (opts.record || tape).then(|| Recorder::new(n.value(), sp, opts.record, tape)),
+            rec: (opts.record || tape).then(|| {
+                Recorder::new(
+                    n.value(),
+                    sp,
+                    opts.record,
+                    tape.then_some(opts.max_record_bytes),
+                )
+            }),
             tape,
             poly: if tape {
                 (0..MAX_COEFS).map(|_| vn()).collect()

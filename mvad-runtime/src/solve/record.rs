@@ -23,11 +23,12 @@ pub(super) struct Recorder {
 
 impl Recorder {
     /// Empty records for n states and p parameters (p = 0: no sensitivities): the trajectory
-    /// when `traj`, the adjoint's tape when `tape`.
-    pub(super) fn new(n: usize, p: usize, traj: bool, tape: bool) -> Self {
+    /// when `traj`, the adjoint's tape when `tape` (of at most that many bytes, see
+    /// [`Tape::with_budget`]).
+    pub(super) fn new(n: usize, p: usize, traj: bool, tape: Option<usize>) -> Self {
         Recorder {
             traj: traj.then(|| Trajectory::new(n, p)),
-            tape: tape.then(|| Tape::new(n)),
+            tape: tape.map(|budget| Tape::with_budget(n, budget)),
             segment_start: 0.0,
             segment_first_step: 0,
             bridge: None,

@@ -356,7 +356,9 @@ mod tests {
     /// One fixed step is not right for every parameter: dC/dτ of the stiff relay (τ = 1e-8,
     /// dC/dτ = 1.5) by the old default, a step of 1e-6 of τ at the check's own rtol 1e-8,
     /// came out 1.5127 (0.8 % off). On the ladder, at 1/1000 of the tolerance, the difference
-    /// is within 1e-5 of it and states an uncertainty that covers its error, and every
+    /// is within 1e-4 of it and states an uncertainty that covers its error (its floor is C's
+    /// own run-to-run error, ~1e-15 against a δC of 3e-11 at the chosen step: 3e-5; it read
+    /// 1.2e-7 or 1.7e-5 off depending on where `auto` switched to Rosenbrock), and every
     /// parameter of the relay and of the saturated cart (where a difference at the check's
     /// own tolerance was off by 8e-7 of dC/dk) agrees with MV-AD.
     #[test]
@@ -381,7 +383,7 @@ mod tests {
                 assert_eq!(tau["param"], "tau");
                 let fd = tau["fd"].as_f64().expect("n");
                 let unc = tau["fd_uncertainty"].as_f64().expect("n");
-                assert!((fd - 1.5).abs() < 1e-5, "{tau}");
+                assert!((fd - 1.5).abs() < 1e-4, "{tau}");
                 assert!((fd - 1.5).abs() <= 2.0 * unc, "{tau}");
             }
         }

@@ -131,8 +131,9 @@ where
                 for &k in wrt {
                     vals.insert(info.params[k].clone(), num(a[k]));
                 }
-                let (index, name, switch, jump) = atom_origin(&sol, info, origin);
+                let (kind, index, name, switch, jump) = atom_origin(&sol, info, origin);
                 serde_json::json!({
+                    "origin": kind,
                     "index": index,
                     "name": name,
                     "switch": switch,
@@ -184,11 +185,11 @@ where
         let header = param_header(&["#", "t", "jump J"], "α d/d", &info.params, wrt);
         let mut t = Table::new(&header);
         for ((tk, a), origin) in mu.atoms.iter().zip(&mu.origins).take(MAX_EVENT_ROWS) {
-            let (index, _, switch, jump) = atom_origin(&sol, info, origin);
+            let (kind, index, _, switch, jump) = atom_origin(&sol, info, origin);
             let label = match (index, switch) {
                 (Some(i), _) => i.to_string(),
                 (None, Some(j)) => format!("switch {j}"),
-                (None, None) => "zeno tail".into(),
+                (None, None) => kind.replace('_', " "),
             };
             let mut row = vec![label, g(*tk, 10), g(jump, 8)];
             row.extend(wrt.iter().map(|&k| g(a[k], 8)));
@@ -221,21 +222,29 @@ where
     Ok(out)
 }
 
-/// What placed an atom: (the event's index in the run's table and its name, or the kink's
-/// switching function, and the jump J of the observable; NaN for a Zeno tail).
+/// What placed an atom: (its kind — `event`, `switch`, `zeno_tail` or `horizon` —, the
+/// event's index in the run's table and its name, or the kink's switching function, and the
+/// jump J of the observable; NaN for a Zeno tail).
 fn atom_origin(
     sol: &Solution,
     info: &mvad::ModelInfo,
     origin: &AtomOrigin,
-) -> (Option<usize>, Option<String>, Option<usize>, f64) {
+) -> (
+    &'static str,
+    Option<usize>,
+    Option<String>,
+    Option<usize>,
+    f64,
+) {
     match *origin {
         AtomOrigin::Event { index, jump } => {
             let e = &sol.events[index];
             let name = info.events.get(e.event).map(|x| x.name.clone());
-            (Some(e.index), name, None, jump)
+            ("event", Some(e.index), name, None, jump)
         }
-        AtomOrigin::Switch { switch, jump } => (None, None, Some(switch), jump),
-        AtomOrigin::ZenoTail => (None, None, None, f64::NAN),
+        AtomOrigin::Switch { switch, jump } => ("switch", None, None, Some(switch), jump),
+        AtomOrigin::ZenoTail => ("zeno_tail", None, None, None, f64::NAN),
+        AtomOrigin::Horizon { jump } => ("horizon", None, None, None, jump),
     }
 }
 
@@ -349,11 +358,30 @@ where
     };
     let (plus, vp) = run_at(h)?;
     let (minus, vm) = run_at(-h)?;
-    let fd: Vec<f64> = plus
+    let mut fd: Vec<f64> = plus
         .iter()
         .zip(&minus)
         .map(|(a, b)| (a - b) / (vp - vm))
         .collect();
+    if sol.dt_end[k] != 0.0 {
+        // The horizon moves with θ_k: μ([0, T]) holds the atom y(T⁻) T' at T, and its
+        // difference quotient is that of ∫₀^T(θ) y over each run's own horizon.
+        let whole = |delta: f64| -> Result<f64, CliError> {
+            let mut p = params.clone();
+            p[k] += delta;
+            let o = Options {
+                record: true,
+                sensitivities: false,
+                ..opts.clone()
+            };
+            let s = solve(model, &p, &o).map_err(solve_err)?;
+            let last = observable_integral(model, &p, &s, obs, &[s.t_end]);
+            Ok(last.last().copied().unwrap_or(f64::NAN))
+        };
+        if let Some(end) = fd.last_mut() {
+            *end = (whole(h)? - whole(-h)?) / (vp - vm);
+        }
+    }
     let mvad_total = mu.pair(|_| 1.0)[k];
     let fd_total = fd.last().copied().unwrap_or(f64::NAN);
     let abs = (mvad_total - fd_total).abs();
@@ -404,6 +432,7 @@ mod tests {
         assert_eq!(v["density"]["e"][10], 0.0);
         // Height is continuous: its atoms vanish.
         assert_eq!(v["atoms"].as_array().map(Vec::len), Some(2));
+        assert_eq!(v["atoms"][0]["origin"], "event");
         assert_eq!(
             v["atoms"][1]["values"]["e"].as_f64().map(f64::abs),
             Some(0.0)
