@@ -274,17 +274,7 @@ impl Layer {
         fill(&mut self.flat, Some(&mut self.jac[..]));
         let (n, nw) = (x.len(), x.len() + p.len() + 1);
         mix(&mut self.dir, &self.jac, nw, f, &[(nw - 1, 1.0)]);
-        let (weak, piece, again) = (&self.weak, &mut self.piece, &mut self.again);
-        let dir = &self.dir;
-        (self.solver).directional_on_piece(
-            dir,
-            Side::Right,
-            weak,
-            &mut self.du,
-            &mut self.dm,
-            piece,
-            again,
-        )?;
+        self.derive_on_piece(Side::Right)?;
         std::mem::swap(&mut self.weak, &mut self.again);
         if !self.weak.iter().any(|&w| w) {
             return Ok(false);
@@ -305,17 +295,7 @@ impl Layer {
                 &s[j * n..(j + 1) * n],
                 &[(n + j, 1.0)],
             );
-            let (weak, piece, again) = (&self.weak, &mut self.piece, &mut self.again);
-            let dir = &self.dir;
-            (self.solver).directional_on_piece(
-                dir,
-                side,
-                weak,
-                &mut self.du,
-                &mut self.dm,
-                piece,
-                again,
-            )?;
+            self.derive_on_piece(side)?;
             let le = (0..self.weak.len()).filter(|&i| self.info.kinds[i] == ConstraintKind::Le);
             for (bit, i) in le.enumerate() {
                 if self.weak[i] {
@@ -324,6 +304,15 @@ impl Layer {
             }
         }
         Ok(true)
+    }
+
+    /// The one-sided derivative along `self.dir` with the constraints `self.weak` marks as
+    /// inequalities ([`QpSolver::directional_on_piece`]): the piece it follows into
+    /// `self.piece`, which weak constraints stay weak along it into `self.again`.
+    fn derive_on_piece(&mut self, side: Side) -> Result<(), QpError> {
+        let (du, dm) = (&mut self.du, &mut self.dm);
+        let (piece, again) = (&mut self.piece, &mut self.again);
+        (self.solver).directional_on_piece(&self.dir, side, &self.weak, du, dm, piece, again)
     }
 
     /// Pins pointwise evaluations to the active set `active` (m entries; `None` unpins).
@@ -371,16 +360,8 @@ impl Layer {
         for (w, s) in self.weak.iter_mut().zip(self.solver.status()) {
             *w = *s == ConstraintStatus::WeaklyActive;
         }
-        let (weak, again, dir) = (&self.weak, &mut self.again, &self.dir);
-        (self.solver).directional_on_piece(
-            dir,
-            side,
-            weak,
-            &mut self.du,
-            &mut self.dm,
-            active,
-            again,
-        )?;
+        self.derive_on_piece(side)?;
+        active.copy_from_slice(&self.piece);
         Ok(true)
     }
 
