@@ -105,6 +105,31 @@ where
             }
         }
     }
+
+    /// Adds the samples still to come (`samples[..*left]`, consumed from the back) while
+    /// `due` takes their time, all at one state: `state` writes it into `self.x` before the
+    /// first (so a sweep that passes no sample evaluates none).
+    #[allow(clippy::too_many_arguments)]
+    fn add_due(
+        &mut self,
+        model: &M,
+        p: &OVector<f64, M::P>,
+        bits: &Switches,
+        (samples, left): (&[Sample<'_>], &mut usize),
+        due: impl Fn(f64) -> bool,
+        state: impl FnOnce(&mut [f64]),
+        lam: &mut OVector<f64, M::N>,
+        g: &mut OVector<f64, M::P>,
+    ) {
+        let mut state = Some(state);
+        while *left > 0 && due(samples[*left - 1].t) {
+            if let Some(write) = state.take() {
+                write(self.x.as_mut_slice());
+            }
+            self.add(model, p, bits, &samples[*left - 1], lam, g);
+            *left -= 1;
+        }
+    }
 }
 
 /// λ(T) = w Φ_xᵀ and g = w [Φ_θ + (ℓ(T) + Φ_x f(T) + Φ_t) dT/dθ] into `lam`, `g`.
@@ -182,19 +207,16 @@ where
     );
     // Samples are consumed from the back: samples[..left] are still to come.
     let mut left = samples.len();
-    while left > 0 && samples[left - 1].t >= fin.t {
-        sw.x.as_mut_slice().copy_from_slice(&fin.x);
-        let bits = &fin.sw;
-        sw.add(
-            model,
-            p,
-            bits,
-            &samples[left - 1],
-            &mut lam,
-            integ.gradient_mut(),
-        );
-        left -= 1;
-    }
+    sw.add_due(
+        model,
+        p,
+        &fin.sw,
+        (samples, &mut left),
+        |t| t >= fin.t,
+        |x| x.copy_from_slice(&fin.x),
+        &mut lam,
+        integ.gradient_mut(),
+    );
     let mut work = JumpWork::new(model);
     let mut error_work = opts.global_error.then(|| JumpErrorWork::new(model));
     let mut h_seed = 0.0;
@@ -250,19 +272,16 @@ where
             let mut cursor = seg.steps.end - 1;
             // A sample at a switch crossing is the left limit: the segment before takes it.
             let left_limit = |t: f64| t == seg.t_start && tape.starts_at_switch(i);
-            while left > 0 && samples[left - 1].t >= stop && !left_limit(samples[left - 1].t) {
-                tape.state_at(seg, s_stop, &mut cursor, sw.x.as_mut_slice());
-                let bits = &seg.sw;
-                sw.add(
-                    model,
-                    p,
-                    bits,
-                    &samples[left - 1],
-                    &mut lam,
-                    integ.gradient_mut(),
-                );
-                left -= 1;
-            }
+            sw.add_due(
+                model,
+                p,
+                &seg.sw,
+                (samples, &mut left),
+                |t| t >= stop && !left_limit(t),
+                |x| tape.state_at(seg, s_stop, &mut cursor, x),
+                &mut lam,
+                integ.gradient_mut(),
+            );
             if stop <= seg.t_start {
                 break;
             }
