@@ -328,3 +328,39 @@ fn the_bundled_models_and_e1_raise_nothing_in_adjoint_mode() {
         }
     }
 }
+
+/// A decay kicked every P, far past its equilibrium between kicks: in the tail an error of
+/// atol is 10⁸ times x, and read as a time shift along f ≈ 0 it became a shift of 10⁸ time
+/// units, materialised under the kick's f as an error 10¹⁷ times the tolerance on an answer
+/// exact to 1e-15 (probe3 b2). A shift is read only while |γ|‖f_x‖∞ ≤ 10⁻³. C = 4/a + 4 and
+/// dC/da = −4/a² (kicks at 0, 1000, 2000 over [0, 2500]).
+#[test]
+fn a_decayed_tail_is_no_time_shift() {
+    let src = "model DecayKicked {
+        param a = 0.8; param P = 1000;
+        state x = 1;
+        flow { der(x) = -a * x; }
+        event kick every P { x = x + 1; }
+        cost = integral(x) + sum(kick, x);
+        horizon 2500;
+    }";
+    let m = mvad::load::load_str("decay_kicked.hyb", src).expect("valid model");
+    let a = 0.8;
+    for method in [Method::Rosenbrock, Method::Auto, Method::Tsit5] {
+        for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+            let sol = run_in(&m, &[a, 1000.0], method, 1e-8, mode);
+            let what = format!("{method:?} {mode:?}");
+            assert!(
+                ((sol.cost - (4.0 / a + 4.0)) / 9.0).abs() < 1e-8,
+                "{what}: C = {}",
+                sol.cost
+            );
+            assert!(
+                (sol.gradient[0] + 4.0 / (a * a)).abs() < 1e-7 * 6.25,
+                "{what}: dC/da = {}",
+                sol.gradient[0]
+            );
+            assert!(!ill_conditioned(&sol), "{what}: {:?}", sol.diagnostics);
+        }
+    }
+}

@@ -40,7 +40,7 @@
 //! once it exceeds the tolerance (from then on it is transported, and reaches the event and
 //! running costs), or is added at T.
 
-use super::{AugState, GlobalError, Saltation};
+use super::{AugState, GlobalError, Saltation, PHASE_LINEAR};
 use crate::model::ModelAlloc;
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
@@ -56,10 +56,6 @@ fn add_rounding(r: &mut [f64], y: &[f64], f: &[f64], h: f64) {
         *r += EPS * (y[i].abs() + (h * f[i]).abs());
     }
 }
-
-/// The largest |γ|‖f_x‖∞ at which the component γ of e_x along f(T) is read as a time shift
-/// ([`GlobalError::at_end`]).
-const PHASE_LINEAR: f64 = 1e-3;
 
 /// (x(T), (atol, rtol), Ṡ(T), q̇_θ(T) − q_θ(T)/T) for the time shift of the sensitivities at T
 /// ([`GlobalError::at_end`]).
