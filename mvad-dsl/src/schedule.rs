@@ -239,6 +239,10 @@ pub struct QpKernels {
     pub switches: Option<usize>,
     /// Whether a flow or ℓ reads its solution.
     pub in_flow: bool,
+    /// The events whose guard or reset reads its solution (at the state before the jump).
+    pub events_before: Vec<usize>,
+    /// The events whose cost term reads its solution (at the state after the jump).
+    pub events_after: Vec<usize>,
     /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
     pub data: Kernel,
     /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
@@ -635,6 +639,23 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 dj.extend_from_slice(&dp[d * p..(d + 1) * p]);
                 dj.push(dt[d]);
             }
+            let vars = q.offset..q.offset + q.vars.len();
+            let reads = |e: ExprId| {
+                ar.depends_on(
+                    e,
+                    |nd| matches!(nd, Node::QpSol(k) if vars.contains(&(*k as usize))),
+                )
+            };
+            let events_before = (program.events.iter().enumerate())
+                .filter(|(_, ev)| {
+                    ev.schedule.is_none() && reads(ev.guard) || ev.reset.iter().any(|&e| reads(e))
+                })
+                .map(|(k, _)| k)
+                .collect();
+            let events_after = (program.events.iter().enumerate())
+                .filter(|(_, ev)| ev.cost.is_some_and(reads))
+                .map(|(k, _)| k)
+                .collect();
             QpKernels {
                 name: q.name.clone(),
                 vars: q.vars.clone(),
@@ -643,6 +664,8 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 dynamic: q.dynamic,
                 switches: q.switches,
                 in_flow: q.in_flow,
+                events_before,
+                events_after,
                 data: Kernel::new(&ar, &data),
                 data_jac: Kernel::new(&ar, &dj),
             }

@@ -27,7 +27,7 @@
 //!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
 //! - Gradient methods *overwrite* every entry of their outputs (zeros included).
 
-use crate::qp::{QpError, QpLayerInfo, QpState, Side};
+use crate::qp::{QpError, QpFlowKink, QpLayerInfo, QpState, Side};
 
 pub mod dense;
 pub mod differences;
@@ -392,6 +392,51 @@ where
     /// point is a kink of the qp's solution map. Allocates nothing.
     fn qp_kink(&self) -> Option<(usize, usize)> {
         None
+    }
+    /// At the flow point `pt` (rate f): whether a qp of the state that the flow reads, on
+    /// the active set `pt.sw` freezes, has a constraint weakly active *along* the flow — a
+    /// persistent kink, where the solution's derivative is one-sided and not linear in the
+    /// direction (see [`crate::qp::QpBank::flow_pieces`]; each such constraint is logged for
+    /// [`HybridModel::qp_flow_kinks`]). With `s` = S, `pieces[j]` (p entries) receives the
+    /// switch bits of the piece whose derivative is the one-sided one (on the side of
+    /// [`HybridModel::set_qp_side`]) along column j's direction (S_j, e_j); untouched when
+    /// there is no such kink. `None` when a qp failed ([`HybridModel::qp_failure`]).
+    fn qp_flow_pieces(
+        &self,
+        pt: Point<'_, Self::N, Self::P>,
+        f: &OVector<f64, Self::N>,
+        s: Option<&OMatrix<f64, Self::N, Self::P>>,
+        pieces: &mut [Switches],
+    ) -> Option<bool> {
+        let _ = (pt, f, s, pieces);
+        Some(false)
+    }
+    /// The persistent kinks [`HybridModel::qp_flow_pieces`] met since the last
+    /// [`HybridModel::clear_qp_flow_kinks`] (it may allocate).
+    fn qp_flow_kinks(&self) -> Vec<QpFlowKink> {
+        Vec::new()
+    }
+    /// Forgets the persistent kinks met so far (at the start of a run).
+    fn clear_qp_flow_kinks(&self) {}
+    /// Where qp q, solved pointwise at `at`, has a weakly active constraint: the active set
+    /// of the smooth piece whose derivative is its one-sided derivative (on the side of
+    /// [`HybridModel::set_qp_side`]) along the direction (dx, e_j, dt) of (x, θ, t), into
+    /// `active` (one entry per constraint), and `Some(true)`; `Some(false)` away from a
+    /// kink, `None` when the qp fails (see [`crate::qp::QpBank::pointwise_piece`]).
+    fn qp_piece(
+        &self,
+        q: usize,
+        at: At<'_, Self::N, Self::P>,
+        direction: (&OVector<f64, Self::N>, usize, f64),
+        active: &mut [bool],
+    ) -> Option<bool> {
+        let _ = (q, at, direction, active);
+        Some(false)
+    }
+    /// Pins qp q's pointwise evaluations to the active set `active` (`None` unpins; see
+    /// [`crate::qp::QpBank::pin`]): its solution and derivatives are then that piece's.
+    fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
+        let _ = (q, active);
     }
 }
 

@@ -136,6 +136,8 @@ fn qp_bank_evaluations_and_switch_functions_allocate_nothing() {
         kinds: vec![ConstraintKind::Le, ConstraintKind::Le],
         dynamic: true,
         switches: Some(0),
+        events_before: Vec::new(),
+        events_after: Vec::new(),
     };
     let mut bank = QpBank::new(vec![info], 2, 3, QpOptions::default());
     let fill = |x: &[f64], p: &[f64]| {

@@ -445,6 +445,36 @@ fn nonconvex_or_unbounded_objective_is_an_error() {
 }
 
 #[test]
+fn a_constraint_whose_coefficients_vanish_is_named() {
+    use ConstraintKind::{Eq, Le};
+    // min ½(u + 1)² s.t. 0·u ≤ b: b = 0 holds with equality (degenerate), b < 0 fails
+    // (infeasible), 0·u = b is never a constraint on u; b > 0 leaves the row out.
+    for (kind, b) in [(Le, 0.0), (Le, -0.5), (Eq, 0.0), (Eq, 2.0)] {
+        let e = expect_err(&[kind], &unit_qp(&[1.0], &[0.0], &[b]));
+        assert_eq!(
+            e,
+            QpError::Vanishing {
+                constraint: 0,
+                equality: kind == Eq,
+                rhs: b
+            }
+        );
+        let text = e.to_string();
+        assert!(
+            text.contains("constraint 0 no longer involves any variable"),
+            "{text}"
+        );
+        let verdict = if b == 0.0 { "degenerate" } else { "infeasible" };
+        assert!(text.contains(verdict), "{text}");
+    }
+    let mut s = QpSolver::new(1, &[Le, Le], QpOptions::default());
+    s.solve(&unit_qp(&[1.0], &[0.0, 1.0], &[0.5, -2.0]))
+        .expect("a vanishing row that holds strictly is left out");
+    assert_eq!(s.u()[0], -2.0);
+    assert_eq!(s.multipliers(), &[0.0, 1.0]);
+}
+
+#[test]
 fn dependent_active_constraints_are_degenerate() {
     use ConstraintKind::{Eq, Le};
     let cases: [(&[ConstraintKind], QpData); 3] = [

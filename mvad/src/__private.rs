@@ -5,7 +5,7 @@
 pub use crate::table::{bind_columns, Table, TableError, TableNeeds};
 pub use mvad_dsl::ir::sign;
 pub use mvad_runtime::qp::{
-    ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side,
+    ConstraintKind, QpBank, QpError, QpFlowKink, QpLayerInfo, QpOptions, QpState, Side,
 };
 pub use mvad_runtime::{
     At, Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,

@@ -19,7 +19,9 @@ use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
 use mvad_dsl::ir::{self, Inputs, Point, QpValues};
 use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
-use mvad_runtime::qp::{ConstraintKind, QpBank, QpError, QpLayerInfo, QpOptions, QpState, Side};
+use mvad_runtime::qp::{
+    ConstraintKind, QpBank, QpError, QpFlowKink, QpLayerInfo, QpOptions, QpState, Side,
+};
 use mvad_runtime::{
     At, EventInfo, HybridModel, ModelDims, ModelInfo, ModelSens, Occurrence, Switches, Trigger,
 };
@@ -176,6 +178,8 @@ impl InterpretedModel {
                     .collect(),
                 dynamic: q.dynamic,
                 switches: q.switches,
+                events_before: q.events_before.clone(),
+                events_after: q.events_after.clone(),
             })
             .collect();
         InterpretedModel {
@@ -739,6 +743,44 @@ impl HybridModel for InterpretedModel {
     }
     fn qp_failure(&self) -> Option<(usize, QpError)> {
         self.qp_bank.borrow().failure().map(|(q, e)| (q, e.clone()))
+    }
+    fn qp_flow_pieces(
+        &self,
+        pt: mvad_runtime::Point<'_, Self::N, Self::P>,
+        f: &X,
+        s: Option<&M>,
+        pieces: &mut [Switches],
+    ) -> Option<bool> {
+        let at = at_pt(pt);
+        let Point { t, x, p, .. } = at.pt;
+        let s = s.map(|s| s.as_slice());
+        let fill = self.qp_fill(&at);
+        let mut bank = self.qp_bank.borrow_mut();
+        let found = bank.flow_pieces(t, x, p, pt.sw, f.as_slice(), s, pieces, fill);
+        found.ok()
+    }
+    fn qp_flow_kinks(&self) -> Vec<QpFlowKink> {
+        self.qp_bank.borrow().flow_kinks().to_vec()
+    }
+    fn clear_qp_flow_kinks(&self) {
+        self.qp_bank.borrow_mut().clear_flow_kinks();
+    }
+    fn qp_piece(
+        &self,
+        q: usize,
+        at: At<'_, Self::N, Self::P>,
+        (dx, j, dt): (&X, usize, f64),
+        active: &mut [bool],
+    ) -> Option<bool> {
+        let at = pt0(at);
+        let Point { t, x, p, .. } = at.pt;
+        let fill = self.qp_fill(&at);
+        let mut bank = self.qp_bank.borrow_mut();
+        let found = bank.pointwise_piece(q, (t, x, p), (dx.as_slice(), j, dt), active, fill);
+        found.ok()
+    }
+    fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
+        self.qp_bank.borrow_mut().pin(q, active);
     }
 }
 

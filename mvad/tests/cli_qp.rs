@@ -196,4 +196,18 @@ fn qp_errors_exit_with_the_spec_statuses() {
     let e = v["error"].as_str().expect("error");
     assert!(e.contains("qp `q`") && e.contains("infeasible"), "{e}");
     run_status(&["grad", &path, "--set", "a=-1"], 0);
+    // A constraint whose coefficients vanish at t = 1/2 (probe2 c08): named as such, exit 1.
+    let (_d, path) = scratch(
+        "vanishing.hyb",
+        b"model B { state x = 1; qp q(u) { minimize u^2 - x*u; subject to u * (t - 0.5) >= 0; }\n flow { der(x) = q.u; } cost = final(x); horizon 1; }",
+    );
+    let o = run_status(&["grad", &path], 1);
+    assert!(
+        stderr(&o).contains(
+            "qp `q` at t = 0.5: qp constraint 0 no longer involves any variable: its \
+             coefficients all vanish here, leaving 0 <= 0"
+        ),
+        "{}",
+        stderr(&o)
+    );
 }

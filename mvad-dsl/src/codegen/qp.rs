@@ -78,12 +78,16 @@ impl Gen<'_> {
                     }
                     None => quote!(::core::option::Option::None),
                 };
+                let before = q.events_before.iter().map(|&k| usize_lit(k));
+                let after = q.events_after.iter().map(|&k| usize_lit(k));
                 quote!(#pr::QpLayerInfo {
                     name: ::core::convert::From::from(#name),
                     vars: #pr::names(&[#(#vars),*]),
                     kinds: ::core::convert::From::from([#(#kinds),*]),
                     dynamic: #dynamic,
                     switches: #switches,
+                    events_before: ::std::vec![#(#before),*],
+                    events_after: ::std::vec![#(#after),*],
                 })
             })
             .collect();
@@ -170,6 +174,41 @@ impl Gen<'_> {
                 }
                 fn qp_kink(&self) -> ::core::option::Option<(usize, usize)> {
                     self.qp.borrow().kink()
+                }
+                fn qp_flow_pieces(
+                    &self,
+                    pt: #pr::Point<'_, Self::N, Self::P>,
+                    f: &#pr::OVector<f64, Self::N>,
+                    s: ::core::option::Option<&#pr::OMatrix<f64, Self::N, Self::P>>,
+                    pieces: &mut [#pr::Switches],
+                ) -> ::core::option::Option<bool> {
+                    let (t, x, p) = (pt.t, pt.x.as_slice(), pt.p.as_slice());
+                    self.qp.borrow_mut().flow_pieces(
+                        t, x, p, pt.sw, f.as_slice(), s.map(|s| s.as_slice()), pieces,
+                        |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),
+                    ).ok()
+                }
+                fn qp_flow_kinks(&self) -> ::std::vec::Vec<#pr::QpFlowKink> {
+                    self.qp.borrow().flow_kinks().to_vec()
+                }
+                fn clear_qp_flow_kinks(&self) {
+                    self.qp.borrow_mut().clear_flow_kinks();
+                }
+                fn qp_piece(
+                    &self,
+                    q: usize,
+                    at: #pr::At<'_, Self::N, Self::P>,
+                    (dx, j, dt): (&#pr::OVector<f64, Self::N>, usize, f64),
+                    active: &mut [bool],
+                ) -> ::core::option::Option<bool> {
+                    let (t, x, p) = (at.t, at.x.as_slice(), at.p.as_slice());
+                    self.qp.borrow_mut().pointwise_piece(
+                        q, (t, x, p), (dx.as_slice(), j, dt), active,
+                        |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),
+                    ).ok()
+                }
+                fn pin_qp(&self, q: usize, active: ::core::option::Option<&[bool]>) {
+                    self.qp.borrow_mut().pin(q, active);
                 }
             },
         }

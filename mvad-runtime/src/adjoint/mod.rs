@@ -38,7 +38,12 @@
 //! flow is smooth and its products λᵀf_x, λᵀf_θ carry the qp's KKT derivative; the switch
 //! flips are transposed like any other. At a qp kink at T (a weakly active constraint, a
 //! `kink` diagnostic) `gradient` is the derivative from the right and `gradient_left` comes
-//! from a second sweep over the same record with every qp on its left side.
+//! from a second sweep over the same record with every qp on its left side (each the sum
+//! of one-sided derivatives along the data's coordinates). A constraint weakly active
+//! *along* a flow (a persistent kink, `crate::qp::FlowPieces`) or where an event reads its
+//! qp makes each parameter's derivative follow the piece its own perturbation selects: not
+//! linear in the cotangent, so the run is handed over to forward mode
+//! ([`Handover::QpKink`], said in the `kink` diagnostic).
 
 pub mod record;
 mod sweep;
@@ -50,7 +55,7 @@ use crate::qp::Side;
 use crate::sample::check_times;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind, GradientMode, Options, Solution, Stats};
-use crate::solve::{judge, run_loop};
+use crate::solve::{is_event_kink, judge, run_loop};
 use crate::vjp::Cotangents;
 use nalgebra::{Const, DefaultAllocator, OVector};
 use record::{Item, JumpKind, Tape};
@@ -96,6 +101,11 @@ pub(crate) enum Handover {
     /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
     /// with a state stuck on its guard: reported in the `zeno` diagnostic.
     Accumulation,
+    /// A qp was read at a kink inside the run — weakly active along a flow (a persistent
+    /// kink) or where an event reads it — reported in a `kink` diagnostic: each parameter's
+    /// one-sided derivative follows the piece its own perturbation selects, which is not
+    /// linear in a cotangent, so no sweep gives it.
+    QpKink,
     /// The record passed [`Options::max_record_bytes`] at time t: reported in a
     /// `record_budget` diagnostic.
     RecordBudget { t: f64, budget: usize },
@@ -119,6 +129,13 @@ impl Handover {
                      grow with the number of events",
                     crate::error::Time(t)
                 ),
+            ),
+            Handover::QpKink => (
+                DiagnosticKind::Kink,
+                "adjoint mode cannot sweep back through a qp kink inside the run (each \
+                 parameter's one-sided derivative follows its own side of it, which is not \
+                 linear in a cotangent): the gradients were computed in forward mode"
+                    .into(),
             ),
         }
     }
@@ -243,7 +260,8 @@ fn sorted_samples<'a>(cot: &Cotangents<'a>, nobs: usize) -> Vec<Sample<'a>> {
 pub const PRIMAL_TOL_FACTOR: f64 = 0.01;
 
 /// The primal run with the tape; a [`Handover`] when it did not reach T normally (an
-/// accumulation or a stuck state ended it), so forward mode has to take over.
+/// accumulation or a stuck state ended it) or met a qp kink that persists along a flow, so
+/// forward mode has to take over.
 fn primal<M: HybridModel>(
     model: &M,
     params: &OVector<f64, M::P>,
@@ -262,6 +280,9 @@ where
     if let Some(t) = tape.as_ref().and_then(Tape::overflowed_at) {
         let budget = opts.max_record_bytes;
         return Ok(Err(Handover::RecordBudget { t, budget }));
+    }
+    if !model.qp_flow_kinks().is_empty() || sol.diagnostics.iter().any(is_event_kink) {
+        return Ok(Err(Handover::QpKink));
     }
     Ok(match tape.filter(|t| t.final_state().is_some()) {
         Some(tape) => Ok((sol, tape)),

@@ -56,6 +56,7 @@ use super::{Integrator, Scheme};
 #[cfg(doc)]
 use crate::model::ModelSecondOrder;
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
+use crate::qp::FlowPieces;
 use crate::solution::{Method, Options};
 use nalgebra::{Const, DefaultAllocator, Dim, Matrix, OMatrix, OVector, StorageMut};
 
@@ -155,6 +156,9 @@ where
     lx: OVector<f64, M::N>,
     /// ℓ_θ scratch.
     lp: OVector<f64, M::P>,
+    /// The columns of S that follow another qp piece at a persistent qp kink (`None` when
+    /// no flow reads a qp; see `crate::qp::FlowPieces`).
+    pieces: Option<FlowPieces<M>>,
 }
 
 /// The Rodas5P buffers of the forward system (allocated once; empty for `Dyn` sizes when the
@@ -219,6 +223,7 @@ where
                 held: Vec::new(),
                 lx: OVector::zeros_generic(n, Const::<1>),
                 lp: OVector::zeros_generic(np, Const::<1>),
+                pieces: FlowPieces::new(model),
             },
             sens_err: opts.sens_error_control && opts.sensitivities,
             sp,
@@ -314,6 +319,13 @@ where
                 .flow
                 .model
                 .running_cost(&self.flow.sw, At::new(t, &y.x, self.flow.p));
+        }
+        if let Some(pieces) = &mut self.pieces {
+            let dq = (self.sens && self.flow.has_rc).then_some(&mut out.qp);
+            let pt = self.flow.point(t, &y.x);
+            let s = self.sens.then_some(&y.s);
+            pieces.correct(self.flow.model, pt, s, &mut out.x, &mut out.s, dq);
+            zero_rows(&mut out.s, &self.held);
         }
     }
 }

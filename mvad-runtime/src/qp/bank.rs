@@ -19,6 +19,8 @@
 //! [`QpBank::switch_grad`] are its switching functions (see `layer.rs`).
 
 use super::layer::Layer;
+#[cfg(doc)]
+use super::QpSolver;
 use super::{ConstraintKind, ConstraintStatus, QpError, QpOptions, Side};
 use crate::model::Switches;
 
@@ -38,6 +40,11 @@ pub struct QpLayerInfo {
     /// constraint in order, when a flow reads its solution (its active set is then frozen
     /// along the steps); `None` otherwise.
     pub switches: Option<usize>,
+    /// The events whose guard or reset reads its solution (at the state before the jump):
+    /// a weakly active constraint there is a kink of the cost in θ at the event.
+    pub events_before: Vec<usize>,
+    /// The events whose cost term reads its solution (at the state after the jump).
+    pub events_after: Vec<usize>,
 }
 
 /// A qp's solution at one point: what `grad --json` reports under `"qp"`.
@@ -69,6 +76,21 @@ impl QpState {
     }
 }
 
+/// A constraint of a qp read by a flow that was weakly active *along* the flow (not just
+/// where its switching function crosses zero): a kink of the cost in θ, met between `first`
+/// and `last` (the times of the evaluations that found it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct QpFlowKink {
+    /// The qp's index.
+    pub qp: usize,
+    /// The constraint's index in the qp.
+    pub constraint: usize,
+    /// The earliest time it was met.
+    pub first: f64,
+    /// The latest time it was met.
+    pub last: f64,
+}
+
 /// The qp layers of a model (see the module documentation).
 #[derive(Clone, Debug)]
 pub struct QpBank {
@@ -83,6 +105,8 @@ pub struct QpBank {
     switch_owner: Vec<(usize, usize)>,
     /// Scratch: ∂σ/∂(x, θ, t) of a switching function.
     grad: Vec<f64>,
+    /// The persistent kinks [`QpBank::flow_pieces`] met since [`QpBank::clear_flow_kinks`].
+    flow_kinks: Vec<QpFlowKink>,
 }
 
 impl QpBank {
@@ -128,6 +152,7 @@ impl QpBank {
             },
             switch_owner,
             grad: vec![0.0; nw],
+            flow_kinks: Vec::new(),
         }
     }
 
@@ -184,6 +209,109 @@ impl QpBank {
             ok &= layer.evaluate(t, x, p, frozen, derivs, side, fill_q, u, du);
         }
         ok
+    }
+
+    /// The one-sided derivative of a flow that reads qps of the state, where one of them is
+    /// weakly active along the flow (see `Layer::flow_pieces`): at a point (t, x, θ) of the
+    /// flow with frozen bits `sw` and rate `f`, each qp with switch bits is checked for a
+    /// constraint whose slack and multiplier are both zero at the point and stay zero along
+    /// the flow (a persistent kink: logged, see [`QpBank::flow_kinks`]). There the
+    /// derivative of the solution is one-sided and not linear in the direction: with `s`
+    /// (S = ∂x/∂θ column-major, n × p), `pieces[j]` receives the bits of the smooth piece
+    /// whose derivative is the one-sided derivative along column j's direction
+    /// (dx, dθ) = (S_j, e_j), on the side [`QpBank::set_side`] chose — `sw` with the kink's
+    /// bits set as that derivative holds them. Returns whether there is such a kink
+    /// (`pieces` is untouched otherwise); a qp that fails is `Err` (and its
+    /// [`QpBank::failure`]). Allocates nothing but a log entry per new kink.
+    #[allow(clippy::too_many_arguments)]
+    pub fn flow_pieces(
+        &mut self,
+        t: f64,
+        x: &[f64],
+        p: &[f64],
+        sw: &Switches,
+        f: &[f64],
+        s: Option<&[f64]>,
+        pieces: &mut [Switches],
+        mut fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
+    ) -> Result<bool, (usize, QpError)> {
+        let side = self.side;
+        let ncols = s.map_or(0, |s| s.len() / x.len().max(1));
+        let mut any = false;
+        let log = &mut self.flow_kinks;
+        for (q, layer) in self.layers.iter_mut().enumerate() {
+            let mut fresh = !any;
+            let found = layer.flow_pieces(
+                (t, x, p),
+                sw,
+                side,
+                f,
+                s,
+                |data, jac| fill(q, data, jac),
+                |i| log_kink(log, q, i, t),
+                |j, bit, held| {
+                    if fresh {
+                        pieces[..ncols].iter_mut().for_each(|pc| pc.clone_from(sw));
+                        fresh = false;
+                    }
+                    pieces[j].set(bit, held);
+                },
+            );
+            match found {
+                Ok(found) => any |= found,
+                Err(e) => {
+                    layer.failure = Some(e.clone());
+                    return Err((q, e));
+                }
+            }
+        }
+        Ok(any)
+    }
+
+    /// Pins qp q: its pointwise evaluations (not a flow's, whose bits freeze it) solve on
+    /// the active set `active` (m entries, [`QpSolver::solve_frozen`]) until `None` unpins
+    /// it — the smooth piece a one-sided derivative follows ([`QpBank::pointwise_piece`]).
+    pub fn pin(&mut self, q: usize, active: Option<&[bool]>) {
+        if let Some(layer) = self.layers.get_mut(q) {
+            layer.pin(active);
+        }
+    }
+
+    /// Where qp q, solved pointwise at (t, x, θ), has a weakly active constraint: writes
+    /// into `active` (m entries) the active set of the piece whose derivative is the
+    /// one-sided derivative (on the side [`QpBank::set_side`] chose) along the direction dx
+    /// of the state, e_j of the params and dt of time, and returns true; false away from a
+    /// kink. Unpins q. A qp that fails is `Err` (and its [`QpBank::failure`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn pointwise_piece(
+        &mut self,
+        q: usize,
+        (t, x, p): (f64, &[f64], &[f64]),
+        (dx, j, dt): (&[f64], usize, f64),
+        active: &mut [bool],
+        mut fill: impl FnMut(usize, &mut [f64], Option<&mut [f64]>),
+    ) -> Result<bool, QpError> {
+        let side = self.side;
+        let Some(layer) = self.layers.get_mut(q) else {
+            return Ok(false);
+        };
+        let fill_q = |data: &mut [f64], jac: Option<&mut [f64]>| fill(q, data, jac);
+        let found = layer.pointwise_piece((t, x, p), (dx, j, dt), side, fill_q, active);
+        if let Err(e) = &found {
+            layer.failure = Some(e.clone());
+        }
+        found
+    }
+
+    /// The persistent kinks met by [`QpBank::flow_pieces`] since the last
+    /// [`QpBank::clear_flow_kinks`], in the order first met.
+    pub fn flow_kinks(&self) -> &[QpFlowKink] {
+        &self.flow_kinks
+    }
+
+    /// Forgets the persistent kinks met so far (at the start of a run).
+    pub fn clear_flow_kinks(&mut self) {
+        self.flow_kinks.clear();
     }
 
     /// The qp and constraint of the model's switch index j, if it is a qp switch bit.
@@ -278,6 +406,22 @@ impl QpBank {
                 status: l.solver.status().to_vec(),
             })
             .collect())
+    }
+}
+
+/// Records that constraint i of qp q is a persistent kink at time t.
+fn log_kink(log: &mut Vec<QpFlowKink>, q: usize, i: usize, t: f64) {
+    match log.iter_mut().find(|k| k.qp == q && k.constraint == i) {
+        Some(k) => {
+            k.first = k.first.min(t);
+            k.last = k.last.max(t);
+        }
+        None => log.push(QpFlowKink {
+            qp: q,
+            constraint: i,
+            first: t,
+            last: t,
+        }),
     }
 }
 

@@ -46,6 +46,18 @@ pub enum QpError {
         /// The active constraints, the dependent one last.
         constraints: Vec<usize>,
     },
+    /// Every coefficient of a constraint's row aᵢ is zero, so it involves no variable and
+    /// reads 0 = bᵢ or 0 ≤ bᵢ: degenerate (its multiplier is undetermined) when that holds
+    /// with equality, infeasible when it fails. (With bᵢ > 0 an inequality is simply left
+    /// out.)
+    Vanishing {
+        /// The constraint.
+        constraint: usize,
+        /// Whether it is an equality.
+        equality: bool,
+        /// Its right-hand side bᵢ.
+        rhs: f64,
+    },
     /// A derivative was asked of a solver whose last solve failed or never ran.
     NotSolved,
     /// The active-set iteration did not finish within its budget (cycling on degenerate data).
@@ -83,6 +95,24 @@ impl fmt::Display for QpError {
                     write!(f, "{i}")?;
                 }
                 write!(f, " are linearly dependent")
+            }
+            QpError::Vanishing {
+                constraint,
+                equality,
+                rhs,
+            } => {
+                let op = if *equality { "=" } else { "<=" };
+                write!(
+                    f,
+                    "qp constraint {constraint} no longer involves any variable: its \
+                     coefficients all vanish here, leaving 0 {op} {}, ",
+                    rhs + 0.0
+                )?;
+                if *rhs == 0.0 {
+                    write!(f, "which holds with equality for every value (degenerate)")
+                } else {
+                    write!(f, "which no value satisfies (infeasible)")
+                }
             }
             QpError::NotSolved => write!(f, "qp derivative asked before a successful solve"),
             QpError::NoConvergence { iterations } => write!(

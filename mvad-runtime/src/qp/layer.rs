@@ -55,6 +55,15 @@ pub(super) struct Layer {
     bits: Vec<bool>,
     /// Scratch: u* while derivatives are taken.
     u_star: DVector<f64>,
+    /// Scratch of the piece analysis (`flow_pieces`), one entry per constraint: weakly
+    /// active on the frozen piece (then: along the flow too), held by a derivative, weakly
+    /// active in a derivative.
+    weak: Vec<bool>,
+    piece: Vec<bool>,
+    again: Vec<bool>,
+    /// A pointwise evaluation solves on `pin_bits` when `pinned` (see `QpBank::pin`).
+    pinned: bool,
+    pin_bits: Vec<bool>,
     key: Key,
 }
 
@@ -81,6 +90,11 @@ impl Layer {
             dm: vec![0.0; m],
             bits: vec![false; m],
             u_star: DVector::zeros(v),
+            weak: vec![false; m],
+            piece: vec![false; m],
+            again: vec![false; m],
+            pinned: false,
+            pin_bits: vec![false; m],
             key: Key {
                 valid: false,
                 derivs: false,
@@ -96,10 +110,14 @@ impl Layer {
     }
 
     /// Reads the frozen active set from `sw` when the layer has switch bits and `sw` is
-    /// given; returns whether the evaluation is frozen.
+    /// given, else the pinned one if the layer is pinned; returns whether the evaluation is
+    /// frozen.
     fn load_bits(&mut self, sw: Option<&Switches>) -> bool {
         let (Some(sw), Some(first)) = (sw, self.info.switches) else {
-            return false;
+            if self.pinned {
+                self.bits.copy_from_slice(&self.pin_bits);
+            }
+            return self.pinned;
         };
         let mut j = first;
         for (bit, kind) in self.bits.iter_mut().zip(&self.info.kinds) {
@@ -217,6 +235,136 @@ impl Layer {
         })
     }
 
+    /// The piece analysis of a flow's evaluation at (t, x, θ) under the bits of `sw` (see
+    /// [`super::QpBank::flow_pieces`]). A constraint weakly active on the frozen piece
+    /// ([`QpSolver::piece_weak`]) is a persistent kink when it stays weakly active along the
+    /// flow, (dx, dθ, dt) = (f, 0, 1): the derivative problem along that direction leaves its
+    /// slack and multiplier both zero too (a crossing moves one of them, and its new piece is
+    /// the one the frozen bits already hold). For each persistent constraint i, `persistent(i)`
+    /// is called; with `s` (the columns of S, column-major n × ncols), for each column j the
+    /// one-sided derivative along (S_j, e_j, 0) on `side` chooses whether i is held, and
+    /// `on_piece(j, bit, held)` is called with i's switch bit. Returns whether some
+    /// constraint is a persistent kink. Leaves the cache invalid when it took derivatives.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn flow_pieces(
+        &mut self,
+        (t, x, p): (f64, &[f64], &[f64]),
+        sw: &Switches,
+        side: Side,
+        f: &[f64],
+        s: Option<&[f64]>,
+        mut fill: impl FnMut(&mut [f64], Option<&mut [f64]>),
+        mut persistent: impl FnMut(usize),
+        mut on_piece: impl FnMut(usize, usize, bool),
+    ) -> Result<bool, QpError> {
+        let Some(first) = self.info.switches else {
+            return Ok(false);
+        };
+        self.load_bits(Some(sw));
+        if !(self.cached(true, self.key.side, t, x, p) && self.failure.is_none()) {
+            self.key.valid = false;
+            fill(&mut self.flat, None);
+            self.solve(true)?;
+        }
+        if !self.solver.piece_weak(&mut self.weak) {
+            return Ok(false);
+        }
+        // The derivatives below replace the solve's working set.
+        self.key.valid = false;
+        fill(&mut self.flat, Some(&mut self.jac[..]));
+        let (n, nw) = (x.len(), x.len() + p.len() + 1);
+        mix(&mut self.dir, &self.jac, nw, f, &[(nw - 1, 1.0)]);
+        self.derive_on_piece(Side::Right)?;
+        std::mem::swap(&mut self.weak, &mut self.again);
+        if !self.weak.iter().any(|&w| w) {
+            return Ok(false);
+        }
+        self.weak
+            .iter()
+            .enumerate()
+            .filter(|(_, &w)| w)
+            .for_each(|(i, _)| persistent(i));
+        let Some(s) = s else {
+            return Ok(true);
+        };
+        for j in 0..s.len() / n.max(1) {
+            mix(
+                &mut self.dir,
+                &self.jac,
+                nw,
+                &s[j * n..(j + 1) * n],
+                &[(n + j, 1.0)],
+            );
+            self.derive_on_piece(side)?;
+            let le = (0..self.weak.len()).filter(|&i| self.info.kinds[i] == ConstraintKind::Le);
+            for (bit, i) in le.enumerate() {
+                if self.weak[i] {
+                    on_piece(j, first + bit, self.piece[i]);
+                }
+            }
+        }
+        Ok(true)
+    }
+
+    /// The one-sided derivative along `self.dir` with the constraints `self.weak` marks as
+    /// inequalities ([`QpSolver::directional_on_piece`]): the piece it follows into
+    /// `self.piece`, which weak constraints stay weak along it into `self.again`.
+    fn derive_on_piece(&mut self, side: Side) -> Result<(), QpError> {
+        let (du, dm) = (&mut self.du, &mut self.dm);
+        let (piece, again) = (&mut self.piece, &mut self.again);
+        (self.solver).directional_on_piece(&self.dir, side, &self.weak, du, dm, piece, again)
+    }
+
+    /// Pins pointwise evaluations to the active set `active` (m entries; `None` unpins).
+    pub(super) fn pin(&mut self, active: Option<&[bool]>) {
+        self.pinned = active.is_some();
+        if let Some(a) = active {
+            self.pin_bits.copy_from_slice(a);
+        }
+    }
+
+    /// At a pointwise solve at (t, x, θ) with a weakly active constraint: the active set of
+    /// the smooth piece whose derivative is the one-sided derivative (on `side`) along the
+    /// direction dx of the state, e_j of the params and dt of time, into `active`; false
+    /// (and `active` untouched) away from a kink. Leaves the cache invalid when it took
+    /// the derivative.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn pointwise_piece(
+        &mut self,
+        (t, x, p): (f64, &[f64], &[f64]),
+        (dx, j, dt): (&[f64], usize, f64),
+        side: Side,
+        mut fill: impl FnMut(&mut [f64], Option<&mut [f64]>),
+        active: &mut [bool],
+    ) -> Result<bool, QpError> {
+        self.pinned = false;
+        self.load_bits(None);
+        if !(self.cached(false, self.key.side, t, x, p) && self.failure.is_none()) {
+            self.key.valid = false;
+            fill(&mut self.flat, None);
+            self.solve(false)?;
+        }
+        if !self.solver.is_kink() {
+            return Ok(false);
+        }
+        self.key.valid = false;
+        fill(&mut self.flat, Some(&mut self.jac[..]));
+        let (n, nw) = (x.len(), x.len() + p.len() + 1);
+        mix(
+            &mut self.dir,
+            &self.jac,
+            nw,
+            dx,
+            &[(n + j, 1.0), (nw - 1, dt)],
+        );
+        for (w, s) in self.weak.iter_mut().zip(self.solver.status()) {
+            *w = *s == ConstraintStatus::WeaklyActive;
+        }
+        self.derive_on_piece(side)?;
+        active.copy_from_slice(&self.piece);
+        Ok(true)
+    }
+
     /// σᵢ = sᵢ + μᵢ of the last (pointwise) solve: the switching function of inequality i.
     pub(super) fn switch_value(&self, i: usize) -> f64 {
         self.solver.slacks()[i] + self.solver.multipliers()[i]
@@ -290,6 +438,16 @@ impl Directions<'_> {
         }
         Ok(())
     }
+}
+
+/// The data direction Σ_k ∂data/∂x_k · dx_k + Σ ∂data/∂w_e · c_e over `extra` = [(w_e, c_e)],
+/// from the Jacobian `jac` (slot d·nw + w): a state direction dx plus other columns.
+fn mix(dir: &mut QpData, jac: &[f64], nw: usize, dx: &[f64], extra: &[(usize, f64)]) {
+    unflatten(dir, |d| {
+        let row = &jac[d * nw..d * nw + dx.len()];
+        let along_x: f64 = row.iter().zip(dx).map(|(a, b)| a * b).sum();
+        along_x + extra.iter().map(|&(w, c)| jac[d * nw + w] * c).sum::<f64>()
+    });
 }
 
 /// Fills `data` from slot values: H (row-major v×v), c (v), A (row-major m×v), b (m).

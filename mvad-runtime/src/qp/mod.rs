@@ -42,11 +42,13 @@ mod bank;
 mod derivative;
 mod error;
 mod factor;
+mod flow;
 mod layer;
 mod solver;
 
-pub use bank::{QpBank, QpLayerInfo, QpState};
+pub use bank::{QpBank, QpFlowKink, QpLayerInfo, QpState};
 pub use error::QpError;
+pub use flow::FlowPieces;
 pub use solver::QpSolver;
 
 use nalgebra::{DMatrix, DVector};

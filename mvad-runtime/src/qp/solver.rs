@@ -23,8 +23,8 @@ const SYMMETRY_TOL: f64 = 1e-12;
 /// them.
 #[derive(Clone, Debug)]
 pub struct QpSolver {
-    kinds: Vec<ConstraintKind>,
-    opts: QpOptions,
+    pub(super) kinds: Vec<ConstraintKind>,
+    pub(super) opts: QpOptions,
     /// Cholesky factor L of H.
     pub(super) hfac: SpdFactor,
     /// The active-set iteration in v = Lᵀu.
@@ -34,7 +34,11 @@ pub struct QpSolver {
     /// Multipliers μ, one per constraint (zero when inactive).
     pub(super) mult: Vec<f64>,
     /// Slacks aᵢᵀu − bᵢ.
-    slacks: Vec<f64>,
+    pub(super) slacks: Vec<f64>,
+    /// The scale each slack is measured against (`Dual::slack_scale`), and that of the
+    /// multipliers' forces (`Dual::force_scale`), at the solution.
+    pub(super) slack_scales: Vec<f64>,
+    pub(super) force: f64,
     pub(super) status: Vec<ConstraintStatus>,
     /// Scratch: the constraints with zero slack.
     near: Vec<usize>,
@@ -42,6 +46,9 @@ pub struct QpSolver {
     pub(super) kink: bool,
     /// Whether `solve` succeeded last time (and the dual still holds its working set).
     pub(super) solved: bool,
+    /// Whether the dual's working set and Gram factor are still the solve's (a derivative
+    /// on a piece, [`QpSolver::directional_on_piece`], replaces them).
+    pub(super) working: bool,
     iterations: usize,
     /// Scratch for a direction's linear term.
     pub(super) q: DVector<f64>,
@@ -59,10 +66,13 @@ impl QpSolver {
             u: DVector::zeros(n),
             mult: vec![0.0; m],
             slacks: vec![0.0; m],
+            slack_scales: vec![0.0; m],
+            force: 0.0,
             status: vec![ConstraintStatus::Inactive; m],
             near: Vec::with_capacity(m),
             kink: false,
             solved: false,
+            working: false,
             iterations: 0,
             q: DVector::zeros(n),
         }
@@ -189,6 +199,7 @@ impl QpSolver {
         self.classify()?;
         self.record_slacks();
         self.solved = true;
+        self.working = true;
         Ok(())
     }
 
@@ -221,6 +232,7 @@ impl QpSolver {
         self.kink = false;
         self.record_slacks();
         self.solved = true;
+        self.working = true;
         Ok(())
     }
 
@@ -254,6 +266,19 @@ impl QpSolver {
         dual.beta.copy_from_slice(data.b.as_slice());
         for (i, (r, &kind)) in dual.role.iter_mut().zip(&self.kinds).enumerate() {
             *r = role(i, kind);
+            // A row of zeros involves no variable: 0 (= or ≤) bᵢ. Left out when it holds
+            // strictly, an error naming it otherwise.
+            if *r != Role::Off && dual.wnorm[i] == 0.0 {
+                let (equality, rhs) = (kind == ConstraintKind::Eq, data.b[i]);
+                if equality || rhs <= 0.0 {
+                    return Err(QpError::Vanishing {
+                        constraint: i,
+                        equality,
+                        rhs,
+                    });
+                }
+                *r = Role::Off;
+            }
         }
         Ok(())
     }
@@ -263,10 +288,20 @@ impl QpSolver {
         &self.slacks
     }
 
-    /// Records the slacks of the iterate (the solution, after a solve).
+    /// Records the slacks of the iterate (the solution, after a solve), with the scales
+    /// they and the multipliers' forces are measured against (the derivatives replace the
+    /// iteration's state they come from).
     fn record_slacks(&mut self) {
-        for (i, s) in self.slacks.iter_mut().enumerate() {
+        let force = self.dual.force_scale();
+        self.force = force;
+        for (i, (s, scale)) in self
+            .slacks
+            .iter_mut()
+            .zip(&mut self.slack_scales)
+            .enumerate()
+        {
             *s = self.dual.slack(i);
+            *scale = self.dual.slack_scale(i, force);
         }
     }
 

@@ -70,7 +70,9 @@ where
         }
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
+        self.qp_kinks_before_costs(k, j, t);
         let l_plus = self.event_costs(k, j, t, approach.still)?;
+        self.qp_kinks_after_costs(k, j, t);
         self.error_through_event(k, j, t, approach.rate, l_plus);
         // Time events neither accumulate nor get stuck: their times are given.
         let zeno_stop = if timed {

@@ -33,6 +33,7 @@ mod finish;
 mod jump;
 mod line;
 mod qp;
+pub(crate) use qp::is_event_kink;
 mod record;
 mod resolution;
 mod schedule;
@@ -129,8 +130,8 @@ where
     if !(t_end.is_finite() && (t_end > 0.0 || timeless && t_end == 0.0)) {
         return Err(SolveError::BadHorizon { t_end });
     }
-    let (mut sol, tape) = qp::run(model, params, opts, t_end, sink, tape)?;
-    qp::report(model, params, opts, &mut sol)?;
+    let (mut sol, tape, qp_event_kink) = qp::run(model, params, opts, t_end, sink, tape)?;
+    qp::report(model, params, opts, &mut sol, qp_event_kink)?;
     sol.stats.wall_seconds = start.elapsed().as_secs_f64();
     Ok((sol, tape))
 }
@@ -273,6 +274,8 @@ where
     /// `max_events`: their number is the model's, T/period or a table's rows.
     scheduled_events: usize,
     diagnostics: Vec<Diagnostic>,
+    /// An event read a qp where it was weakly active (a `kink` diagnostic; see `qp.rs`).
+    qp_event_kink: bool,
     /// The `grazing` diagnostics of crossings found at a turning point within the guard's
     /// uncertainty on the step just scanned, by event (see `undecided`): reported when the
     /// event is applied, unless its crossing cosine already grazes.
@@ -372,6 +375,7 @@ where
             nevents: 0,
             scheduled_events: 0,
             diagnostics: Vec::new(),
+            qp_event_kink: false,
             undecided: Vec::new(),
             flood_half: None,
             switch_crossings: 0,
