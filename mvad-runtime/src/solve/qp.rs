@@ -44,7 +44,11 @@ where
     /// `self.y.x`, S⁺ in `self.s_plus`): the kinks of the qps its guard or reset reads (at
     /// x⁻), and with sensitivities each column of S⁺ re-derived on its own side of them
     /// (see [`Driver::one_sided_columns`]).
+    #[inline]
     pub(super) fn qp_kinks_before_costs(&mut self, k: usize, j: usize, t: f64) {
+        if self.model.qps().is_empty() {
+            return;
+        }
         let kinked = self.qp_kinks_at_event(k, t, false);
         if self.sens && !kinked.is_empty() {
             self.one_sided_columns(k, j, t, &kinked, false);
@@ -53,7 +57,11 @@ where
 
     /// After the cost terms of user event k: the kinks of the qps its cost term reads (at
     /// x⁺), and with sensitivities the cost's gradient re-derived column by column.
+    #[inline]
     pub(super) fn qp_kinks_after_costs(&mut self, k: usize, j: usize, t: f64) {
+        if self.model.qps().is_empty() {
+            return;
+        }
         let kinked = self.qp_kinks_at_event(k, t, true);
         if self.sens && !kinked.is_empty() && self.model.info().events[k].has_cost {
             self.one_sided_columns(k, j, t, &kinked, true);

@@ -23,6 +23,9 @@ pub(super) struct Schedule {
     armed: Vec<Vec<usize>>,
     /// Per mode: the time events not armed there.
     unarmed: Vec<Vec<usize>>,
+    /// Per mode: the time events armed there but not in every mode (those a mode switch into
+    /// it can find behind; see [`Schedule::enter_mode`]).
+    partial: Vec<Vec<usize>>,
     /// (mode, the earliest time of the events armed there), as last computed; cleared
     /// whenever a time changes.
     earliest: Option<(usize, f64)>,
@@ -52,6 +55,16 @@ impl Schedule {
             time: vec![f64::INFINITY; nevents],
             armed: (0..info.modes.len()).map(|m| timed(m, true)).collect(),
             unarmed: (0..info.modes.len()).map(|m| timed(m, false)).collect(),
+            partial: (0..info.modes.len())
+                .map(|m| {
+                    let everywhere =
+                        |k: &usize| (0..info.modes.len()).all(|o| info.events[*k].armed_in(o));
+                    timed(m, true)
+                        .into_iter()
+                        .filter(|k| !everywhere(k))
+                        .collect()
+                })
+                .collect(),
             earliest: None,
             trigger: info.events.iter().map(|ev| ev.trigger).collect(),
         }
@@ -197,8 +210,8 @@ impl Schedule {
         DefaultAllocator: ModelAlloc<M::N, M::P>,
     {
         let after = (t + super::time_resolution(t)).next_up();
-        for i in 0..self.armed[to].len() {
-            let k = self.armed[to][i];
+        for i in 0..self.partial[to].len() {
+            let k = self.partial[to][i];
             if !model.info().events[k].armed_in(from) {
                 self.skip_before(model, p, k, after)?;
             }
