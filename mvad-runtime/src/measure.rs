@@ -12,7 +12,7 @@
 //! observable: J = h(sw⁺) − h(sw⁻) at the continuous x(t_c), t_c' the crossing-time
 //! sensitivity; a continuous kink, `max`, `abs`, has J ≈ 0, an atom at rounding level).
 //! A horizon T(θ) that moves with θ (`horizon EXPR` of params) ends y's support there:
-//! t ↦ y(t)·1[t < T] drops from y(T⁻) to 0 at T, J = −y(T⁻), so the measure has the atom
+//! t ↦ y(t)·𝟙(t < T) drops from y(T⁻) to 0 at T, J = −y(T⁻), so the measure has the atom
 //! α_T = y(T⁻) T' at T. Pairing with a test function gives ⟨μ_y, φ⟩ = d/dθ ∫₀ᵀ φ(t) y(t) dt
 //! for φ independent of θ (with a moving horizon, φ continuous at T). The density is evaluated at the
 //! recorded nodes of every step (see [`Trajectory`]) under the frozen switch bits of the

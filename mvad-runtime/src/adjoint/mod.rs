@@ -43,7 +43,7 @@
 //! *along* a flow (a persistent kink, `crate::qp::FlowPieces`) or where an event reads its
 //! qp makes each parameter's derivative follow the piece its own perturbation selects: not
 //! linear in the cotangent, so the run is handed over to forward mode
-//! ([`Handover::QpKink`], said in the `kink` diagnostic).
+//! (`Handover::QpKink`, said in the `kink` diagnostic).
 
 pub mod record;
 mod sweep;
