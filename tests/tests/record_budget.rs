@@ -53,6 +53,8 @@ fn an_adjoint_record_past_its_budget_hands_over_to_forward_mode() {
         d.message
     );
     assert_eq!(d.kind.name(), "record_budget");
+    // `t` is where the record passed the budget (the primal run stopped there).
+    assert!(d.t > 0.0 && d.t < 10.0, "{}", d.t);
 
     // The vector–Jacobian product takes the same way (samples of x at t = 5 and T).
     let times = [5.0, 10.0];

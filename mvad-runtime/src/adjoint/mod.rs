@@ -328,7 +328,11 @@ pub(crate) fn note_fallback(sol: &mut Solution, handover: Handover) {
         }
         None => sol.diagnostics.push(Diagnostic {
             kind,
-            t: sol.t_end,
+            // Where the record passed its budget; T for the others.
+            t: match handover {
+                Handover::RecordBudget { t, .. } => t,
+                _ => sol.t_end,
+            },
             message: note,
         }),
     }

@@ -570,6 +570,11 @@ where
             .start(model, p, (self.t_end, self.opts.max_periodic_occurrences))?;
         self.restart(0.0)?;
         loop {
+            if self.rec.as_ref().is_some_and(Recorder::tape_overflowed) {
+                // Adjoint mode hands this run over to forward mode (`Handover::RecordBudget`):
+                // its end is never read.
+                return Ok(());
+            }
             let t = self.integ.t();
             let t_next = self.schedule.next_in_mode(model, p, self.mode, t)?;
             if t_next <= t + time_resolution(t) {

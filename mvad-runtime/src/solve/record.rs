@@ -35,6 +35,14 @@ impl Recorder {
         }
     }
 
+    /// The adjoint's tape passed its memory budget: the run it records is handed over to
+    /// forward mode, so it need not go on.
+    pub(super) fn tape_overflowed(&self) -> bool {
+        self.tape
+            .as_ref()
+            .is_some_and(|tape| tape.overflowed_at().is_some())
+    }
+
     /// The records: (trajectory, tape).
     pub(super) fn into_parts(self) -> (Option<Trajectory>, Option<Tape>) {
         (self.traj, self.tape)
