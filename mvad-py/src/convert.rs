@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use mvad::runtime::solution::Method;
 use mvad::setup::{check_mode, Request};
 use mvad::table::{Table, TableSource};
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
+use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -80,8 +80,8 @@ pub fn request(
 }
 
 /// `tables={"NAME": source}` as replacement tables: a source is a file name (a `str` or an
-/// `os.PathLike`, read as CSV) or a dict of columns (`{"t": array, "s": array}`, 1-D float
-/// arrays or sequences of equal length).
+/// `os.PathLike`, read as CSV) or a dict of columns (`{"t": array, "s": array}`, 1-D arrays or
+/// sequences of numbers, of equal length and finite, as a CSV file's columns must be).
 pub fn tables(value: &Bound<'_, PyAny>) -> PyResult<Vec<(String, TableSource)>> {
     let dict = value.cast::<PyDict>().map_err(|_| {
         PyTypeError::new_err("tables must be a dict: {\"NAME\": \"FILE.csv\" or {\"COL\": array}}")
@@ -93,15 +93,8 @@ pub fn tables(value: &Bound<'_, PyAny>) -> PyResult<Vec<(String, TableSource)>> 
             let mut cols = Vec::with_capacity(columns.len());
             for (col, values) in columns.iter() {
                 let col: String = col.extract()?;
-                let data: Vec<f64> = match values.extract::<PyReadonlyArray1<'_, f64>>() {
-                    Ok(a) => a.as_array().iter().copied().collect(),
-                    Err(_) => values.extract().map_err(|_| {
-                        value_error(format!(
-                            "tables[\"{name}\"][\"{col}\"] must be a 1-D array of floats"
-                        ))
-                    })?,
-                };
-                cols.push((col, data));
+                let what = format!("tables[\"{name}\"][\"{col}\"]");
+                cols.push((col, float_array(&values, &what, 1)?.data));
             }
             let table = Table::from_columns(&name, cols).map_err(|e| value_error(e.to_string()))?;
             out.push((name, TableSource::Data(table)));
@@ -163,4 +156,36 @@ pub fn column(data: &[f64], ncols: usize, col: usize) -> Vec<f64> {
         .step_by(ncols.max(1))
         .copied()
         .collect()
+}
+
+/// An array argument read as float64: its values in row-major order and its shape.
+pub struct FloatArray {
+    /// Row-major values.
+    pub data: Vec<f64>,
+    /// The shape, `ndim` long.
+    pub shape: Vec<usize>,
+}
+
+/// The array-like argument `name` (a numpy array of any real dtype, a list, a tuple, nested
+/// lists) as `numpy.asarray(value, dtype=numpy.float64)` would make it, copied out of Python;
+/// a `ValueError` when it is not numbers or not `ndim`-dimensional.
+pub fn float_array(value: &Bound<'_, PyAny>, name: &str, ndim: usize) -> PyResult<FloatArray> {
+    let numpy = value.py().import("numpy")?;
+    let converted = numpy
+        .call_method1("asarray", (value, numpy.getattr("float64")?))
+        .map_err(|e| value_error(format!("{name} must be an array of numbers: {e}")))?;
+    let array = converted
+        .cast_into::<PyArrayDyn<f64>>()
+        .map_err(|_| value_error(format!("{name} must be an array of numbers")))?;
+    let array = array.readonly();
+    if array.ndim() != ndim {
+        return Err(value_error(format!(
+            "{name} must be a {ndim}-D array, got shape {:?}",
+            array.shape()
+        )));
+    }
+    Ok(FloatArray {
+        data: array.as_array().iter().copied().collect(),
+        shape: array.shape().to_vec(),
+    })
 }

@@ -24,11 +24,10 @@ use mvad::runtime::{measure, sample, solve, vjp};
 use mvad::setup::{check_mode, resolve, Request, Setup, SetupError};
 use mvad::{HybridModel, ModelInfo};
 use nalgebra::DVector;
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{array, column, json_to_py, request};
+use crate::convert::{array, column, float_array, json_to_py, request, FloatArray};
 use crate::errors::{load_error, panicked, setup_error, solve_error, value_error};
 
 /// Why a call failed, carried out of the GIL-free section and raised after it.
@@ -165,16 +164,22 @@ struct Rows {
     data: Vec<f64>,
     /// w.
     cols: usize,
+    /// B.
+    count: usize,
 }
 
-fn rows(thetas: &PyReadonlyArray2<'_, f64>) -> Rows {
-    Rows {
-        data: thetas.as_array().iter().copied().collect(),
-        cols: thetas.shape()[1],
-    }
+/// The (B, w) array `thetas`.
+fn rows(thetas: &Bound<'_, PyAny>) -> PyResult<Rows> {
+    let FloatArray { data, shape } = float_array(thetas, "thetas", 2)?;
+    Ok(Rows {
+        data,
+        cols: shape[1],
+        count: shape[0],
+    })
 }
 
-/// The `wrt` list given, or every parameter.
+/// The `wrt` list given, or every parameter (a name given twice counts once, as everywhere:
+/// `thetas` has one column per distinct name).
 fn wrt_or_all(info: &ModelInfo, wrt: Option<Vec<String>>) -> Vec<String> {
     wrt.unwrap_or_else(|| info.params.clone())
 }
@@ -183,13 +188,13 @@ fn wrt_or_all(info: &ModelInfo, wrt: Option<Vec<String>>) -> Vec<String> {
 /// default) and its sample times.
 fn observe_request(
     info: &ModelInfo,
-    times: &PyReadonlyArray1<'_, f64>,
+    times: &Bound<'_, PyAny>,
     wrt: Option<Vec<String>>,
     params: Option<BTreeMap<String, f64>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(Request, Vec<f64>)> {
     let req = request(params, Some(wrt_or_all(info, wrt)), options)?;
-    Ok((req, times.as_array().iter().copied().collect()))
+    Ok((req, float_array(times, "times", 1)?.data))
 }
 
 #[pymethods]
@@ -285,12 +290,12 @@ impl Model {
     fn simulate<'py>(
         &self,
         py: Python<'py>,
-        times: PyReadonlyArray1<'py, f64>,
+        times: &Bound<'py, PyAny>,
         params: Option<BTreeMap<String, f64>>,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let req = request(params, None, options)?;
-        let ts: Vec<f64> = times.as_array().iter().copied().collect();
+        let ts = float_array(times, "times", 1)?.data;
         let info = &self.info;
         let (smp, events, diags) = py.detach(|| {
             self.run(&req, |m, s| {
@@ -337,8 +342,8 @@ impl Model {
         observable: &str,
         params: Option<BTreeMap<String, f64>>,
         wrt: Option<Vec<String>>,
-        grid: Option<PyReadonlyArray1<'py, f64>>,
-        points: usize,
+        grid: Option<&Bound<'py, PyAny>>,
+        points: i64,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let obs = self.info.observable_index(observable).ok_or_else(|| {
@@ -353,7 +358,11 @@ impl Model {
             )));
         }
         let req = request(params, wrt, options)?;
-        let given: Option<Vec<f64>> = grid.map(|g| g.as_array().iter().copied().collect());
+        let given: Option<Vec<f64>> = match grid {
+            Some(g) => Some(float_array(g, "grid", 1)?.data),
+            None => None,
+        };
+        let points = points as usize; // in 2..=10⁶ when no grid is given
         let (grid, wrt, dens, atoms_t, atoms, total) = py.detach(|| {
             self.run(&req, |m, s| {
                 let mut opts = s.opts.clone();
@@ -396,14 +405,14 @@ impl Model {
     fn cost_batch<'py>(
         &self,
         py: Python<'py>,
-        thetas: PyReadonlyArray2<'py, f64>,
+        thetas: &Bound<'py, PyAny>,
         wrt: Option<Vec<String>>,
         params: Option<BTreeMap<String, f64>>,
         gradient: bool,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let req = request(params, Some(wrt_or_all(&self.info, wrt)), options)?;
-        let flat = rows(&thetas);
+        let flat = rows(thetas)?;
         let (results, w) = self.batch(py, &req, &flat, |_, m, p, s| {
             if gradient {
                 let (c, g) = vjp::cost_gradient(m, p, &s.opts)?;
@@ -424,14 +433,14 @@ impl Model {
     fn observe_batch<'py>(
         &self,
         py: Python<'py>,
-        thetas: PyReadonlyArray2<'py, f64>,
-        times: PyReadonlyArray1<'py, f64>,
+        thetas: &Bound<'py, PyAny>,
+        times: &Bound<'py, PyAny>,
         wrt: Option<Vec<String>>,
         params: Option<BTreeMap<String, f64>>,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (req, ts) = observe_request(&self.info, &times, wrt, params, options)?;
-        let flat = rows(&thetas);
+        let (req, ts) = observe_request(&self.info, times, wrt, params, options)?;
+        let flat = rows(thetas)?;
         let (results, _) = self.batch(py, &req, &flat, |_, m, p, s| {
             vjp::observe(m, p, &s.opts, &ts)
         })?;
@@ -449,26 +458,28 @@ impl Model {
     fn observe_vjp_batch<'py>(
         &self,
         py: Python<'py>,
-        thetas: PyReadonlyArray2<'py, f64>,
-        times: PyReadonlyArray1<'py, f64>,
-        cotangents: PyReadonlyArray3<'py, f64>,
+        thetas: &Bound<'py, PyAny>,
+        times: &Bound<'py, PyAny>,
+        cotangents: &Bound<'py, PyAny>,
         wrt: Option<Vec<String>>,
         params: Option<BTreeMap<String, f64>>,
         options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (req, ts) = observe_request(&self.info, &times, wrt, params, options)?;
+        let (req, ts) = observe_request(&self.info, times, wrt, params, options)?;
         let m = self.info.nobservables();
-        let b = thetas.shape()[0];
-        if cotangents.shape() != [b, ts.len(), m] {
+        let thetas = rows(thetas)?;
+        let b = thetas.count;
+        let cotangents = float_array(cotangents, "cotangents", 3)?;
+        if cotangents.shape != [b, ts.len(), m] {
             return Err(value_error(format!(
                 "cotangents must have shape ({b}, {}, {m}), got {:?}",
                 ts.len(),
-                cotangents.shape()
+                cotangents.shape
             )));
         }
-        let cot: Vec<f64> = cotangents.as_array().iter().copied().collect();
+        let cot = cotangents.data;
         let per_row = ts.len() * m;
-        let (results, w) = self.batch(py, &req, &rows(&thetas), |i, model, p, s| {
+        let (results, w) = self.batch(py, &req, &thetas, |i, model, p, s| {
             let ybar = &cot[i * per_row..(i + 1) * per_row];
             let v = vjp::observe_vjp(model, p, &s.opts, &ts, ybar)?;
             Ok(s.wrt.iter().map(|&k| v[k]).collect::<Vec<_>>())

@@ -90,6 +90,19 @@ def test_jit_of_grad_and_bad_shapes(ball):
         f(jnp.array([0.8, 9.81]))
 
 
+def test_wrt_is_checked_when_the_function_is_made_and_a_repeat_counts_once(ball):
+    """As in Model.grad and Model.cost_batch, a name given twice is one parameter: theta
+    holds the distinct names. An unknown name fails at once, not at the first call."""
+    f = mvad.jax.cost(ball, wrt=["e", "g", "e"], **TIGHT)
+    g = jax.grad(f)(jnp.array([0.8, 9.81]))
+    r = ball.grad(wrt=["e", "g"], **TIGHT)["gradient"]
+    assert [float(v) for v in g] == [r["e"], r["g"]]
+    with pytest.raises(ValueError, match="unknown parameter `q` in wrt"):
+        mvad.jax.cost(ball, wrt=["q"])
+    with pytest.raises(ValueError, match="unknown parameter `q` in wrt"):
+        mvad.jax.observe(ball, TIMES, wrt=["e", "q"])
+
+
 def test_a_failing_run_inside_jax_raises():
     blow = mvad.from_source("model Blow { param a = 1; state x = a; flow { der(x) = x^2; } cost = integral(x); horizon 2; }")
     f = mvad.jax.cost(blow, wrt=["a"])

@@ -162,6 +162,28 @@ def test_bad_requests_are_value_errors(ball):
     assert g.shape == (1, 1)
     with pytest.raises(ValueError, match="cotangents must have shape"):
         ball.observe_vjp_batch(np.ones((2, 1)), np.array([0.5]), np.ones((1, 1, 2)), wrt=["e"])
+    with pytest.raises(ValueError, match="points must be between 2 and 1000000, got -1"):
+        ball.measure("height", points=-1)
+    with pytest.raises(ValueError, match=r"thetas must be a 2-D array, got shape \[2\]"):
+        ball.cost_batch([0.8, 0.7], wrt=["e"])
+    with pytest.raises(ValueError, match="times must be an array of numbers"):
+        ball.simulate(["soon"])
+    # Numbers far from 1 are printed in exponent form, not as hundreds of digits.
+    with pytest.raises(ValueError, match=r"sample time 1e-300 \(index 0\) is outside the horizon \[0, 1e-305\]"):
+        ball.simulate([1e-300], t_end=1e-305)
+
+
+def test_array_arguments_take_any_array_like_of_numbers(ball):
+    """Lists, tuples and integer arrays are read as float64, with the same numbers."""
+    ref = ball.simulate(np.array([0.0, 1.0, 2.0]), **TIGHT)
+    for times in ([0, 1, 2], (0.0, 1.0, 2.0), np.array([0, 1, 2])):
+        s = ball.simulate(times, **TIGHT)
+        np.testing.assert_array_equal(s["observables"]["height"], ref["observables"]["height"])
+    c, g = ball.cost_batch([[0.8, 9.81]], wrt=["e", "g"], **TIGHT)
+    c2, g2 = ball.cost_batch(np.array([[0.8, 9.81]]), wrt=["e", "g"], **TIGHT)
+    assert c[0] == c2[0] and list(g[0]) == list(g2[0])
+    mu = ball.measure("height", grid=[0, 1, 2], **TIGHT)
+    assert mu["grid"].dtype == np.float64 and list(mu["grid"]) == [0.0, 1.0, 2.0]
 
 
 def test_a_failing_run_raises_solve_error():

@@ -90,3 +90,9 @@ def test_bad_tables_are_errors(queue, tmp_path):
         queue.grad(tables={"arrivals": {"t": [1.0, 2.0], "s": [1.0]}})
     with pytest.raises(TypeError, match="tables must be a dict"):
         queue.grad(tables=["arrivals"])
+    # Columns in memory are held to what a CSV file's fields are held to: finite numbers.
+    for bad in (np.nan, np.inf, -np.inf):
+        with pytest.raises(ValueError, match=r"in column `t` \(row 2\) is not a finite number"):
+            queue.grad(tables={"arrivals": {"t": [0.5, bad], "s": [1.0, 1.0]}})
+    with pytest.raises(ValueError, match=r'tables\["arrivals"\]\["s"\] must be an array of numbers'):
+        queue.grad(tables={"arrivals": {"t": [0.5], "s": ["x"]}})

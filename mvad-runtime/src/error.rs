@@ -16,8 +16,9 @@ use std::fmt;
 /// their second half chatter (a sliding mode): 10⁻⁶, a million times the resolution of t.
 pub const CHATTER_SPAN: f64 = 1e-6;
 
-/// A time as a message prints it: the shortest decimal that reads back as t, in exponent form
-/// when that decimal would be long (|t| < 10⁻⁴ or ≥ 10¹⁶; `{}` of 2.3e-310 is 310 digits).
+/// A number as a message prints it (a time mostly; also a horizon, a step or a parameter value):
+/// the shortest decimal that reads back as t, in exponent form when that decimal would be long
+/// (|t| < 10⁻⁴ or ≥ 10¹⁶; `{}` of 2.3e-310 is 310 digits).
 pub struct Time(pub f64);
 
 impl fmt::Display for Time {
@@ -185,13 +186,17 @@ impl fmt::Display for SolveError {
                 write!(f, "the model declares no horizon and no end time was given")
             }
             SolveError::BadHorizon { t_end } => {
-                write!(f, "the horizon must be finite and positive, got {t_end}")
+                write!(
+                    f,
+                    "the horizon must be finite and positive, got {}",
+                    Time(*t_end)
+                )
             }
             SolveError::ParamCount { expected, got } => {
                 write!(f, "expected {expected} parameter values, got {got}")
             }
             SolveError::BadParam { index, value } => {
-                write!(f, "parameter {index} is not finite ({value})")
+                write!(f, "parameter {index} is not finite ({})", Time(*value))
             }
             SolveError::BadOption { what } => write!(f, "bad option: {what}"),
             SolveError::NonFinite { t, what } => {

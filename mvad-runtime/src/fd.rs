@@ -16,7 +16,7 @@
 //! with their difference as its uncertainty. The default relative step of a single
 //! difference is [`DEFAULT_REL_STEP`] = 1e-6.
 
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::model::{HybridModel, ModelAlloc};
 use crate::solution::Options;
 use crate::solve::solve_with;
@@ -69,7 +69,10 @@ where
     }
     if !(rel_step.is_finite() && rel_step > 0.0) {
         return Err(SolveError::BadOption {
-            what: format!("finite-difference step must be finite and positive, got {rel_step}"),
+            what: format!(
+                "finite-difference step must be finite and positive, got {}",
+                Time(rel_step)
+            ),
         });
     }
     let h = fd_step(params[i], rel_step);
@@ -81,7 +84,8 @@ where
     if denom == 0.0 {
         return Err(SolveError::BadOption {
             what: format!(
-                "finite-difference step {rel_step} is below the resolution of parameter {i}"
+                "finite-difference step {} is below the resolution of parameter {i}",
+                Time(rel_step)
             ),
         });
     }

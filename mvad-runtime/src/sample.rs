@@ -11,7 +11,7 @@
 //! time it reads the post-event state x(t_k⁺). At a switch crossing of a kink it is the left
 //! limit: the observables under the bits before the flip, with S(t_c⁻) (x is continuous).
 
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::measure::add_density;
 use crate::model::{At, HybridModel, ModelAlloc};
 use crate::solution::{Solution, Trajectory};
@@ -46,8 +46,9 @@ pub fn check_times(times: &[f64], t_end: f64) -> Result<(), SolveError> {
         None => Ok(()),
         Some(i) => Err(SolveError::BadOption {
             what: format!(
-                "sample time {} (index {i}) is outside the horizon [0, {t_end}]",
-                times[i]
+                "sample time {} (index {i}) is outside the horizon [0, {}]",
+                Time(times[i]),
+                Time(t_end)
             ),
         }),
     }

@@ -8,6 +8,7 @@
 use std::fmt;
 
 use crate::table::TableSource;
+use mvad_runtime::error::Time;
 use mvad_runtime::solution::{GradientMode, Method, Options};
 use mvad_runtime::{HybridModel, ModelAlloc};
 use nalgebra::{Const, DefaultAllocator, OVector};
@@ -137,14 +138,15 @@ impl SetupError {
                 known_params(known)
             ),
             SetupError::NotFinite { name, value } => format!(
-                "{}: parameter `{name}` = {value} is not a finite number",
-                spell.option("set")
+                "{}: parameter `{name}` = {} is not a finite number",
+                spell.option("set"),
+                Time(*value)
             ),
             SetupError::OutOfRange {
                 option,
                 requirement,
                 got,
-            } => format!("{} {requirement}, got {got}", spell.option(option)),
+            } => format!("{} {requirement}, got {}", spell.option(option), Time(*got)),
             SetupError::EmptyWrt { known } => format!(
                 "{} names no parameter; {}",
                 spell.option("wrt"),
@@ -159,8 +161,9 @@ impl SetupError {
                 spell.option("mode")
             ),
             SetupError::BadHorizon { model, t } => format!(
-                "the horizon of model `{model}` evaluates to {t} at these parameters; \
+                "the horizon of model `{model}` evaluates to {} at these parameters; \
                  it must be positive and finite (or pass {})",
+                Time(*t),
                 spell.assign("t_end", "T")
             ),
         }

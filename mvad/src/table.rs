@@ -145,9 +145,36 @@ impl TableError {
 }
 
 impl Table {
-    /// A table from columns held in memory (`name` is used in error messages); every column
-    /// must have the same length.
+    /// A table from columns held in memory (`name` is used in error messages). It is held to
+    /// what a CSV file is held to: column names are distinct identifiers, every column has the
+    /// same length and every value is a finite number.
     pub fn from_columns(name: &str, columns: Vec<(String, Vec<f64>)>) -> Result<Table, TableError> {
+        for (i, (n, c)) in columns.iter().enumerate() {
+            if !is_identifier(n) {
+                return Err(TableError::unlocated(
+                    name,
+                    format!(
+                        "column name `{n}` is not an identifier (letters, digits and `_`, not \
+                         starting with a digit)"
+                    ),
+                ));
+            }
+            if columns[..i].iter().any(|(m, _)| m == n) {
+                return Err(TableError::unlocated(
+                    name,
+                    format!("column `{n}` appears twice"),
+                ));
+            }
+            if let Some((row, v)) = c.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(TableError::unlocated(
+                    name,
+                    format!(
+                        "`{v}` in column `{n}` (row {}) is not a finite number",
+                        row + 1
+                    ),
+                ));
+            }
+        }
         let rows = columns.first().map_or(0, |(_, c)| c.len());
         if let Some((n, c)) = columns.iter().find(|(_, c)| c.len() != rows) {
             return Err(TableError::unlocated(
@@ -547,5 +574,41 @@ mod tests {
             e.message.contains("no column `w`; its columns are t, s"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn columns_in_memory_are_held_to_what_a_file_is_held_to() {
+        let col = |n: &str, v: &[f64]| (n.to_string(), v.to_vec());
+        let ok = Table::from_columns(
+            "arrivals",
+            vec![col("t", &[0.0, 1.0]), col("s", &[1.0, 2.0])],
+        );
+        assert_eq!(ok.expect("finite columns").rows(), 2);
+        for (columns, says) in [
+            (
+                vec![col("t", &[0.0, f64::NAN])],
+                "`NaN` in column `t` (row 2) is not a finite",
+            ),
+            (
+                vec![col("t", &[f64::INFINITY])],
+                "`inf` in column `t` (row 1)",
+            ),
+            (
+                vec![col("t", &[1.0]), col("s", &[1.0, 2.0])],
+                "column `s` has 2 rows",
+            ),
+            (
+                vec![col("1t", &[1.0])],
+                "column name `1t` is not an identifier",
+            ),
+            (
+                vec![col("t", &[1.0]), col("t", &[2.0])],
+                "column `t` appears twice",
+            ),
+        ] {
+            let e = Table::from_columns("arrivals", columns).unwrap_err();
+            assert!(e.to_string().starts_with("arrivals:1:1: error: "), "{e}");
+            assert!(e.message.contains(says), "{e}");
+        }
     }
 }

@@ -155,6 +155,21 @@ fn table_errors_are_located_in_the_csv_file_with_exit_status_2() {
     );
     let (_, err) = run(&["grad", QUEUE, "--table", "arrivals"], 2);
     assert!(err.contains("--table expects NAME=FILE"), "{err}");
+    let (_, err) = run(
+        &[
+            "grad",
+            QUEUE,
+            "--table",
+            "arrivals=models/queue.csv",
+            "--table",
+            "arrivals=models/queue.csv",
+        ],
+        2,
+    );
+    assert!(
+        err.contains("--table names table `arrivals` twice"),
+        "{err}"
+    );
 }
 
 #[test]

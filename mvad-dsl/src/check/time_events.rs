@@ -1,5 +1,6 @@
 //! Rules of time events and data tables.
 //!
+//! - A table names a file (a path that is not blank).
 //! - A `TABLE.COL` whose TABLE is declared reads a column (its columns are known only once the
 //!   CSV file is read, so the loader checks them, located in the file). What a dotted name
 //!   resolves to (a table, a qp, neither) is a name rule ([`super::names`]); the rules below
@@ -21,10 +22,19 @@ use crate::span::Span;
 /// Checks the table and time-event rules above.
 pub fn check_time_events(model: &Model) -> Vec<Diagnostic> {
     let mut tables: HashMap<&str, Span> = HashMap::new();
+    let mut out = Vec::new();
     for t in model.tables() {
         tables.entry(t.name.name.as_str()).or_insert(t.name.span);
+        if t.file.trim().is_empty() {
+            out.push(
+                Diagnostic::new(
+                    t.file_span,
+                    format!("table `{}` names no file", t.name.name),
+                )
+                .with_help("write the CSV file's path, relative to the model file"),
+            );
+        }
     }
-    let mut out = Vec::new();
     let mut allowed: HashSet<*const Expr> = HashSet::new();
     for (_, ev) in model.all_events() {
         let Trigger::Each(times) = &ev.trigger else {

@@ -23,16 +23,32 @@ def _rows(theta, width):
     return np.ascontiguousarray(theta.reshape(-1, width)), theta.shape[:-1]
 
 
+def _distinct(wrt):
+    """``wrt`` with a repeated name kept once, in first-seen order: the parameters theta holds
+    (``Model.cost_batch`` and ``Model.grad`` count a repeated name once too)."""
+    return list(dict.fromkeys(wrt))
+
+
+def _check_request(model, wrt, params, options):
+    """Raises the ValueError a batch with this ``wrt`` (names known), ``params`` and
+    ``options`` would raise, now rather than at the first call: Rust checks a batch of no rows
+    exactly as it checks every batch."""
+    if not wrt:
+        raise ValueError("wrt names no parameter")
+    model.cost_batch(
+        np.empty((0, len(wrt))), wrt=wrt, params=params, gradient=False, **options
+    )
+
+
 class Cost:
     """C(theta) and dC/dtheta for the parameters ``wrt``."""
 
     def __init__(self, model, wrt, params=None, options=None):
         self.model = model
-        self.wrt = list(wrt)
+        self.wrt = _distinct(wrt)
         self.params = params
         self.options = dict(options or {})
-        if not self.wrt:
-            raise ValueError("wrt names no parameter")
+        _check_request(model, self.wrt, params, self.options)
 
     def value(self, theta):
         rows, batch = _rows(theta, len(self.wrt))
@@ -55,12 +71,11 @@ class Observe:
     def __init__(self, model, times, wrt, params=None, options=None):
         self.model = model
         self.times = np.ascontiguousarray(np.asarray(times, dtype=np.float64).ravel())
-        self.wrt = list(wrt)
+        self.wrt = _distinct(wrt)
         self.params = params
         self.options = dict(options or {})
         self.shape = (len(self.times), len(model.observables))
-        if not self.wrt:
-            raise ValueError("wrt names no parameter")
+        _check_request(model, self.wrt, params, self.options)
 
     def value(self, theta):
         rows, batch = _rows(theta, len(self.wrt))

@@ -106,20 +106,29 @@ pub struct Common {
 }
 
 impl Common {
-    /// The `--table NAME=FILE` replacements.
+    /// The `--table NAME=FILE` replacements; a NAME given twice is an error (which file
+    /// would the run read?).
     pub fn tables(&self) -> Result<Vec<(String, TableSource)>, CliError> {
-        self.table
-            .iter()
-            .map(|item| match item.split_once('=') {
-                Some((name, file)) if !name.trim().is_empty() && !file.trim().is_empty() => Ok((
-                    name.trim().to_string(),
-                    TableSource::File(PathBuf::from(file.trim())),
-                )),
-                _ => Err(CliError::Input(format!(
-                    "error: --table expects NAME=FILE, got `{item}`"
-                ))),
-            })
-            .collect()
+        let mut out: Vec<(String, TableSource)> = Vec::with_capacity(self.table.len());
+        for item in &self.table {
+            let (name, file) = match item.split_once('=') {
+                Some((name, file)) if !name.trim().is_empty() && !file.trim().is_empty() => {
+                    (name.trim(), file.trim())
+                }
+                _ => {
+                    return Err(CliError::Input(format!(
+                        "error: --table expects NAME=FILE, got `{item}`"
+                    )))
+                }
+            };
+            if out.iter().any(|(n, _)| n == name) {
+                return Err(CliError::Input(format!(
+                    "error: --table names table `{name}` twice; give each table once"
+                )));
+            }
+            out.push((name.to_string(), TableSource::File(PathBuf::from(file))));
+        }
+        Ok(out)
     }
 
     /// How many events the JSON output lists.
@@ -392,7 +401,8 @@ pub fn check_step(step: f64) -> Result<(), CliError> {
         Ok(())
     } else {
         Err(CliError::Input(format!(
-            "error: --step must be in (0, 1), got {step}"
+            "error: --step must be in (0, 1), got {}",
+            mvad_runtime::error::Time(step)
         )))
     }
 }

@@ -137,3 +137,11 @@ fn dotted_names_resolve_to_a_table_column_or_a_qp_variable() {
     ];
     expect_each_with_head(cases);
 }
+
+#[test]
+fn a_table_names_a_file() {
+    for file in ["\"\"", "\"  \""] {
+        let src = format!("model M {{ state x = 0; table arr = {file};\nflow {{ der(x) = 1; }} }}");
+        assert_errors(&src, errors(&src), &[(1, 36, "table `arr` names no file")]);
+    }
+}
