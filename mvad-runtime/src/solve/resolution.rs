@@ -19,9 +19,11 @@
 //! the step the end slopes, which are of the order of h⁻¹ times the range for each oscillation,
 //! drive H far outside the range of the samples (aliasing can make the samples look smooth,
 //! the slopes cannot). A piece of the step that fails is cut to a quarter until it passes or
-//! reaches the resolution of t, and the step is scanned piece by piece on its dense output
+//! reaches the resolution of t (a piece no cut resolves is rounding, not an oscillation, and is
+//! scanned whole), and the step is scanned piece by piece on its dense output
 //! (nothing is integrated again, and the state is cut from the dense output only at a
-//! crossing, as always); each piece starts at twice the length of the last one that passed.
+//! crossing, as always); each piece starts at twice the length of the last one that passed
+//! after a cut (one that passed uncut leaves that length as it is, or doubles it).
 
 use super::{time_resolution, Driver};
 use crate::integrate::zero_rows;
@@ -124,12 +126,22 @@ where
                 self.resolution.s0[i] = s;
             }
         }
-        let mut t1 = t_step.min(t0 + self.resolution.next);
+        let whole = t_step.min(t0 + self.resolution.next);
+        let mut t1 = whole;
         self.resolution.end = f64::NAN;
         for _ in 0..MAX_CUTS {
             if self.resolved_on(t0, t1, t_step) {
                 self.resolution.end = t1;
-                break;
+                // A piece that passed uncut does not shrink the next: it may be a sliver the
+                // step's end cut short (10⁻¹⁷ left of a step, whose successors would crawl on
+                // at twice that, each at the resolution of t).
+                let grown = 2.0 * (t1 - t0);
+                self.resolution.next = if t1 == whole {
+                    grown.max(self.resolution.next)
+                } else {
+                    grown
+                };
+                return t1;
             }
             let cut = t0 + 0.25 * (t1 - t0);
             if cut - t0 <= 4.0 * time_resolution(t0) {
@@ -137,8 +149,13 @@ where
             }
             t1 = cut;
         }
-        self.resolution.next = 2.0 * (t1 - t0);
-        t1
+        // No cut resolved it: what still fails a 4⁻⁴⁰ part of the piece, or one at the
+        // resolution of t, is the rounding of v (a qp's switch value that is zero at a weakly
+        // active start and computed from terms of order 1), not an oscillation between the
+        // samples. The piece is scanned whole and the next keeps its length: carrying the cut
+        // on would crawl on, each piece 4⁻⁴⁰ of the last or, from t = 0, at the resolution of
+        // t, which is absolute there (a run that never ended).
+        whole
     }
 
     /// Whether every unresolved-class watched function passes the Hermite check on [t0, t1]
