@@ -27,7 +27,8 @@
 //!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
 //! - Gradient methods *overwrite* every entry of their outputs (zeros included).
 
-use crate::qp::{QpError, QpFlowKink, QpLayerInfo, QpState, Side};
+use crate::qp::{QpBank, QpError, QpFlowKink, QpLayerInfo, QpState, Side};
+use std::cell::RefCell;
 
 pub mod dense;
 pub mod differences;
@@ -361,11 +362,17 @@ where
     // ---- optimisation layers (qp) ------------------------------------------------------
     //
     // A model's qps are solved inside its evaluation methods (see `crate::qp::QpBank`); the
-    // runtime only reports on them. A model without qps keeps these defaults.
+    // runtime only reports on them. A model without qps keeps these defaults; a model that
+    // keeps its qps in a `QpBank` hands it over (`qp_bank`), and the methods that only ask
+    // the bank (side, failure, kink, persistent kinks, pins) are answered by it.
 
     /// The model's qp layers, in declaration order.
     fn qps(&self) -> &[QpLayerInfo] {
         &[]
+    }
+    /// The bank that solves the model's qps, if it keeps one (`None` by default: no qps).
+    fn qp_bank(&self) -> Option<&RefCell<QpBank>> {
+        None
     }
     /// Every qp solved at (t, x, θ): solutions, multipliers and constraint statuses, for
     /// reports (it may allocate); the first failure as (qp index, error).
@@ -376,16 +383,19 @@ where
     /// Chooses the one-sided derivative the qps give at a kink from now on (right by
     /// default).
     fn set_qp_side(&self, side: Side) {
-        let _ = side;
+        if let Some(bank) = self.qp_bank() {
+            bank.borrow_mut().set_side(side);
+        }
     }
     /// The qp failure behind the non-finite values of the last evaluation, if any.
     fn qp_failure(&self) -> Option<(usize, QpError)> {
-        None
+        let bank = self.qp_bank()?.borrow();
+        bank.failure().map(|(q, e)| (q, e.clone()))
     }
     /// The first weakly active constraint of the last evaluation, as (qp, constraint): the
     /// point is a kink of the qp's solution map. Allocates nothing.
     fn qp_kink(&self) -> Option<(usize, usize)> {
-        None
+        self.qp_bank()?.borrow().kink()
     }
     /// At the flow point `pt` (rate f): whether a qp of the state that the flow reads, on
     /// the active set `pt.sw` freezes, has a constraint weakly active *along* the flow — a
@@ -408,10 +418,15 @@ where
     /// The persistent kinks [`HybridModel::qp_flow_pieces`] met since the last
     /// [`HybridModel::clear_qp_flow_kinks`] (it may allocate).
     fn qp_flow_kinks(&self) -> Vec<QpFlowKink> {
-        Vec::new()
+        self.qp_bank()
+            .map_or_else(Vec::new, |bank| bank.borrow().flow_kinks().to_vec())
     }
     /// Forgets the persistent kinks met so far (at the start of a run).
-    fn clear_qp_flow_kinks(&self) {}
+    fn clear_qp_flow_kinks(&self) {
+        if let Some(bank) = self.qp_bank() {
+            bank.borrow_mut().clear_flow_kinks();
+        }
+    }
     /// Where qp q, solved pointwise at `at`, has a weakly active constraint: the active set
     /// of the smooth piece whose derivative is its one-sided derivative (on the side of
     /// [`HybridModel::set_qp_side`]) along the direction (dx, e_j, dt) of (x, θ, t), into
@@ -430,7 +445,9 @@ where
     /// Pins qp q's pointwise evaluations to the active set `active` (`None` unpins; see
     /// [`crate::qp::QpBank::pin`]): its solution and derivatives are then that piece's.
     fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
-        let _ = (q, active);
+        if let Some(bank) = self.qp_bank() {
+            bank.borrow_mut().pin(q, active);
+        }
     }
 }
 

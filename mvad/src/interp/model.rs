@@ -2,11 +2,12 @@
 //! product, each method one or two tape runs (`run.rs`).
 
 use mvad_dsl::ir::Point;
-use mvad_runtime::qp::{QpError, QpFlowKink, QpLayerInfo, QpState, Side};
+use mvad_runtime::qp::{QpBank, QpError, QpLayerInfo, QpState};
 use mvad_runtime::{
     At, AtOf, HybridModel, ModelDims, ModelInfo, ModelSens, Occurrence, PointOf, Switches,
 };
 use nalgebra::Dyn;
+use std::cell::RefCell;
 
 use super::run::{at_pt, at_sw, copy_into, pt0, pt_row, pt_theta};
 use super::{InterpretedModel, Scratch, M, X};
@@ -276,11 +277,8 @@ impl HybridModel for InterpretedModel {
         self.evaluate_qps(&pt0(at), false);
         self.qp_bank.borrow().states()
     }
-    fn set_qp_side(&self, side: Side) {
-        self.qp_bank.borrow_mut().set_side(side);
-    }
-    fn qp_failure(&self) -> Option<(usize, QpError)> {
-        self.qp_bank.borrow().failure().map(|(q, e)| (q, e.clone()))
+    fn qp_bank(&self) -> Option<&RefCell<QpBank>> {
+        Some(&self.qp_bank)
     }
     fn qp_flow_pieces(
         &self,
@@ -297,12 +295,6 @@ impl HybridModel for InterpretedModel {
         let found = bank.flow_pieces(t, x, p, pt.sw, f.as_slice(), s, pieces, fill);
         found.ok()
     }
-    fn qp_flow_kinks(&self) -> Vec<QpFlowKink> {
-        self.qp_bank.borrow().flow_kinks().to_vec()
-    }
-    fn clear_qp_flow_kinks(&self) {
-        self.qp_bank.borrow_mut().clear_flow_kinks();
-    }
     fn qp_piece(
         &self,
         q: usize,
@@ -316,9 +308,6 @@ impl HybridModel for InterpretedModel {
         let mut bank = self.qp_bank.borrow_mut();
         let found = bank.pointwise_piece(q, (t, x, p), (dx.as_slice(), j, dt), active, fill);
         found.ok()
-    }
-    fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
-        self.qp_bank.borrow_mut().pin(q, active);
     }
 }
 
