@@ -19,6 +19,19 @@
 //! [`paper`] holds the numbers the seed paper printed (Tables 1 and 2), which the
 //! examples `table1` and `table2` print beside ours.
 
+/// A test's prologue: `(m, p, sol)`, the model `$model::new()` solved at its declared
+/// parameters `p = $params::default()` with [`tolerances`]`(rtol, atol)`.
+#[cfg(test)]
+macro_rules! solved_at_defaults {
+    ($model:ident, $params:ident, $rtol:expr, $atol:expr) => {{
+        let m = $model::new();
+        let p = $params::default();
+        let opts = $crate::tolerances($rtol, $atol);
+        let sol = mvad::solve::solve(&m, &p.to_vector(), &opts).expect("runs");
+        (m, p, sol)
+    }};
+}
+
 pub mod bouncing_ball;
 pub mod ceiling;
 pub mod e2_sweep;

@@ -93,16 +93,13 @@ pub fn cost_closed(tau: f64, rate: f64, lo: f64, hi: f64) -> (f64, [f64; 4]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tolerances;
     use approx::assert_relative_eq;
     use mvad::solution::Options;
     use mvad::solve::solve;
 
     #[test]
     fn auto_solves_the_stiff_relay_with_exact_switch_times_and_sensitivities() {
-        let m = StiffRelay::new();
-        let p = StiffRelayParams::default();
-        let sol = solve(&m, &p.to_vector(), &tolerances(1e-8, 1e-10)).expect("runs");
+        let (_, p, sol) = solved_at_defaults!(StiffRelay, StiffRelayParams, 1e-8, 1e-10);
         let times = switch_times(p.tau, p.rate, p.lo, p.hi, 3.0);
         assert_eq!(sol.events.len(), times.len());
         assert!(sol.stats.steps < 20_000, "{} steps", sol.stats.steps);

@@ -51,16 +51,12 @@ pub fn closed_form(k: f64, lo: f64, hi: f64, p: f64, t_end: f64) -> (f64, Vec<f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{derivative, tolerances};
+    use crate::derivative;
     use approx::assert_relative_eq;
-    use mvad::solve::solve;
 
     #[test]
     fn cost_switch_times_and_gradient_match_the_closed_form() {
-        let m = Thermostat::new();
-        let p = ThermostatParams::default();
-        let opts = tolerances(1e-11, 1e-12);
-        let sol = solve(&m, &p.to_vector(), &opts).expect("runs");
+        let (_, p, sol) = solved_at_defaults!(Thermostat, ThermostatParams, 1e-11, 1e-12);
         let (c, times) = closed_form(p.k, p.lo, p.hi, p.p, 10.0);
         assert_relative_eq!(sol.cost, c, max_relative = 1e-9);
         assert_eq!(sol.events.len(), times.len());

@@ -29,16 +29,13 @@ pub fn dcost_de(e: f64, g: f64, h0: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{ball_closed_form, central, tolerances};
+    use crate::{ball_closed_form, central};
     use approx::assert_relative_eq;
     use mvad::solution::DiagnosticKind;
-    use mvad::solve::solve;
 
     #[test]
     fn the_series_tail_is_estimated_to_1e_6() {
-        let m = ZenoBall::new();
-        let p = ZenoBallParams::default();
-        let sol = solve(&m, &p.to_vector(), &tolerances(1e-10, 1e-12)).expect("runs");
+        let (_, p, sol) = solved_at_defaults!(ZenoBall, ZenoBallParams, 1e-10, 1e-12);
         // The tail is summed, not stepped through: a few dozen bounces, not thousands.
         assert!(sol.events.len() < 100, "{} events", sol.events.len());
         let zeno = sol

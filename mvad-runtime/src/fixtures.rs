@@ -6,8 +6,8 @@
 pub mod counting;
 
 use crate::model::{
-    At, Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder,
-    ModelSens, Occurrence, Point, Switches,
+    At, AtOf, Direction, EventInfo, HybridModel, ModelAdjoint, ModelDims, ModelInfo,
+    ModelSecondOrder, ModelSens, Occurrence, PointOf, Switches,
 };
 use nalgebra::{Const, OMatrix, OVector};
 
@@ -107,35 +107,35 @@ impl HybridModel for Ball {
     fn horizon_grad(&self, _p: &Th, dt: &mut Th) {
         dt.fill(0.0);
     }
-    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut X) {
+    fn rhs(&self, pt: PointOf<'_, Self>, f: &mut X) {
         f[0] = pt.x[1];
         f[1] = -pt.p[1];
     }
-    fn rhs_jac_x(&self, _pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, N, N>) {
+    fn rhs_jac_x(&self, _pt: PointOf<'_, Self>, fx: &mut OMatrix<f64, N, N>) {
         fx.fill(0.0);
         fx[(0, 1)] = 1.0;
     }
-    fn rhs_jac_p(&self, _pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, N, P>) {
+    fn rhs_jac_p(&self, _pt: PointOf<'_, Self>, fp: &mut OMatrix<f64, N, P>) {
         fp.fill(0.0);
         fp[(1, 1)] = -1.0;
     }
-    fn rhs_dt(&self, _pt: Point<'_, Self::N, Self::P>, ft: &mut X) {
+    fn rhs_dt(&self, _pt: PointOf<'_, Self>, ft: &mut X) {
         ft.fill(0.0);
     }
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
         false
     }
-    fn guard(&self, _k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn guard(&self, _k: usize, at: AtOf<'_, Self>) -> f64 {
         let At { x, .. } = at;
         x[0]
     }
-    fn guard_grad(&self, _k: usize, _at: At<'_, Self::N, Self::P>, gx: &mut X, gp: &mut Th) -> f64 {
+    fn guard_grad(&self, _k: usize, _at: AtOf<'_, Self>, gx: &mut X, gp: &mut Th) -> f64 {
         gx.fill(0.0);
         gx[0] = 1.0;
         gp.fill(0.0);
         0.0
     }
-    fn reset(&self, _occ: Occurrence, at: At<'_, Self::N, Self::P>, xplus: &mut X) {
+    fn reset(&self, _occ: Occurrence, at: AtOf<'_, Self>, xplus: &mut X) {
         let At { x, p, .. } = at;
         xplus[0] = x[0];
         xplus[1] = -p[0] * x[1];
@@ -143,7 +143,7 @@ impl HybridModel for Ball {
     fn reset_jac(
         &self,
         _occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         rx: &mut OMatrix<f64, N, N>,
         rp: &mut OMatrix<f64, N, P>,
         rt: &mut X,
@@ -156,43 +156,31 @@ impl HybridModel for Ball {
         rp[(1, 0)] = -x[1];
         rt.fill(0.0);
     }
-    fn switch_value(&self, _j: usize, _at: At<'_, Self::N, Self::P>) -> f64 {
+    fn switch_value(&self, _j: usize, _at: AtOf<'_, Self>) -> f64 {
         0.0
     }
-    fn switch_grad(
-        &self,
-        _j: usize,
-        _at: At<'_, Self::N, Self::P>,
-        gx: &mut X,
-        gp: &mut Th,
-    ) -> f64 {
+    fn switch_grad(&self, _j: usize, _at: AtOf<'_, Self>, gx: &mut X, gp: &mut Th) -> f64 {
         zero_grad(gx, gp)
     }
-    fn observe(&self, _sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+    fn observe(&self, _sw: &Switches, at: AtOf<'_, Self>, y: &mut [f64]) {
         let At { x, .. } = at;
         y[0] = x[0];
         y[1] = x[1];
     }
-    fn observe_jac(
-        &self,
-        _sw: &Switches,
-        _at: At<'_, Self::N, Self::P>,
-        yx: &mut [f64],
-        yp: &mut [f64],
-    ) {
+    fn observe_jac(&self, _sw: &Switches, _at: AtOf<'_, Self>, yx: &mut [f64], yp: &mut [f64]) {
         yx.fill(0.0);
         yx[0] = 1.0; // ∂height/∂h
         yx[3] = 1.0; // ∂velocity/∂v
         yp.fill(0.0);
     }
-    fn running_cost(&self, _sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn running_cost(&self, _sw: &Switches, at: AtOf<'_, Self>) -> f64 {
         let At { x, .. } = at;
         x[0]
     }
     fn running_cost_value_grad(
         &self,
         _sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         lx: &mut X,
         lp: &mut Th,
     ) -> f64 {
@@ -202,22 +190,22 @@ impl HybridModel for Ball {
         lp.fill(0.0);
         x[0]
     }
-    fn event_cost(&self, _occ: Occurrence, _at: At<'_, Self::N, Self::P>) -> f64 {
+    fn event_cost(&self, _occ: Occurrence, _at: AtOf<'_, Self>) -> f64 {
         0.0
     }
     fn event_cost_grad(
         &self,
         _occ: Occurrence,
-        _at: At<'_, Self::N, Self::P>,
+        _at: AtOf<'_, Self>,
         cx: &mut X,
         cp: &mut Th,
     ) -> f64 {
         zero_grad(cx, cp)
     }
-    fn final_cost(&self, _at: At<'_, Self::N, Self::P>) -> f64 {
+    fn final_cost(&self, _at: AtOf<'_, Self>) -> f64 {
         0.0
     }
-    fn final_cost_grad(&self, _at: At<'_, Self::N, Self::P>, cx: &mut X, cp: &mut Th) -> f64 {
+    fn final_cost_grad(&self, _at: AtOf<'_, Self>, cx: &mut X, cp: &mut Th) -> f64 {
         zero_grad(cx, cp)
     }
 }

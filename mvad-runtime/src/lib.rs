@@ -13,8 +13,8 @@ pub mod fixtures;
 pub mod model;
 
 pub use model::{
-    At, Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
-    ModelSecondOrder, ModelSens, Occurrence, Point, Switches, Trigger,
+    At, AtOf, Direction, EventInfo, HybridModel, ModelAdjoint, ModelAlloc, ModelDims, ModelInfo,
+    ModelSecondOrder, ModelSens, Occurrence, Point, PointOf, Switches, Trigger,
 };
 
 pub mod adjoint;

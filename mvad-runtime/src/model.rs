@@ -27,7 +27,8 @@
 //!   dimension, Jacobians are row-major slices (`nobs × n`, `nobs × p`).
 //! - Gradient methods *overwrite* every entry of their outputs (zeros included).
 
-use crate::qp::{QpError, QpFlowKink, QpLayerInfo, QpState, Side};
+use crate::qp::{QpBank, QpError, QpFlowKink, QpLayerInfo, QpState, Side};
+use std::cell::RefCell;
 
 pub mod dense;
 pub mod differences;
@@ -186,6 +187,11 @@ pub trait ModelDims {
     type P: Dim;
 }
 
+/// The flow-side evaluation point [`Point`] of a model `M` (its dimensions N, P).
+pub type PointOf<'a, M> = Point<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
+/// The pointwise evaluation point [`At`] of a model `M` (its dimensions N, P).
+pub type AtOf<'a, M> = At<'a, <M as ModelDims>::N, <M as ModelDims>::P>;
+
 /// A hybrid model: its core — sizes, structure, and the values and first derivatives of
 /// x₀, T, f, g, R, σ, h, ℓ, φ and Φ that the forward method needs — on top of the
 /// capability traits ([`ModelSens`], [`ModelAdjoint`], [`ModelSecondOrder`]), whose
@@ -229,13 +235,13 @@ where
     // ---- flow -------------------------------------------------------------------------
 
     /// f_m(t, x, θ) at `pt` = (m, sw, t, x, θ), with the frozen branches `pt.sw`.
-    fn rhs(&self, pt: Point<'_, Self::N, Self::P>, f: &mut OVector<f64, Self::N>);
+    fn rhs(&self, pt: PointOf<'_, Self>, f: &mut OVector<f64, Self::N>);
     /// ∂f_m/∂x (n×n).
-    fn rhs_jac_x(&self, pt: Point<'_, Self::N, Self::P>, fx: &mut OMatrix<f64, Self::N, Self::N>);
+    fn rhs_jac_x(&self, pt: PointOf<'_, Self>, fx: &mut OMatrix<f64, Self::N, Self::N>);
     /// ∂f_m/∂θ (n×p).
-    fn rhs_jac_p(&self, pt: Point<'_, Self::N, Self::P>, fp: &mut OMatrix<f64, Self::N, Self::P>);
+    fn rhs_jac_p(&self, pt: PointOf<'_, Self>, fp: &mut OMatrix<f64, Self::N, Self::P>);
     /// ∂f_m/∂t (zeros for an autonomous flow).
-    fn rhs_dt(&self, pt: Point<'_, Self::N, Self::P>, ft: &mut OVector<f64, Self::N>);
+    fn rhs_dt(&self, pt: PointOf<'_, Self>, ft: &mut OVector<f64, Self::N>);
     /// Whether f_m depends on t explicitly.
     fn rhs_depends_on_t(&self, mode: usize) -> bool;
     /// Whether f_m is a function of θ alone (it reads no state, no t, no switch bit, no qp):
@@ -249,7 +255,7 @@ where
     // ---- events -----------------------------------------------------------------------
 
     /// g_k(t, x, θ) = LHS − RHS of event k's guard.
-    fn guard(&self, event: usize, at: At<'_, Self::N, Self::P>) -> f64;
+    fn guard(&self, event: usize, at: AtOf<'_, Self>) -> f64;
     /// Whether the guard of event k is affine in (x, t) (its derivatives in x and t are
     /// functions of θ alone): on a segment of a constant flow
     /// ([`HybridModel::flow_is_constant`]) it is then affine in t and the event loop samples
@@ -262,24 +268,19 @@ where
     fn guard_grad(
         &self,
         event: usize,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         gx: &mut OVector<f64, Self::N>,
         gp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// x⁺ = R_k(t, x⁻, θ) (the identity for states the reset block does not assign), at
     /// occurrence j of event k (see [`Trigger`]: for `at each` the table row whose values
     /// the reset reads).
-    fn reset(
-        &self,
-        occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
-        xplus: &mut OVector<f64, Self::N>,
-    );
+    fn reset(&self, occ: Occurrence, at: AtOf<'_, Self>, xplus: &mut OVector<f64, Self::N>);
     /// ∂R_k/∂x into `rx`, ∂R_k/∂θ into `rp`, ∂R_k/∂t into `rt`, at occurrence j.
     fn reset_jac(
         &self,
         occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         rx: &mut OMatrix<f64, Self::N, Self::N>,
         rp: &mut OMatrix<f64, Self::N, Self::P>,
         rt: &mut OVector<f64, Self::N>,
@@ -306,12 +307,12 @@ where
     // ---- switching functions ----------------------------------------------------------
 
     /// σ_j(t, x, θ).
-    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64;
+    fn switch_value(&self, j: usize, at: AtOf<'_, Self>) -> f64;
     /// ∇ₓσ_j into `gx`, ∂θσ_j into `gp`; returns ∂ₜσ_j.
     fn switch_grad(
         &self,
         j: usize,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         gx: &mut OVector<f64, Self::N>,
         gp: &mut OVector<f64, Self::P>,
     ) -> f64;
@@ -321,77 +322,80 @@ where
     /// y = h(t, x, θ), one entry per observable, with the frozen branches `sw` (an
     /// observable's kinks are switches like a flow's: the bits of the segment t lies in,
     /// and at a crossing those on the side asked for).
-    fn observe(&self, sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]);
+    fn observe(&self, sw: &Switches, at: AtOf<'_, Self>, y: &mut [f64]);
     /// ∂h/∂x (row-major nobs×n) and ∂h/∂θ (row-major nobs×p), with the frozen branches `sw`.
-    fn observe_jac(
-        &self,
-        sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
-        yx: &mut [f64],
-        yp: &mut [f64],
-    );
+    fn observe_jac(&self, sw: &Switches, at: AtOf<'_, Self>, yx: &mut [f64], yp: &mut [f64]);
 
     // ---- cost -------------------------------------------------------------------------
 
     /// Running cost ℓ(t, x, θ) (sum of the `integral` terms with their factors), with the
     /// frozen branches `sw`.
-    fn running_cost(&self, sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64;
+    fn running_cost(&self, sw: &Switches, at: AtOf<'_, Self>) -> f64;
     /// ℓ_x into `lx`, ℓ_θ into `lp`; returns the value ℓ (not ∂ℓ/∂t, which no caller needs).
     fn running_cost_value_grad(
         &self,
         sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         lx: &mut OVector<f64, Self::N>,
         lp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// φ_k(t, x⁺, θ): the `sum(EVENT, ..)` terms of event k, evaluated after its reset, at
     /// occurrence j.
-    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64;
+    fn event_cost(&self, occ: Occurrence, at: AtOf<'_, Self>) -> f64;
     /// φ_x into `cx`, φ_θ into `cp`; returns φ_t (at occurrence j).
     fn event_cost_grad(
         &self,
         occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
     /// Φ(T, x(T), θ): the `final(..)` terms.
-    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64;
+    fn final_cost(&self, at: AtOf<'_, Self>) -> f64;
     /// Φ_x into `cx`, Φ_θ into `cp`; returns Φ_t.
     fn final_cost_grad(
         &self,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         cx: &mut OVector<f64, Self::N>,
         cp: &mut OVector<f64, Self::P>,
     ) -> f64;
     // ---- optimisation layers (qp) ------------------------------------------------------
     //
     // A model's qps are solved inside its evaluation methods (see `crate::qp::QpBank`); the
-    // runtime only reports on them. A model without qps keeps these defaults.
+    // runtime only reports on them. A model without qps keeps these defaults; a model that
+    // keeps its qps in a `QpBank` hands it over (`qp_bank`), and the methods that only ask
+    // the bank (side, failure, kink, persistent kinks, pins) are answered by it.
 
     /// The model's qp layers, in declaration order.
     fn qps(&self) -> &[QpLayerInfo] {
         &[]
     }
+    /// The bank that solves the model's qps, if it keeps one (`None` by default: no qps).
+    fn qp_bank(&self) -> Option<&RefCell<QpBank>> {
+        None
+    }
     /// Every qp solved at (t, x, θ): solutions, multipliers and constraint statuses, for
     /// reports (it may allocate); the first failure as (qp index, error).
-    fn qp_states(&self, at: At<'_, Self::N, Self::P>) -> Result<Vec<QpState>, (usize, QpError)> {
+    fn qp_states(&self, at: AtOf<'_, Self>) -> Result<Vec<QpState>, (usize, QpError)> {
         let _ = at;
         Ok(Vec::new())
     }
     /// Chooses the one-sided derivative the qps give at a kink from now on (right by
     /// default).
     fn set_qp_side(&self, side: Side) {
-        let _ = side;
+        if let Some(bank) = self.qp_bank() {
+            bank.borrow_mut().set_side(side);
+        }
     }
     /// The qp failure behind the non-finite values of the last evaluation, if any.
     fn qp_failure(&self) -> Option<(usize, QpError)> {
-        None
+        let bank = self.qp_bank()?.borrow();
+        bank.failure().map(|(q, e)| (q, e.clone()))
     }
     /// The first weakly active constraint of the last evaluation, as (qp, constraint): the
     /// point is a kink of the qp's solution map. Allocates nothing.
     fn qp_kink(&self) -> Option<(usize, usize)> {
-        None
+        self.qp_bank()?.borrow().kink()
     }
     /// At the flow point `pt` (rate f): whether a qp of the state that the flow reads, on
     /// the active set `pt.sw` freezes, has a constraint weakly active *along* the flow — a
@@ -403,7 +407,7 @@ where
     /// there is no such kink. `None` when a qp failed ([`HybridModel::qp_failure`]).
     fn qp_flow_pieces(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         f: &OVector<f64, Self::N>,
         s: Option<&OMatrix<f64, Self::N, Self::P>>,
         pieces: &mut [Switches],
@@ -414,10 +418,15 @@ where
     /// The persistent kinks [`HybridModel::qp_flow_pieces`] met since the last
     /// [`HybridModel::clear_qp_flow_kinks`] (it may allocate).
     fn qp_flow_kinks(&self) -> Vec<QpFlowKink> {
-        Vec::new()
+        self.qp_bank()
+            .map_or_else(Vec::new, |bank| bank.borrow().flow_kinks().to_vec())
     }
     /// Forgets the persistent kinks met so far (at the start of a run).
-    fn clear_qp_flow_kinks(&self) {}
+    fn clear_qp_flow_kinks(&self) {
+        if let Some(bank) = self.qp_bank() {
+            bank.borrow_mut().clear_flow_kinks();
+        }
+    }
     /// Where qp q, solved pointwise at `at`, has a weakly active constraint: the active set
     /// of the smooth piece whose derivative is its one-sided derivative (on the side of
     /// [`HybridModel::set_qp_side`]) along the direction (dx, e_j, dt) of (x, θ, t), into
@@ -426,7 +435,7 @@ where
     fn qp_piece(
         &self,
         q: usize,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         direction: (&OVector<f64, Self::N>, usize, f64),
         active: &mut [bool],
     ) -> Option<bool> {
@@ -436,7 +445,9 @@ where
     /// Pins qp q's pointwise evaluations to the active set `active` (`None` unpins; see
     /// [`crate::qp::QpBank::pin`]): its solution and derivatives are then that piece's.
     fn pin_qp(&self, q: usize, active: Option<&[bool]>) {
-        let _ = (q, active);
+        if let Some(bank) = self.qp_bank() {
+            bank.borrow_mut().pin(q, active);
+        }
     }
 }
 
@@ -452,7 +463,7 @@ where
     /// f = f_m(t, x, θ) and Ṡ = f_x S + f_θ (n×p) at `pt`, with the frozen branches `pt.sw`.
     fn rhs_sens(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         s: &OMatrix<f64, Self::N, Self::P>,
         f: &mut OVector<f64, Self::N>,
         ds: &mut OMatrix<f64, Self::N, Self::P>,
@@ -486,7 +497,7 @@ where
     /// vx_j = Σᵢ λᵢ ∂fᵢ/∂x_j, vp_k = Σᵢ λᵢ ∂fᵢ/∂θ_k. Both outputs are overwritten.
     fn rhs_vjp(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         lambda: &OVector<f64, Self::N>,
         vx: &mut OVector<f64, Self::N>,
         vp: &mut OVector<f64, Self::P>,
@@ -506,7 +517,7 @@ where
     /// when w = 0), touching nothing of size p. The default is [`dense::adjoint_rate`].
     fn adjoint_rate(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         lambda: &OVector<f64, Self::N>,
         w: f64,
         out: &mut OVector<f64, Self::N>,
@@ -521,12 +532,8 @@ where
     /// without sensitivities (the adjoint's primal run) needs of ℓ at every step, and what
     /// the implicit stages read (`integrate::forward`). The default is
     /// [`dense::running_cost_grad_x`].
-    fn running_cost_grad_x(
-        &self,
-        sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
-        lx: &mut OVector<f64, Self::N>,
-    ) where
+    fn running_cost_grad_x(&self, sw: &Switches, at: AtOf<'_, Self>, lx: &mut OVector<f64, Self::N>)
+    where
         Self: HybridModel,
     {
         dense::running_cost_grad_x(self, sw, at, lx);
@@ -537,7 +544,7 @@ where
     /// is [`dense::adjoint_quadrature_add`].
     fn adjoint_quadrature_add(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         lambda: &OVector<f64, Self::N>,
         w: f64,
         a: f64,
@@ -567,7 +574,7 @@ where
     fn reset_vjp(
         &self,
         occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         mu: &OVector<f64, Self::N>,
         vx: &mut OVector<f64, Self::N>,
         vp: &mut OVector<f64, Self::P>,
@@ -594,7 +601,7 @@ where
     fn reset_vjp_pair(
         &self,
         occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         (mu1, mu2): CotangentPair<'_, Self::N>,
         out1: VjpOutput<'_, Self::N, Self::P>,
         out2: VjpOutput<'_, Self::N, Self::P>,
@@ -616,7 +623,7 @@ where
     /// scratch; a model with symbolic second derivatives can give it exactly.
     fn rhs_vjp_dir(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         lambda: &OVector<f64, Self::N>,
         v: &OVector<f64, Self::N>,
         vx: &mut OVector<f64, Self::N>,
@@ -635,7 +642,7 @@ where
     fn running_cost_grad_dir(
         &self,
         sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         v: &OVector<f64, Self::N>,
         lx: &mut OVector<f64, Self::N>,
         lp: &mut OVector<f64, Self::P>,
@@ -683,7 +690,7 @@ where
     /// derivative of the sensitivity right-hand side along the state direction v.
     fn rhs_sens_dir_x(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         s: &OMatrix<f64, Self::N, Self::P>,
         v: &OVector<f64, Self::N>,
         out: &mut OMatrix<f64, Self::N, Self::P>,
@@ -697,7 +704,7 @@ where
     /// side at fixed x and S (zeros for an autonomous flow).
     fn rhs_sens_dt(
         &self,
-        pt: Point<'_, Self::N, Self::P>,
+        pt: PointOf<'_, Self>,
         s: &OMatrix<f64, Self::N, Self::P>,
         out: &mut OMatrix<f64, Self::N, Self::P>,
     ) where
@@ -712,7 +719,7 @@ where
     fn running_cost_sens_dir_x(
         &self,
         sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         s: &OMatrix<f64, Self::N, Self::P>,
         v: &OVector<f64, Self::N>,
         out: &mut OVector<f64, Self::P>,
@@ -727,7 +734,7 @@ where
     fn running_cost_sens_dt(
         &self,
         sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         s: &OMatrix<f64, Self::N, Self::P>,
         out: &mut OVector<f64, Self::P>,
     ) -> f64

@@ -70,6 +70,35 @@ pub fn tight() -> mvad::Options {
     }
 }
 
+/// Integration tolerances rtol 1e-10, atol 1e-12 in gradient mode `mode`: where a test's
+/// closed forms hold to about 1e-8.
+pub fn precise(mode: mvad::GradientMode) -> mvad::Options {
+    mvad::Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        gradient_mode: mode,
+        ..mvad::Options::default()
+    }
+}
+
+/// `check(model, door)` on the model compiled by `hybrid!` (the expression `compiled`) and
+/// on the same model loaded from `tests/tests/FILE`, with `door` "compiled" and "loaded".
+/// (`check` is generic over the model, so this is a macro, not a function taking it.) With
+/// `NAME:` first, the `#[test]` function NAME doing so.
+#[macro_export]
+macro_rules! test_both_doors {
+    ($test:ident: $check:expr, $compiled:expr, $file:expr) => {
+        #[test]
+        fn $test() {
+            $crate::test_both_doors!($check, $compiled, $file);
+        }
+    };
+    ($check:expr, $compiled:expr, $file:expr) => {{
+        $check(&$compiled, "compiled");
+        $check(&$crate::loaded_test_model($file), "loaded");
+    }};
+}
+
 /// Asserts |got − want| ≤ rel · max(|want|, 1) (relative above 1, absolute below; false
 /// for NaN); `what` names the value in the message.
 #[track_caller]

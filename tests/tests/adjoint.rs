@@ -18,14 +18,12 @@ mvad::hybrid!(include "tests/every_construct.hyb");
 /// The every-construct model's source, for the loader.
 const EVERY: &str = include_str!("every_construct.hyb");
 
-/// rtol 1e-12, atol 1e-14, in `mode` under `method`.
+/// [`mvad_tests::tight`] (rtol 1e-12, atol 1e-14), in `mode` under `method`.
 fn fine(method: Method, mode: GradientMode) -> Options {
     Options {
         method,
-        rtol: 1e-12,
-        atol: 1e-14,
         gradient_mode: mode,
-        ..Options::default()
+        ..mvad_tests::tight()
     }
 }
 

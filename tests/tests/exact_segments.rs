@@ -60,13 +60,11 @@ where
     }
 }
 
-#[test]
-fn a_constant_flow_takes_one_exact_step_per_segment_through_both_doors() {
-    check(&Sawtooth::new(), "compiled");
-    let src = include_str!("sawtooth.hyb");
-    let loaded = InterpretedModel::from_source(src).expect("loads");
-    check(&loaded, "loaded");
-}
+mvad_tests::test_both_doors!(
+    a_constant_flow_takes_one_exact_step_per_segment_through_both_doors: check,
+    Sawtooth::new(),
+    "sawtooth.hyb"
+);
 
 #[test]
 fn guards_that_are_not_affine_in_the_state_and_t_are_not_flagged() {

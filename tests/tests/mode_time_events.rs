@@ -7,21 +7,12 @@
 
 use models::queue::{self, Arrivals};
 use mvad::interp::InterpretedModel;
-use mvad::runtime::solution::{GradientMode, Options};
+use mvad::runtime::solution::GradientMode;
 use mvad::{HybridModel, ModelAlloc};
-use mvad_tests::assert_near;
+use mvad_tests::{assert_near, precise};
 use nalgebra::{DVector, DefaultAllocator, OVector};
 
 mvad::hybrid!(include "tests/mode_time_events.hyb");
-
-fn opts(mode: GradientMode) -> Options {
-    Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        gradient_mode: mode,
-        ..Options::default()
-    }
-}
 
 /// C and dC/dr: x = r t up to t₁ = 1/r, then x' = 1 with +10 at the multiples of 0.3 in
 /// (t₁, 2], which are 1.2, 1.5 and 1.8 for t₁ ∈ (0.9, 1.2) (the `at 0.1` never fires).
@@ -46,7 +37,7 @@ where
         let p = OVector::<f64, M::P>::from_element_generic(m.nparams(), nalgebra::Const::<1>, r);
         for mode in [GradientMode::Forward, GradientMode::Adjoint] {
             let what = format!("{door} r = {r} {mode:?}");
-            let sol = mvad::solve(m, &p, &opts(mode)).expect("runs");
+            let sol = mvad::solve(m, &p, &precise(mode)).expect("runs");
             assert_eq!(sol.stats.events, 4, "{what}: up and three kicks");
             assert_near(sol.cost, c, 1e-9, format_args!("{what}: C"));
             assert_near(sol.gradient[0], dc, 1e-8, format_args!("{what}: dC/dr"));
@@ -54,14 +45,11 @@ where
     }
 }
 
-#[test]
-fn a_time_event_skips_what_fell_before_its_mode_was_entered() {
-    check(&ModeTimeEvents::new(), "compiled");
-    check(
-        &mvad_tests::loaded_test_model("mode_time_events.hyb"),
-        "loaded",
-    );
-}
+mvad_tests::test_both_doors!(
+    a_time_event_skips_what_fell_before_its_mode_was_entered: check,
+    ModeTimeEvents::new(),
+    "mode_time_events.hyb"
+);
 
 /// The queue with `arrive_idle` (idle → busy) and `arrive_busy` over the same rows: each row is
 /// handled once, by the event of the mode current at its time (an arrival to an empty queue
@@ -91,7 +79,7 @@ fn a_queue_with_one_arrival_event_per_mode_is_the_lindley_recursion() {
     let mu = 1.25;
     let (c, dmu, _) = queue::exact(&a.t, &a.s, mu, 1.0);
     for mode in [GradientMode::Forward, GradientMode::Adjoint] {
-        let sol = mvad::solve(&m, &DVector::from_element(1, mu), &opts(mode)).expect("runs");
+        let sol = mvad::solve(&m, &DVector::from_element(1, mu), &precise(mode)).expect("runs");
         assert_near(sol.cost, c, 1e-12, format_args!("{mode:?}: C"));
         assert_near(
             sol.gradient[0],

@@ -85,11 +85,8 @@ where
     assert_eq!(mu.pair(|_| 1.0)[3], 0.0, "{door}");
 }
 
-#[test]
-fn a_moving_horizon_is_an_atom_of_every_observables_measure() {
-    check(&MovingHorizon::new(), "compiled");
-    check(
-        &mvad_tests::loaded_test_model("moving_horizon.hyb"),
-        "loaded",
-    );
-}
+mvad_tests::test_both_doors!(
+    a_moving_horizon_is_an_atom_of_every_observables_measure: check,
+    MovingHorizon::new(),
+    "moving_horizon.hyb"
+);

@@ -7,20 +7,18 @@
 use mvad::runtime::solution::{GradientMode, Options, Solution};
 use mvad::runtime::vjp::{vjp, Cotangents};
 use mvad::{measure, sample, HybridModel, ModelAlloc};
-use mvad_tests::assert_near;
+use mvad_tests::{assert_near, precise};
 use nalgebra::{Const, DefaultAllocator, OVector};
 
 mvad::hybrid!(include "tests/obs_sign.hyb");
 mvad::hybrid!(include "tests/obs_max_cost.hyb");
 mvad::hybrid!(include "tests/obs_kink_only.hyb");
 
+/// [`mvad_tests::precise`], recording.
 fn tight(mode: GradientMode) -> Options {
     Options {
-        rtol: 1e-10,
-        atol: 1e-12,
         record: true,
-        gradient_mode: mode,
-        ..Options::default()
+        ..precise(mode)
     }
 }
 
@@ -83,11 +81,11 @@ where
     assert_near(s.observables[5], c * 1.5, 1e-12, door);
 }
 
-#[test]
-fn a_jumping_observable_has_an_atom_at_its_switch_crossing() {
-    check_sign(&ObsSign::new(), "compiled");
-    check_sign(&mvad_tests::loaded_test_model("obs_sign.hyb"), "loaded");
-}
+mvad_tests::test_both_doors!(
+    a_jumping_observable_has_an_atom_at_its_switch_crossing: check_sign,
+    ObsSign::new(),
+    "obs_sign.hyb"
+);
 
 /// q21: u = max(−x, −a) shares the flow's kink. ⟨μ_u, 1⟩ = dC/da (C = ∫u) in closed form and
 /// as `grad` has it, and du/da = −1 exactly between the kick and the switch.
@@ -130,11 +128,11 @@ where
     }
 }
 
-#[test]
-fn an_observable_sharing_the_flows_kink_has_an_exact_density() {
-    check_max_cost(&MaxObsCost::new(), "compiled");
-    check_max_cost(&mvad_tests::loaded_test_model("obs_max_cost.hyb"), "loaded");
-}
+mvad_tests::test_both_doors!(
+    an_observable_sharing_the_flows_kink_has_an_exact_density: check_max_cost,
+    MaxObsCost::new(),
+    "obs_max_cost.hyb"
+);
 
 /// m05: a kink only in the observable. The run now ends a step at it, so ⟨μ_y, 1⟩ = dC/dθ
 /// (C = ∫y) to 1e-8; dC/dc = −(T − t_c) in closed form.
@@ -168,14 +166,11 @@ where
     );
 }
 
-#[test]
-fn a_kink_only_in_an_observable_is_watched() {
-    check_kink_only(&ObsKinkOnly::new(), "compiled");
-    check_kink_only(
-        &mvad_tests::loaded_test_model("obs_kink_only.hyb"),
-        "loaded",
-    );
-}
+mvad_tests::test_both_doors!(
+    a_kink_only_in_an_observable_is_watched: check_kink_only,
+    ObsKinkOnly::new(),
+    "obs_kink_only.hyb"
+);
 
 /// Samples of u = max(−x, −a) and y = x t: their VJPs agree between forward and adjoint
 /// mode, and with the closed forms du/da = −1 on (1, t_s), 0 before the kick.
@@ -213,11 +208,11 @@ where
     }
 }
 
-#[test]
-fn samples_of_a_kinked_observable_agree_between_modes() {
-    check_vjp_modes(&MaxObsCost::new(), "compiled");
-    check_vjp_modes(&mvad_tests::loaded_test_model("obs_max_cost.hyb"), "loaded");
-}
+mvad_tests::test_both_doors!(
+    samples_of_a_kinked_observable_agree_between_modes: check_vjp_modes,
+    MaxObsCost::new(),
+    "obs_max_cost.hyb"
+);
 
 /// A kink in an observable does not change the gradient of the cost: the model without the
 /// observable gives the same dC/dθ (the extra watched function only ends a step there).
@@ -272,8 +267,8 @@ where
     }
 }
 
-#[test]
-fn a_sample_at_a_switch_crossing_is_the_left_limit() {
-    check_sample_at_crossing(&ObsSign::new(), "compiled");
-    check_sample_at_crossing(&mvad_tests::loaded_test_model("obs_sign.hyb"), "loaded");
-}
+mvad_tests::test_both_doors!(
+    a_sample_at_a_switch_crossing_is_the_left_limit: check_sample_at_crossing,
+    ObsSign::new(),
+    "obs_sign.hyb"
+);

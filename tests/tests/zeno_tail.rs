@@ -13,7 +13,7 @@ use mvad::interp::InterpretedModel;
 use mvad::runtime::error::SolveError;
 use mvad::runtime::solution::{GradientMode, Options, Solution};
 use mvad::{DiagnosticKind, HybridModel, ModelAlloc};
-use mvad_tests::{assert_near, solve_at};
+use mvad_tests::{assert_near, precise, solve_at};
 use nalgebra::DefaultAllocator;
 
 mvad::hybrid!(include "tests/zeno_kick.hyb");
@@ -66,15 +66,6 @@ fn fd(f: impl Fn(&[f64]) -> f64, p: &[f64], rel: f64) -> Vec<f64> {
         .collect()
 }
 
-fn opts(mode: GradientMode) -> Options {
-    Options {
-        rtol: 1e-10,
-        atol: 1e-12,
-        gradient_mode: mode,
-        ..Options::default()
-    }
-}
-
 fn run<M: HybridModel>(m: &M, p: &[f64], opts: &Options) -> Result<Solution, SolveError>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
@@ -118,7 +109,7 @@ fn a_time_event_after_the_accumulation_fires_and_the_run_goes_on() {
         // The kick matters: without it C would not move with u.
         assert!(grad[3].abs() > 0.1, "{grad:?}");
         for mode in [GradientMode::Forward, GradientMode::Adjoint] {
-            let o = opts(mode);
+            let o = precise(mode);
             for (door, sol) in [
                 ("macro", run(&ZenoKick::new(), &p, &o)),
                 ("loaded", run(&interp, &p, &o)),
@@ -164,7 +155,7 @@ fn a_kick_far_in_time_gives_the_answer_of_a_kick_at_eight() {
         let p = [0.8, 9.81, 2.0, 3.0, tau];
         let o = Options {
             t_end: Some(tau + 2.0),
-            ..opts(GradientMode::Forward)
+            ..precise(GradientMode::Forward)
         };
         for (door, sol) in [
             ("macro", run(&ZenoKick::new(), &p, &o)),
@@ -190,7 +181,7 @@ fn the_held_limit_does_not_depend_on_how_far_the_horizon_lies() {
     for t_end in [10.0, 1e6, 1e12, 1e20, 1e300] {
         let o = Options {
             t_end: Some(t_end),
-            ..opts(GradientMode::Forward)
+            ..precise(GradientMode::Forward)
         };
         for (door, sol) in [
             ("macro", run(&ZenoKick::new(), &p, &o)),
@@ -233,7 +224,7 @@ fn a_time_event_that_leaves_the_ball_at_rest_keeps_it_held() {
     // within a flight of 0.01 s, which a difference step must not cross).
     let p = [0.8, 9.81, 2.0, 0.5];
     let (c, grad) = (sampled_cost(&p), fd(sampled_cost, &p, 1e-5));
-    let o = opts(GradientMode::Forward);
+    let o = precise(GradientMode::Forward);
     for (door, sol) in [
         ("macro", run(&ZenoSampled::new(), &p, &o)),
         ("loaded", run(&interp, &p, &o)),
@@ -270,7 +261,7 @@ fn an_event_sum_that_diverges_at_the_accumulation_is_an_error() {
         );
         let m = InterpretedModel::from_source(&src).expect("loads");
         for mode in [GradientMode::Forward, GradientMode::Adjoint] {
-            match run(&m, &[0.8, 9.81, 2.0], &opts(mode)) {
+            match run(&m, &[0.8, 9.81, 2.0], &precise(mode)) {
                 Err(SolveError::NonFinite { t, what }) => {
                     assert_near(t, t_star(0.8, 9.81, 2.0), 1e-9, "t*");
                     assert!(
@@ -304,7 +295,7 @@ fn a_convergent_event_sum_over_the_accumulation_is_summed() {
         c / g,
         c / h0,
     ];
-    let sol = run(&m, &[e, g, h0], &opts(GradientMode::Forward)).expect("runs");
+    let sol = run(&m, &[e, g, h0], &precise(GradientMode::Forward)).expect("runs");
     assert_solution(&sol, c, &grad, 1e-8, "Σ v²");
 }
 

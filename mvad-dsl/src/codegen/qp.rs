@@ -166,14 +166,8 @@ impl Gen<'_> {
                 ) -> ::core::result::Result<::std::vec::Vec<#pr::QpState>, (usize, #pr::QpError)> {
                     self.__qp_eval(at.t, at.x.as_slice(), at.p.as_slice(), ::core::option::Option::None, false).states()
                 }
-                fn set_qp_side(&self, side: #pr::Side) {
-                    self.qp.borrow_mut().set_side(side);
-                }
-                fn qp_failure(&self) -> ::core::option::Option<(usize, #pr::QpError)> {
-                    self.qp.borrow().failure().map(|(q, e)| (q, ::core::clone::Clone::clone(e)))
-                }
-                fn qp_kink(&self) -> ::core::option::Option<(usize, usize)> {
-                    self.qp.borrow().kink()
+                fn qp_bank(&self) -> ::core::option::Option<&::core::cell::RefCell<#pr::QpBank>> {
+                    ::core::option::Option::Some(&self.qp)
                 }
                 fn qp_flow_pieces(
                     &self,
@@ -188,12 +182,6 @@ impl Gen<'_> {
                         |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),
                     ).ok()
                 }
-                fn qp_flow_kinks(&self) -> ::std::vec::Vec<#pr::QpFlowKink> {
-                    self.qp.borrow().flow_kinks().to_vec()
-                }
-                fn clear_qp_flow_kinks(&self) {
-                    self.qp.borrow_mut().clear_flow_kinks();
-                }
                 fn qp_piece(
                     &self,
                     q: usize,
@@ -206,9 +194,6 @@ impl Gen<'_> {
                         q, (t, x, p), (dx.as_slice(), j, dt), active,
                         |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),
                     ).ok()
-                }
-                fn pin_qp(&self, q: usize, active: ::core::option::Option<&[bool]>) {
-                    self.qp.borrow_mut().pin(q, active);
                 }
             },
         }

@@ -63,7 +63,8 @@ use super::adjoint_error::AdjointError;
 use super::aug::{axpy_slice, WeightedRms};
 use super::forward::ModeFlow;
 use super::rosenbrock::{Linearisation, WMatrix};
-use super::system::{HermiteStep, ImplicitSystem, OdeSystem, QuadratureSum, StageVector};
+use super::system::{AcceptedStep, HermiteStep, ImplicitSystem, OdeSystem, QuadratureSum};
+use super::system::{StageVector, Tol};
 use super::Integrator;
 use crate::adjoint::record::{SegmentRec, Tape};
 use crate::model::{At, HybridModel, ModelAlloc, Point};
@@ -410,15 +411,8 @@ where
     /// `WeightedRms` over λ with weight 1 (g is a quadrature outside the vector; see the
     /// module doc).
     #[inline]
-    fn error_norm(
-        &self,
-        e: &Self::Vector,
-        y0: &Self::Vector,
-        y1: &Self::Vector,
-        atol: f64,
-        rtol: f64,
-    ) -> f64 {
-        let mut rms = WeightedRms::new(atol, rtol);
+    fn error_norm(&self, e: &Self::Vector, y0: &Self::Vector, y1: &Self::Vector, tol: Tol) -> f64 {
+        let mut rms = WeightedRms::new(tol);
         rms.add(e.as_slice(), y0.as_slice(), y1.as_slice(), 1.0);
         rms.norm()
     }
@@ -510,9 +504,9 @@ where
     /// `WeightedRms` over the support of the error of Δg against g and g + Δg, entry j
     /// weighted by `gradient_weight``(θ_j)`: g is a running sum, held relative to its own
     /// size as forward mode holds S.
-    fn quadrature_error_norm(&self, atol: f64, rtol: f64) -> f64 {
+    fn quadrature_error_norm(&self, tol: Tol) -> f64 {
         let q = &self.quad;
-        let mut rms = WeightedRms::new(atol, rtol);
+        let mut rms = WeightedRms::new(tol);
         for &k in &q.support {
             let g0 = self.g[k];
             let w = gradient_weight(self.rhs.flow.p[k]);
@@ -552,11 +546,7 @@ where
         imp.lin.prepared = true;
     }
 
-    fn linearisation(&self) -> &Self::Linear {
-        &self.imp.lin
-    }
-
-    fn linearisation_mut(&mut self) -> &mut Self::Linear {
+    fn linearisation(&mut self) -> &mut Self::Linear {
         &mut self.imp.lin
     }
 
@@ -566,10 +556,9 @@ where
         _t0: f64,
         _y0: &Self::Vector,
         hg: f64,
-        r: &Self::Vector,
-        k: &mut Self::Vector,
+        rk: &mut Self::Vector,
     ) -> bool {
-        self.imp.lin.w.solve_scaled(hg, r, k)
+        self.imp.lin.w.solve_scaled(hg, rk)
     }
 
     /// `sum` += a·J_gλ v = −a·f_θᵀv at the step start (x(t0)).
@@ -609,14 +598,8 @@ where
     /// δF = F(t₀, x + e_x, λ₀) − F(t₀, x, λ₀) and δG likewise: secants over the actual
     /// displacement (`adjoint_rate` twice, and the sparse `adjoint_quadrature_add` with ±h,
     /// never a p-long vector). A displacement at which F is not finite adds nothing.
-    fn carry_global_error(
-        &mut self,
-        t0: f64,
-        y0: &Self::Vector,
-        _f0: &Self::Vector,
-        h: f64,
-        le: &Self::Vector,
-    ) {
+    fn carry_global_error(&mut self, step: AcceptedStep<'_, Self::Vector>) {
+        let AcceptedStep { t0, h, y0, le, .. } = step;
         let Backward {
             rhs,
             hist,

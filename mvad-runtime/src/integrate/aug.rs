@@ -1,6 +1,6 @@
 //! The forward augmented state (x, S, q, q_θ) and its vector-space operations.
 
-use super::system::{HermiteStep, StageVector};
+use super::system::{HermiteStep, StageVector, Tol};
 use crate::model::ModelAlloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 use std::slice;
@@ -327,19 +327,17 @@ where
 /// accumulated part by part (each part with its own weight w), so every system measures its
 /// local error the same way. Entries whose scale is 0 are not counted in N.
 pub(super) struct WeightedRms {
-    atol: f64,
-    rtol: f64,
+    tol: Tol,
     sum: f64,
     count: usize,
 }
 
 impl WeightedRms {
-    /// An empty sum for the tolerances (atol, rtol).
+    /// An empty sum for the tolerances `tol`.
     #[inline]
-    pub(super) fn new(atol: f64, rtol: f64) -> Self {
+    pub(super) fn new(tol: Tol) -> Self {
         WeightedRms {
-            atol,
-            rtol,
+            tol,
             sum: 0.0,
             count: 0,
         }
@@ -349,7 +347,7 @@ impl WeightedRms {
     /// the step, and its weight `w`.
     #[inline]
     pub(super) fn add(&mut self, e: &[f64], y0: &[f64], y1: &[f64], w: f64) {
-        let rw = self.rtol * w;
+        let rw = self.tol.rtol * w;
         for ((ei, a), b) in e.iter().zip(y0).zip(y1) {
             self.add_one(*ei, magnitude(*a, *b), w, rw);
         }
@@ -359,13 +357,13 @@ impl WeightedRms {
     /// its weight `w`.
     #[inline]
     pub(super) fn add_entry(&mut self, e: f64, y0: f64, y1: f64, w: f64) {
-        self.add_one(e, magnitude(y0, y1), w, self.rtol * w);
+        self.add_one(e, magnitude(y0, y1), w, self.tol.rtol * w);
     }
 
     /// Adds one entry: error `e`, magnitude `m` = max(|y0|, |y1|), weight `w`, `rw` = rtol·w.
     #[inline(always)]
     fn add_one(&mut self, e: f64, m: f64, w: f64, rw: f64) {
-        let scale = self.atol + rw * m;
+        let scale = self.tol.atol + rw * m;
         // A component with scale 0 (atol = 0 and y = 0 at both ends, as S at t = 0 when
         // x₀ does not depend on θ) has no relative accuracy to hold: it is left out, rather
         // than making the norm infinite and the (first) step zero.
@@ -405,13 +403,11 @@ fn magnitude(a: f64, b: f64) -> f64 {
 /// (`sens_err`), S and q_θ. The weight is 1 on x and q and [`sens_weight`]`(θ_j)` on column j
 /// of S and on q_θ[j], so both are measured as the change θ_j·S_j they predict for a relative
 /// change of θ_j.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn weighted_rms<N: Dim, P: Dim>(
     e: &AugState<N, P>,
     y0: &AugState<N, P>,
     y1: &AugState<N, P>,
-    atol: f64,
-    rtol: f64,
+    tol: Tol,
     has_rc: bool,
     sens_err: bool,
     theta: &OVector<f64, P>,
@@ -419,10 +415,10 @@ pub(super) fn weighted_rms<N: Dim, P: Dim>(
 where
     DefaultAllocator: ModelAlloc<N, P>,
 {
-    let mut rms = WeightedRms::new(atol, rtol);
+    let mut rms = WeightedRms::new(tol);
     rms.add(e.x.as_slice(), y0.x.as_slice(), y1.x.as_slice(), 1.0);
     if has_rc {
-        rms.add_one(e.q, magnitude(y0.q, y1.q), 1.0, rtol);
+        rms.add_one(e.q, magnitude(y0.q, y1.q), 1.0, tol.rtol);
     }
     if sens_err {
         // Column j of S, then q_θ[j], in one pass over the columns.
@@ -433,7 +429,7 @@ where
             let col = j * n..(j + 1) * n;
             rms.add(&es[col.clone()], &as_[col.clone()], &bs[col], w);
             if has_rc {
-                rms.add_one(e.qp[j], magnitude(y0.qp[j], y1.qp[j]), w, rtol * w);
+                rms.add_one(e.qp[j], magnitude(y0.qp[j], y1.qp[j]), w, tol.rtol * w);
             }
         }
     }

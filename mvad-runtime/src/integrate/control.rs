@@ -133,6 +133,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
 
     /// Weighted RMS norm of `v` with scale atol + rtol |y|, over the controlled parts.
     pub(super) fn scaled_norm(&self, v: &Sys::Vector, y: &Sys::Vector) -> f64 {
-        self.sys.error_norm(v, y, y, self.atol, self.rtol)
+        self.sys.error_norm(v, y, y, self.tol)
     }
 }

@@ -156,7 +156,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.t = t_cut;
         self.k0_valid = false;
         self.fsal_slot = None;
-        self.sys.linearisation_mut().invalidate();
+        self.sys.linearisation().invalidate();
     }
 
     /// Makes the full-order dense output of the last accepted step available (evaluates

@@ -51,7 +51,7 @@
 use super::aug::{weighted_rms, AugState};
 use super::global_error::GlobalError;
 use super::rosenbrock::{Linearisation, WMatrix};
-use super::system::{ImplicitSystem, OdeSystem};
+use super::system::{AcceptedStep, ImplicitSystem, OdeSystem, Tol};
 use super::{Integrator, Scheme};
 #[cfg(doc)]
 use crate::model::ModelSecondOrder;
@@ -76,8 +76,7 @@ where
     /// The run's global error estimate (`Options::global_error`), with the tolerances that
     /// weigh its split along the flow.
     global: Option<GlobalError<M::N, M::P>>,
-    atol: f64,
-    rtol: f64,
+    tol: Tol,
     /// Per mode: the constant F of a constant-rate mode ([`OdeSystem::constant_rate`]) once
     /// evaluated, `None` for the other modes (see [`Integrator::restart`]).
     rates: Vec<Option<ConstantRate<M::N, M::P>>>,
@@ -174,6 +173,8 @@ where
     /// A zero S and its q̇_θ_t, full width, for ∂ₜℓ in a narrow primal run (else empty).
     s0: OMatrix<f64, N, P>,
     qp0: OVector<f64, P>,
+    /// B K_x and D K_x of a stage solve (its S and q_θ parts).
+    bk: AugState<N, P>,
 }
 
 impl<'a, M: HybridModel> Forward<'a, M>
@@ -232,10 +233,13 @@ where
                 lx0: OVector::zeros_generic(rn, Const::<1>),
                 s0: OMatrix::zeros_generic(n, s0p),
                 qp0: OVector::zeros_generic(s0p, Const::<1>),
+                bk: AugState::zeros(rn, rsp),
             },
             global: opts.global_error.then(|| GlobalError::new(n, sp)),
-            atol: opts.atol,
-            rtol: opts.rtol,
+            tol: Tol {
+                atol: opts.atol,
+                rtol: opts.rtol,
+            },
             rates: (0..model.info().modes.len())
                 .map(|mode| {
                     (!model.info().has_running_cost && model.flow_is_constant(mode)).then(|| {
@@ -381,24 +385,9 @@ where
     /// `weighted_rms`: x, q (with a running cost) and, under sensitivity error control, S and
     /// q_θ with column j weighted by |θ_j|.
     #[inline]
-    fn error_norm(
-        &self,
-        e: &Self::Vector,
-        y0: &Self::Vector,
-        y1: &Self::Vector,
-        atol: f64,
-        rtol: f64,
-    ) -> f64 {
-        weighted_rms(
-            e,
-            y0,
-            y1,
-            atol,
-            rtol,
-            self.rhs.flow.has_rc,
-            self.sens_err,
-            self.rhs.flow.p,
-        )
+    fn error_norm(&self, e: &Self::Vector, y0: &Self::Vector, y1: &Self::Vector, tol: Tol) -> f64 {
+        let flow = &self.rhs.flow;
+        weighted_rms(e, y0, y1, tol, flow.has_rc, self.sens_err, flow.p)
     }
 
     fn nonfinite_part(&self, y: &Self::Vector) -> Option<&'static str> {
@@ -468,47 +457,36 @@ where
         lin.prepared = true;
     }
 
-    fn linearisation(&self) -> &Self::Linear {
-        &self.imp.lin
-    }
-
-    fn linearisation_mut(&mut self) -> &mut Self::Linear {
+    fn linearisation(&mut self) -> &mut Self::Linear {
         &mut self.imp.lin
     }
 
     /// K = hγ (I − hγ J)⁻¹ R by block forward substitution (see the module doc).
-    fn solve_stage(
-        &mut self,
-        t0: f64,
-        y0: &Self::Vector,
-        hg: f64,
-        r: &Self::Vector,
-        k: &mut Self::Vector,
-    ) -> bool {
+    fn solve_stage(&mut self, t0: f64, y0: &Self::Vector, hg: f64, k: &mut Self::Vector) -> bool {
         let Forward { rhs, imp: w, .. } = self;
         if w.lin.w.factorised_for().is_none() {
             return false;
         }
-        let ok_x = w.lin.w.solve_scaled(hg, &r.x, &mut k.x);
+        let ok_x = w.lin.w.solve_scaled(hg, &mut k.x);
         let lxk = w.lx0.dot(&k.x);
-        k.q = hg * (r.q + lxk);
+        k.q = hg * (k.q + lxk);
         if !rhs.sens {
             return ok_x;
         }
         // K_S = W⁻¹ hγ (R_S + B K_x), B K_x at (t0, x0, S0); D K_x likewise.
         let pt = rhs.flow.point(t0, &y0.x);
-        rhs.flow.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut k.s);
-        zero_rows(&mut k.s, &rhs.held);
-        k.s += &r.s;
+        rhs.flow.model.rhs_sens_dir_x(pt, &y0.s, &k.x, &mut w.bk.s);
+        zero_rows(&mut w.bk.s, &rhs.held);
+        k.s += &w.bk.s;
         if rhs.flow.has_rc {
             rhs.flow.model.running_cost_sens_dir_x(
                 &rhs.flow.sw,
                 At::new(t0, &y0.x, rhs.flow.p),
                 &y0.s,
                 &k.x,
-                &mut k.qp,
+                &mut w.bk.qp,
             );
-            k.qp += &r.qp;
+            k.qp += &w.bk.qp;
         }
         k.s *= hg;
         let ok_s = w.lin.w.solve_mut(&mut k.s);
@@ -524,14 +502,8 @@ where
     /// Rosenbrock Jacobian is gone by the time a step is carried (the step is carried once it
     /// is known where it ends: at the next step, at a truncation, or at the end of the run), so
     /// f_x and ℓ_x are evaluated here.
-    fn carry_global_error(
-        &mut self,
-        t0: f64,
-        y0: &Self::Vector,
-        f0: &Self::Vector,
-        h: f64,
-        le: &Self::Vector,
-    ) {
+    fn carry_global_error(&mut self, step: AcceptedStep<'_, Self::Vector>) {
+        let AcceptedStep { t0, h, y0, f0, le } = step;
         let Forward {
             rhs,
             imp,
@@ -550,7 +522,7 @@ where
         }
         // f_x and ℓ_x now hold the carried step's start, not the next step's.
         imp.lin.prepared = false;
-        let tols = (self.atol, self.rtol);
+        let tols = (self.tol.atol, self.tol.rtol);
         let autonomous = !model.rhs_depends_on_t(rhs.flow.mode);
         let pattern = &model.info().jacobian_sparsity[rhs.flow.mode];
         ge.carry(

@@ -77,7 +77,9 @@ pub(crate) use forward::zero_rows;
 pub use forward::Forward;
 pub use global_error::{EventRounding, GlobalError, JumpOf, ResetSecant, Saltation};
 pub use scheme::Scheme;
-pub use system::{ImplicitSystem, Linearised, OdeSystem, QuadratureSum, StageVector};
+pub use system::{
+    AcceptedStep, ImplicitSystem, Linearised, OdeSystem, QuadratureSum, StageVector, Tol,
+};
 
 use crate::error::SolveError;
 use crate::solution::{Method, Options, Stats};
@@ -98,8 +100,7 @@ const SEED_RATE_JUMP: f64 = 10.0;
 /// Times and step lengths are signed; t_prev → t is the last accepted step in either direction.
 pub struct Integrator<Sys: OdeSystem> {
     sys: Sys,
-    rtol: f64,
-    atol: f64,
+    tol: Tol,
     /// Budget of step attempts (accepted + rejected) over the integrator's life.
     max_steps: usize,
     requested: Method,
@@ -127,8 +128,6 @@ pub struct Integrator<Sys: OdeSystem> {
     tmp: Sys::Vector,
     /// Local error estimate.
     yerr: Sys::Vector,
-    /// Rosenbrock stage right-hand side R.
-    r: Sys::Vector,
     /// Stage derivatives k_i (and for Verner, the interpolation stages).
     k: Vec<Sys::Vector>,
     /// Signed length of the last accepted step while it is not closed: the system's global
@@ -173,8 +172,10 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let scheme = Scheme::initial(opts.method);
         let zero = || sys.zeros();
         let mut it = Integrator {
-            rtol: opts.rtol,
-            atol: opts.atol,
+            tol: Tol {
+                atol: opts.atol,
+                rtol: opts.rtol,
+            },
             max_steps: opts.max_steps,
             requested: opts.method,
             scheme,
@@ -191,7 +192,6 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
             ynew: zero(),
             tmp: zero(),
             yerr: zero(),
-            r: zero(),
             k: (0..slots).map(|_| zero()).collect(),
             k0_valid: false,
             seed_rate: None,
@@ -246,7 +246,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.y_prev.copy_from(y);
         self.fsal_slot = None;
         self.dense_pending = false;
-        self.sys.linearisation_mut().invalidate();
+        self.sys.linearisation().invalidate();
     }
 
     /// The restart after a jump inside a segment of exact steps that leaves F as it was (the
@@ -503,7 +503,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         // F is constant: k[0] stays the next step's first stage.
         self.k0_valid = false;
         self.fsal_slot = Some(0);
-        self.sys.linearisation_mut().invalidate();
+        self.sys.linearisation().invalidate();
         self.dense_pending = false;
         self.stats.rhs_evals = self.sys.evals();
         // Pending like any accepted step when the system keeps a quadrature outside its
@@ -561,8 +561,13 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         if let Some(h) = self.carry_pending.take() {
             let exact = self.dense_scheme == Scheme::Exact;
             if !exact {
-                self.sys
-                    .carry_global_error(self.t_prev, &self.y_prev, &self.k[0], h, &self.yerr);
+                self.sys.carry_global_error(AcceptedStep {
+                    t0: self.t_prev,
+                    h,
+                    y0: &self.y_prev,
+                    f0: &self.k[0],
+                    le: &self.yerr,
+                });
             }
             if self.sys.has_quadrature() {
                 let error = self.sys.estimates_quadrature_error() && !exact;
@@ -658,7 +663,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         }
         self.form_quadrature(quadrature::QuadratureOf::Attempt(h), true);
         self.quadrature_formed = true;
-        let eq = self.sys.quadrature_error_norm(self.atol, self.rtol);
+        let eq = self.sys.quadrature_error_norm(self.tol);
         // A non-finite ΔQ or error makes the attempt non-finite (`f64::max` would drop it).
         if eq.is_nan() {
             f64::NAN
@@ -687,7 +692,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         self.stats.steps += 1;
         self.k0_valid = false;
         self.fsal_slot = self.scheme.info().3;
-        self.sys.linearisation_mut().invalidate();
+        self.sys.linearisation().invalidate();
         self.dense_pending = false;
         if self.scheme == Scheme::Verner9 {
             self.accepted_interp_stages(&VERNER9, h);
@@ -699,7 +704,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     #[inline]
     fn error_norm(&self) -> f64 {
         self.sys
-            .error_norm(&self.yerr, &self.y, &self.ynew, self.atol, self.rtol)
+            .error_norm(&self.yerr, &self.y, &self.ynew, self.tol)
     }
 }
 

@@ -216,15 +216,14 @@ where
         self.wlu.solve_upper_triangular_mut(b)
     }
 
-    /// k := hγ W⁻¹ r, the stage solve of a block that W alone governs; false (k untouched)
-    /// without factors.
-    pub fn solve_scaled(&self, hg: f64, r: &OVector<f64, N>, k: &mut OVector<f64, N>) -> bool {
+    /// rk := hγ W⁻¹ rk in place (R in, K out), the stage solve of a block that W alone
+    /// governs; false (rk untouched) without factors.
+    pub fn solve_scaled(&self, hg: f64, rk: &mut OVector<f64, N>) -> bool {
         if !self.lu_ok {
             return false;
         }
-        k.copy_from(r);
-        *k *= hg;
-        self.solve_mut(k)
+        *rk *= hg;
+        self.solve_mut(rk)
     }
 
     /// ρ(f_x) ≈ (‖J⁸v‖/‖v‖)^(1/8) from a fixed start vector (geometric mean of the growth
@@ -434,7 +433,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let hg = h * GAMMA;
         if self.sys.linearisation().factorised_for() != Some(hg) {
             self.stats.factorizations += 1;
-            if !self.sys.linearisation_mut().factorise(hg) {
+            if !self.sys.linearisation().factorise(hg) {
                 return f64::NAN;
             }
         }
@@ -458,23 +457,24 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// + h d_s F_t, then K_s = hγ (I − hγ J)⁻¹ R.
     fn rosenbrock_stage(&mut self, s: usize, h: f64, hg: f64, all: bool) -> bool {
         let t0 = self.t;
+        // R is formed in k[1 + s] and solved for K_s in place.
+        let (done, tail) = self.k.split_at_mut(1 + s);
+        let rk = &mut tail[0];
         if s == 0 {
-            self.r.copy_from(&self.k[0]);
+            rk.copy_from(&done[0]);
         } else {
             let reads = self.sys.reads_secondary();
             self.tmp
-                .combine_argument(&self.y, 1.0, &A[s][..s], &self.k[1..=s], reads);
-            self.sys.eval(t0 + C[s] * h, &self.tmp, &mut self.r);
-            for (c, kj) in CC[s][..s].iter().zip(&self.k[1..=s]) {
-                self.r.axpy(c / h, kj, all);
+                .combine_argument(&self.y, 1.0, &A[s][..s], &done[1..=s], reads);
+            self.sys.eval(t0 + C[s] * h, &self.tmp, rk);
+            for (c, kj) in CC[s][..s].iter().zip(&done[1..=s]) {
+                rk.axpy(c / h, kj, all);
             }
         }
         if D[s] != 0.0 {
-            self.r
-                .axpy(h * D[s], self.sys.linearisation().time_derivative(), all);
+            rk.axpy(h * D[s], self.sys.linearisation().time_derivative(), all);
         }
-        let tail = &mut self.k[1 + s..];
-        self.sys.solve_stage(t0, &self.y, hg, &self.r, &mut tail[0])
+        self.sys.solve_stage(t0, &self.y, hg, rk)
     }
 }
 

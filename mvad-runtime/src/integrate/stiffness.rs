@@ -109,7 +109,7 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
         let Some(slot) = self.fsal_slot else {
             return f64::INFINITY;
         };
-        let floor = (self.atol / self.rtol).max(f64::MIN_POSITIVE);
+        let floor = (self.tol.atol / self.tol.rtol).max(f64::MIN_POSITIVE);
         self.k[slot]
             .primary()
             .iter()

@@ -162,6 +162,33 @@ pub enum QuadratureSum {
     Error,
 }
 
+/// The tolerances of a run's local error control: an entry e_i of an error, with magnitude
+/// y_i and weight w_i, counts as w_i e_i / (atol + rtol·w_i·|y_i|).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tol {
+    /// Absolute tolerance.
+    pub atol: f64,
+    /// Relative tolerance.
+    pub rtol: f64,
+}
+
+/// An accepted step as a global error estimate carries it: from (t₀, Y₀) over the signed
+/// length h (as it stands after any truncation), with F(t₀, Y₀) = `f0` and the step's local
+/// error estimate `le` (see `global_error.rs`).
+#[derive(Clone, Copy, Debug)]
+pub struct AcceptedStep<'a, V> {
+    /// t₀.
+    pub t0: f64,
+    /// The signed step length h.
+    pub h: f64,
+    /// Y₀.
+    pub y0: &'a V,
+    /// F(t₀, Y₀).
+    pub f0: &'a V,
+    /// The local error estimate.
+    pub le: &'a V,
+}
+
 /// A system Ẏ = F(t, Y) the explicit methods can integrate, in either time direction.
 pub trait OdeSystem {
     /// The integrated vector Y.
@@ -217,7 +244,7 @@ pub trait OdeSystem {
     fn quadrature_add(&mut self, _t: f64, _y: &Self::Vector, _a: f64, _e: f64) {}
     /// The weighted RMS norm of [`QuadratureSum::Error`] against Q at both ends of the step,
     /// Q and Q + ΔQ (for [`OdeSystem::controls_quadrature`]).
-    fn quadrature_error_norm(&self, _atol: f64, _rtol: f64) -> f64 {
+    fn quadrature_error_norm(&self, _tol: Tol) -> f64 {
         0.0
     }
     /// Closes the step: Q += ΔQ, and with `error` the error estimate goes to the system's
@@ -227,14 +254,7 @@ pub trait OdeSystem {
     /// sqrt(1/N Σ_i (w_i e_i / (atol + rtol·w_i·max(|y0_i|, |y1_i|)))²) over the controlled
     /// entries with the system's weights w_i. Also the norm of Hairer's initial-step heuristic
     /// (with y0 = y1).
-    fn error_norm(
-        &self,
-        e: &Self::Vector,
-        y0: &Self::Vector,
-        y1: &Self::Vector,
-        atol: f64,
-        rtol: f64,
-    ) -> f64;
+    fn error_norm(&self, e: &Self::Vector, y0: &Self::Vector, y1: &Self::Vector, tol: Tol) -> f64;
     /// Names the first integrated part of `y` holding a NaN or infinity.
     fn nonfinite_part(&self, y: &Self::Vector) -> Option<&'static str>;
     /// Names the flow being integrated (for errors: "flow of mode `m`").
@@ -253,33 +273,16 @@ pub trait ImplicitSystem: OdeSystem {
     /// difference steps in t); afterwards [`Linearised::prepared`] holds until
     /// [`Linearised::invalidate`].
     fn prepare(&mut self, t0: f64, y0: &Self::Vector, h: f64);
-    /// The linearisation at the step start.
-    fn linearisation(&self) -> &Self::Linear;
-    /// The linearisation at the step start, mutably (to factorise W or forget it).
-    fn linearisation_mut(&mut self) -> &mut Self::Linear;
-    /// Solves the stage equation (I/(hγ) − J) K = R at the step start, i.e.
-    /// K = hγ (I − hγ J)⁻¹ R; false when the factors are missing or a solve failed.
-    fn solve_stage(
-        &mut self,
-        t0: f64,
-        y0: &Self::Vector,
-        hg: f64,
-        r: &Self::Vector,
-        k: &mut Self::Vector,
-    ) -> bool;
-    /// Carries the system's global error estimate, if it keeps one, over the accepted step
-    /// from (t₀, Y₀) of signed length h (the step as it stands after any truncation), with
-    /// F(t₀, Y₀) = `f0` and the step's local error estimate `le` (see `global_error.rs`).
+    /// The linearisation at the step start, which the system owns: the stepper reads it,
+    /// factorises W in it or forgets it.
+    fn linearisation(&mut self) -> &mut Self::Linear;
+    /// Solves the stage equation (I/(hγ) − J) K = R at the step start (t₀, Y₀) in place:
+    /// `rk` holds R and becomes K = hγ (I − hγ J)⁻¹ R; false when the factors are missing or
+    /// a solve failed.
+    fn solve_stage(&mut self, t0: f64, y0: &Self::Vector, hg: f64, rk: &mut Self::Vector) -> bool;
+    /// Carries the system's global error estimate, if it keeps one, over the accepted `step`.
     /// Does nothing by default.
-    fn carry_global_error(
-        &mut self,
-        _t0: f64,
-        _y0: &Self::Vector,
-        _f0: &Self::Vector,
-        _h: f64,
-        _le: &Self::Vector,
-    ) {
-    }
+    fn carry_global_error(&mut self, _step: AcceptedStep<'_, Self::Vector>) {}
     /// `sum` += a·(∂G/∂Y)·v at the step start t0 (the quadrature's block of J, for the
     /// Rosenbrock update of Q or its error; see `quadrature.rs`).
     fn quadrature_jac_add(&mut self, _t0: f64, _v: &Self::Vector, _a: f64, _sum: QuadratureSum) {}

@@ -109,10 +109,7 @@ impl SpdFactor {
         &self,
         b: &mut Matrix<f64, Dyn, C, S>,
     ) {
-        debug_assert!(self.valid);
-        if let Some(ch) = &self.chol {
-            ch.l_dirty().solve_lower_triangular_unchecked_mut(b);
-        }
+        self.with_lower(|l| l.solve_lower_triangular_unchecked_mut(b));
     }
 
     /// B := L⁻ᵀ B (back substitution with the factor's transpose).
@@ -120,9 +117,14 @@ impl SpdFactor {
         &self,
         b: &mut Matrix<f64, Dyn, C, S>,
     ) {
+        self.with_lower(|l| l.tr_solve_lower_triangular_unchecked_mut(b));
+    }
+
+    /// Runs `solve` on the lower factor L (M = LLᵀ) of the last successful factorisation.
+    fn with_lower(&self, solve: impl FnOnce(&DMatrix<f64>)) {
         debug_assert!(self.valid);
         if let Some(ch) = &self.chol {
-            ch.l_dirty().tr_solve_lower_triangular_unchecked_mut(b);
+            solve(ch.l_dirty());
         }
     }
 }

@@ -10,8 +10,8 @@ pub mod check;
 pub mod models;
 
 use mvad_runtime::model::{
-    At, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens, Occurrence,
-    Switches,
+    At, AtOf, HybridModel, ModelAdjoint, ModelDims, ModelInfo, ModelSecondOrder, ModelSens,
+    Occurrence, Switches,
 };
 use nalgebra::{DVector, Dyn, OMatrix, OVector};
 use std::ops::{Add, Div, Mul, Neg, Sub};
@@ -371,26 +371,19 @@ impl<T: Spec> HybridModel for AdModel<T> {
     fn rhs_depends_on_t(&self, _mode: usize) -> bool {
         true
     }
-    fn guard(&self, k: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn guard(&self, k: usize, at: AtOf<'_, Self>) -> f64 {
         on_slices(at, |t, x, p| self.spec.guard(k, t, x, p))
     }
-    fn guard_grad(&self, k: usize, at: At<'_, Self::N, Self::P>, gx: &mut V, gp: &mut V) -> f64 {
+    fn guard_grad(&self, k: usize, at: AtOf<'_, Self>, gx: &mut V, gp: &mut V) -> f64 {
         self.scalar_grad(at, gx, gp, |t, x, p| self.spec.guard(k, t, x, p))
             .1
     }
-    fn reset(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>, xp: &mut V) {
+    fn reset(&self, occ: Occurrence, at: AtOf<'_, Self>, xp: &mut V) {
         on_slices(at, |t, x, p| {
             self.spec.reset(occ.event, t, x, p, xp.as_mut_slice())
         });
     }
-    fn reset_jac(
-        &self,
-        occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
-        rx: &mut Mx,
-        rp: &mut Mx,
-        rt: &mut V,
-    ) {
+    fn reset_jac(&self, occ: Occurrence, at: AtOf<'_, Self>, rx: &mut Mx, rp: &mut Mx, rt: &mut V) {
         let (td, xd, pd) = self.seed(at);
         let mut r = vec![D::c(0.0); self.n()];
         self.spec.reset(occ.event, td, &xd, &pd, &mut r);
@@ -400,23 +393,17 @@ impl<T: Spec> HybridModel for AdModel<T> {
         partials(&r, 1, rx);
         partials(&r, 1 + self.n(), rp);
     }
-    fn switch_value(&self, j: usize, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn switch_value(&self, j: usize, at: AtOf<'_, Self>) -> f64 {
         on_slices(at, |t, x, p| self.spec.switch(j, t, x, p))
     }
-    fn switch_grad(&self, j: usize, at: At<'_, Self::N, Self::P>, gx: &mut V, gp: &mut V) -> f64 {
+    fn switch_grad(&self, j: usize, at: AtOf<'_, Self>, gx: &mut V, gp: &mut V) -> f64 {
         self.scalar_grad(at, gx, gp, |t, x, p| self.spec.switch(j, t, x, p))
             .1
     }
-    fn observe(&self, _sw: &Switches, at: At<'_, Self::N, Self::P>, y: &mut [f64]) {
+    fn observe(&self, _sw: &Switches, at: AtOf<'_, Self>, y: &mut [f64]) {
         on_slices(at, |t, x, p| self.spec.observe(t, x, p, y));
     }
-    fn observe_jac(
-        &self,
-        _sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
-        yx: &mut [f64],
-        yp: &mut [f64],
-    ) {
+    fn observe_jac(&self, _sw: &Switches, at: AtOf<'_, Self>, yx: &mut [f64], yp: &mut [f64]) {
         let (td, xd, pd) = self.seed(at);
         let no = self.info.observables.len();
         let mut y = vec![D::c(0.0); no];
@@ -427,13 +414,13 @@ impl<T: Spec> HybridModel for AdModel<T> {
             yp[i * np..(i + 1) * np].copy_from_slice(&y[i].g[1 + n..1 + n + np]);
         }
     }
-    fn running_cost(&self, sw: &Switches, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn running_cost(&self, sw: &Switches, at: AtOf<'_, Self>) -> f64 {
         on_slices(at, |t, x, p| self.spec.running(sw.low_word(), t, x, p))
     }
     fn running_cost_value_grad(
         &self,
         sw: &Switches,
-        at: At<'_, Self::N, Self::P>,
+        at: AtOf<'_, Self>,
         lx: &mut V,
         lp: &mut V,
     ) -> f64 {
@@ -442,25 +429,19 @@ impl<T: Spec> HybridModel for AdModel<T> {
         })
         .0
     }
-    fn event_cost(&self, occ: Occurrence, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn event_cost(&self, occ: Occurrence, at: AtOf<'_, Self>) -> f64 {
         on_slices(at, |t, x, p| self.spec.event_cost(occ.event, t, x, p))
     }
-    fn event_cost_grad(
-        &self,
-        occ: Occurrence,
-        at: At<'_, Self::N, Self::P>,
-        cx: &mut V,
-        cp: &mut V,
-    ) -> f64 {
+    fn event_cost_grad(&self, occ: Occurrence, at: AtOf<'_, Self>, cx: &mut V, cp: &mut V) -> f64 {
         self.scalar_grad(at, cx, cp, |t, x, p| {
             self.spec.event_cost(occ.event, t, x, p)
         })
         .1
     }
-    fn final_cost(&self, at: At<'_, Self::N, Self::P>) -> f64 {
+    fn final_cost(&self, at: AtOf<'_, Self>) -> f64 {
         on_slices(at, |t, x, p| self.spec.final_cost(t, x, p))
     }
-    fn final_cost_grad(&self, at: At<'_, Self::N, Self::P>, cx: &mut V, cp: &mut V) -> f64 {
+    fn final_cost_grad(&self, at: AtOf<'_, Self>, cx: &mut V, cp: &mut V) -> f64 {
         self.scalar_grad(at, cx, cp, |t, x, p| self.spec.final_cost(t, x, p))
             .1
     }

@@ -16,7 +16,8 @@ use mvad_runtime::model::differences;
 use mvad_runtime::{At, ModelAdjoint, ModelSecondOrder, Occurrence, Point, Switches};
 use nalgebra::Dyn;
 
-use super::{at_pt, at_sw, pt0, pt_theta, InterpretedModel, ModeTapes, Scratch, TapeAt, M, X};
+use super::run::{at_pt, at_sw, pt0, pt_theta, TapeAt};
+use super::{InterpretedModel, ModeTapes, Scratch, M, X};
 
 /// The tapes of [`SecondOrderKernels`], with their entry tables.
 #[derive(Clone, Debug)]

@@ -9,7 +9,8 @@ use mvad_dsl::eval::Tape;
 use mvad_dsl::schedule::{ModelKernels, TimeKind};
 use mvad_runtime::Trigger;
 
-use super::{pt_theta, InterpretedModel, Scratch, TapeAt, X};
+use super::run::{pt_theta, TapeAt};
+use super::{InterpretedModel, Scratch, X};
 use crate::table::{bind_columns, Table, TableError, TableNeeds};
 
 /// τ (or the start of `every`), ∂τ/∂θ, and for `every` the period and its gradient.
