@@ -34,7 +34,8 @@ where
 {
     /// Carries the estimate through occurrence j of user event k at t. Expects what `apply_event` has computed
     /// up to the event's costs: x⁻ in `y.x`, x⁺ in `x_plus`, f⁻, f⁺, ∇g at x⁻ in `gx`, the old
-    /// bits in `sw` and the new in `sw_next`; `rate` = ∇g·f⁻ + ∂g/∂t and ℓ⁺ = `l_plus`.
+    /// bits in `sw` and the new in `sw_next`; `rate` = ∇g·f⁻ + ∂g/∂t and ℓ⁺ = `l_plus`;
+    /// `phi_t` = φ_t with φ_x in `cx` when `event_costs` evaluated them.
     pub(super) fn error_through_event(
         &mut self,
         k: usize,
@@ -42,6 +43,7 @@ where
         t: f64,
         rate: f64,
         l_plus: f64,
+        phi_t: Option<f64>,
     ) {
         let Some(zero) = self.estimate_at_jump() else {
             return;
@@ -56,9 +58,14 @@ where
             self.error_jump(Reset::Jacobians, None, (l_minus, l_plus), None, (t, kind));
             return;
         }
-        let phi_t = model.info().events[k].has_cost.then(|| {
-            model.event_cost_grad(occ, At::new(t, &self.x_plus, p), &mut self.cx, &mut self.cp)
-        });
+        // φ_t and φ_x as `event_costs` left them (with sensitivities and no qp, whose kinks
+        // may take the cost's columns again), else evaluated here.
+        let phi_t = match phi_t {
+            Some(phi_t) if model.qps().is_empty() => Some(phi_t),
+            _ => model.info().events[k].has_cost.then(|| {
+                model.event_cost_grad(occ, At::new(t, &self.x_plus, p), &mut self.cx, &mut self.cp)
+            }),
+        };
         let reset = if self.sens {
             // R_x and R_t as `event_reset` computed them for the sensitivities.
             Reset::Jacobians

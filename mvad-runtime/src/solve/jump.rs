@@ -71,9 +71,9 @@ where
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
         self.qp_kinks_before_costs(k, j, t);
-        let l_plus = self.event_costs(k, j, t, approach.still)?;
+        let (l_plus, phi_t) = self.event_costs(k, j, t, approach.still)?;
         self.qp_kinks_after_costs(k, j, t);
-        self.error_through_event(k, j, t, approach.rate, l_plus);
+        self.error_through_event(k, j, t, approach.rate, l_plus, phi_t);
         // Time events neither accumulate nor get stuck: their times are given.
         let zeno_stop = if timed {
             None
@@ -400,8 +400,15 @@ where
     /// derivative S⁺ + f⁺t' of the post-event state into `self.dtot`, and the event cost φ_k
     /// with dφ_k/dθ = φ_x (S⁺ + f⁺t') + φ_t t' + φ_θ; when the event is `still` (t' = 0,
     /// [`Approach::still`]) that is φ_x S⁺ + φ_θ and `self.dtot` is not written. Returns ℓ⁺
-    /// (0 without a running cost).
-    fn event_costs(&mut self, k: usize, j: usize, t: f64, still: bool) -> Result<f64, SolveError> {
+    /// (0 without a running cost) and, when φ_x, φ_θ and φ_t were evaluated (an event cost,
+    /// with sensitivities), φ_t, with φ_x left in `self.cx` for the error estimate.
+    fn event_costs(
+        &mut self,
+        k: usize,
+        j: usize,
+        t: f64,
+        still: bool,
+    ) -> Result<(f64, Option<f64>), SolveError> {
         let (model, p, sens) = (self.model, self.p, self.sens);
         let info = model.info();
         let mut l_plus = 0.0;
@@ -422,6 +429,7 @@ where
             sens::post_event_total(&self.s_plus, &self.f_plus, &self.dt, &mut self.dtot);
         }
         let ev = &info.events[k];
+        let mut phi_t_out = None;
         if ev.has_cost {
             let phi = model.event_cost(Occurrence::new(k, j), At::new(t, &self.x_plus, p));
             if !phi.is_finite() {
@@ -445,9 +453,10 @@ where
                 if !still {
                     self.g_ev.axpy(phi_t, &self.dt, 1.0);
                 }
+                phi_t_out = Some(phi_t);
             }
         }
-        Ok(l_plus)
+        Ok((l_plus, phi_t_out))
     }
 
     /// Hands the event to the sink, with the observables on both sides of the jump (nothing is

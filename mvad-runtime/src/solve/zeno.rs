@@ -230,6 +230,12 @@ where
             return None;
         }
         let t = |i: usize| self.times[(self.count - k + i) % k];
+        // The newest ratio first: one that is not below ZENO_MAX_RATIO (or a dwell that is
+        // not positive) decides alone, as it would at the end of the loop.
+        let (d0, d1) = (t(k - 2) - t(k - 3), t(k - 1) - t(k - 2));
+        if !(d0 > 0.0 && d1 > 0.0 && d1 / d0 < ZENO_MAX_RATIO) {
+            return None;
+        }
         let mut ratios = [0.0; ZENO_RATIOS];
         for (i, r) in ratios.iter_mut().enumerate() {
             let d0 = t(i + 1) - t(i);
