@@ -4,7 +4,7 @@
 use super::zeno::{Hold, ZENO_RATIOS};
 use super::Driver;
 use crate::adjoint::record::Tape;
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::integrate::zero_rows;
 use crate::model::{HybridModel, ModelAlloc, Point};
 use crate::reduce::{final_terms, FinalWork};
@@ -103,10 +103,13 @@ where
     pub(super) fn report_accumulation(&mut self, h: &Hold<M>, released_at: Option<f64>) {
         let info = self.model.info();
         let name = self.event_name(h.event);
-        let (t_star, ratio, n) = (h.t_star, h.ratio, h.events);
+        let (t_star, ratio, n) = (Time(h.t_star), h.ratio, h.events);
         let span = match released_at {
             None => "[t*, T]".to_string(),
-            Some(tau) => format!("[t*, {tau}], where an event moved them off and the run went on"),
+            Some(tau) => format!(
+                "[t*, {}], where an event moved them off and the run went on",
+                Time(tau)
+            ),
         };
         let held: Vec<String> = (0..h.constrained.len())
             .filter(|&i| h.constrained[i])
@@ -134,7 +137,7 @@ where
         };
         self.diagnostics.push(Diagnostic {
             kind: DiagnosticKind::Zeno,
-            t: t_star,
+            t: t_star.0,
             message,
         });
     }

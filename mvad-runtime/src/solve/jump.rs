@@ -4,7 +4,7 @@
 
 use super::Driver;
 use crate::adjoint::record::JumpKind;
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::integrate::zero_rows;
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::sens;
@@ -178,7 +178,8 @@ where
                 "time event `{}` fires at t = {t}, an end of the run, and its time moves with the \
                  params: on one side it falls {side} and does not fire, so C is not \
                  differentiable here and the gradient is the one-sided value with the event",
-                self.event_name(k)
+                self.event_name(k),
+                t = Time(t),
             ),
         });
     }

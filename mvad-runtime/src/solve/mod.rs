@@ -23,7 +23,8 @@
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
 //! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
-//! `record` the trajectory record; `finish` the end of the run; `watch` what each mode
+//! `record` the trajectory record; `finish` the end of the run; `validate` the checks of
+//! the parameters, options and model before a run; `watch` what each mode
 //! watches; `line` the exact segments whose watched guards are lines, taken to their first
 //! root in closed form instead of being stepped and scanned.
 //! Events leave the loop through an [`EventSink`] the caller chooses.
@@ -38,13 +39,14 @@ mod record;
 mod resolution;
 mod schedule;
 mod undecided;
+mod validate;
 mod watch;
 mod zeno;
 
 pub(crate) use conditioning::judge;
 
 use crate::adjoint::record::{Tape, MAX_COEFS};
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::event::{Crossing, Scanner, Watch};
 use crate::integrate::{zero_rows, AugState, Forward, Integrator, OdeSystem, Scheme};
 use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
@@ -55,6 +57,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 use record::Recorder;
 use schedule::Schedule;
 use std::time::Instant;
+use validate::validate;
 use watch::ModeWatch;
 use zeno::Zeno;
 
@@ -134,63 +137,6 @@ where
     qp::report(model, params, opts, &mut sol, qp_event_kink)?;
     sol.stats.wall_seconds = start.elapsed().as_secs_f64();
     Ok((sol, tape))
-}
-
-fn validate<M: HybridModel>(
-    model: &M,
-    params: &OVector<f64, M::P>,
-    opts: &Options,
-) -> Result<(), SolveError>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    let info = model.info();
-    let np = model.nparams().value();
-    if params.len() != np || info.params.len() != np {
-        return Err(SolveError::ParamCount {
-            expected: np,
-            got: params.len(),
-        });
-    }
-    if let Some((index, &value)) = params.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(SolveError::BadParam { index, value });
-    }
-    let bad = |what: &str| Err(SolveError::BadOption { what: what.into() });
-    if !(opts.rtol.is_finite() && opts.rtol > 0.0) {
-        return bad("rtol must be finite and positive");
-    }
-    if !(opts.atol.is_finite() && opts.atol >= 0.0) {
-        return bad("atol must be finite and non-negative");
-    }
-    if !(opts.grazing_tol.is_finite() && opts.grazing_tol >= 0.0) {
-        return bad("grazing tolerance must be finite and non-negative");
-    }
-    if !(opts.simultaneous_tol.is_finite() && opts.simultaneous_tol >= 0.0) {
-        return bad("simultaneous-event tolerance must be finite and non-negative");
-    }
-    if opts.max_steps == 0 {
-        return bad("max_steps must be positive");
-    }
-    let nmodes = info.modes.len();
-    let bad_model = |what: String| Err(SolveError::BadModel { what });
-    if nmodes == 0 || info.initial_mode >= nmodes {
-        return bad_model(format!(
-            "initial mode {} of {} modes",
-            info.initial_mode, nmodes
-        ));
-    }
-    if info.states.len() != model.nstates().value() {
-        return bad_model("state names and state dimension disagree".into());
-    }
-    for ev in &info.events {
-        if ev.target.is_some_and(|m| m >= nmodes) || ev.mode.is_some_and(|m| m >= nmodes) {
-            return bad_model(format!(
-                "event `{}` names a mode that does not exist",
-                ev.name
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// The `NonFinite` error at t; its text is built only when it happens (off the hot path).
@@ -791,7 +737,8 @@ where
             message: format!(
                 "switching function {j} (a kink of abs/min/max/sign/if) is exactly zero at t = {t} and \
                  moves with the params: C is not differentiable here, and the gradient is one of its \
-                 one-sided values"
+                 one-sided values",
+                t = Time(t),
             ),
         });
     }

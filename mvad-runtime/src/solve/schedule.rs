@@ -8,7 +8,7 @@
 //! t = 0, and occurrences that pass while their event is not armed, are skipped. A state
 //! event's j counts its earlier firings.
 
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::model::{HybridModel, ModelAlloc, Occurrence, Trigger};
 use nalgebra::{DefaultAllocator, OVector};
 
@@ -120,7 +120,8 @@ impl Schedule {
                         event: ev.name.clone(),
                         what: format!(
                             "with period {period:e} it would fire {count:.3e} times before the \
-                             horizon {t_end}, more than {limit} (max_periodic_occurrences)"
+                             horizon {t_end}, more than {limit} (max_periodic_occurrences)",
+                            t_end = Time(t_end),
                         ),
                     });
                 }
@@ -299,7 +300,9 @@ fn decreasing_times(name: &str, j: usize, before: f64, tau: f64) -> SolveError {
         event: name.to_string(),
         what: format!(
             "its times decrease at occurrence {j} (row {j} of its table for `at each`): \
-             {before} then {tau}"
+             {before} then {tau}",
+            before = Time(before),
+            tau = Time(tau),
         ),
     }
 }
@@ -308,7 +311,6 @@ fn decreasing_times(name: &str, j: usize, before: f64, tau: f64) -> SolveError {
 /// is read as the difference of the first two times, so a period below the resolution of t0
 /// (`every 1 from -1e20`: ulp 1.6e4) comes out 0 although the model's is not.
 fn bad_period(t0: f64, period: f64) -> String {
-    use crate::error::Time;
     if t0.is_finite() && period == 0.0 && t0 != 0.0 {
         return format!(
             "its first time {} and the next coincide in floating point: the period is below the \

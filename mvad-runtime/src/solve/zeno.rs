@@ -61,7 +61,7 @@
 //! whose term does not vanish at the limit) diverges: an error.
 
 use super::Driver;
-use crate::error::SolveError;
+use crate::error::{SolveError, Time};
 use crate::integrate::zero_rows;
 use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::reduce::{aitken_iterated_weights, CompensatedSum};
@@ -570,7 +570,8 @@ where
                         "cost: the events of `{}` accumulate at t* = {t_star} and the cost grows \
                          by about {last} at each of them, so its sum over their infinitely many \
                          occurrences diverges",
-                        self.event_name(k)
+                        self.event_name(k),
+                        t_star = Time(t_star),
                     ),
                 });
             }
