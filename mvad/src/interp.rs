@@ -3,8 +3,8 @@
 //!
 //! Each trait method runs one tape into a scratch register file kept in a `RefCell`, so
 //! no call allocates. Matrices are written entry by entry from the tape's non-zero
-//! outputs after one zero fill. [`ModelSens::rhs_sens`] is overridden with the fused
-//! kernel: f, the non-zero entries of f_x and f_θ in one pass, then
+//! outputs after one zero fill. [`ModelSens::rhs_sens`](mvad_runtime::ModelSens::rhs_sens)
+//! is overridden with the fused kernel: f, the non-zero entries of f_x and f_θ in one pass, then
 //! Ṡ = f_θ + Σ_{(i,k) ∈ nz(f_x)} (f_x)_{ik} S_{k·}, the same sums in the same order as the
 //! generated code. The capability products (`ModelAdjoint`, `ModelSecondOrder`) live in
 //! `interp/products.rs`.
