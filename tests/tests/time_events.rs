@@ -516,3 +516,61 @@ fn a_time_event_at_an_end_of_the_run_moving_with_the_params_is_a_kink() {
     let (ts, _) = kinks(&model("2", "tau"));
     assert!(ts.is_empty(), "{ts:?}");
 }
+
+/// `every 0.3 from 0.3` with T = 3: its tenth occurrence is 0.3 + 9·0.3 = 2.9999999999999996,
+/// one ulp before T (probe4 1, 2). The step that lands on it leaves a sliver of 4.4e-16 to T.
+/// Adjoint mode's sweep starts on that sliver, and it used to seed the next segment's first
+/// step with it: a step-size underflow. The seed is now ignored, so both modes give
+/// C = e^{−aT} k^{10} (for cost = final(x), and its integral for ∫x). The occurrence is at T
+/// within the resolution of t, so a larger period moves it past T: it is the `kink` of a time
+/// event at an end of the run, in both modes.
+#[test]
+fn a_sample_one_ulp_before_the_horizon_is_at_the_end() {
+    let (a, k, t_end) = (0.7_f64, 0.8_f64, 3.0_f64);
+    for (cost, want) in [
+        ("final(x)", (-a * t_end).exp() * k.powi(10)),
+        // ∫₀ᵀ x: on [0.3 j, 0.3 (j+1)) x = k^j e^{−a t}; the last piece, after the tenth
+        // sample, is one ulp long.
+        ("integral(x)", {
+            let mut sum = 0.0;
+            for j in 0..10 {
+                let (t0, t1) = (0.3 * j as f64, 0.3 * (j + 1) as f64);
+                sum += k.powi(j) * ((-a * t0).exp() - (-a * t1).exp()) / a;
+            }
+            sum
+        }),
+    ] {
+        let m = InterpretedModel::from_source(&format!(
+            "model Sliver {{
+                param a = {a}; param P = 0.3; param off = 0.3; param k = {k};
+                state x = 1.0;
+                flow {{ der(x) = -a*x; }}
+                event samp every P from off {{ x = k*x; }}
+                cost = {cost};
+                horizon {t_end};
+            }}"
+        ))
+        .expect("valid");
+        for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+            let opts = Options {
+                gradient_mode: mode,
+                ..tight()
+            };
+            let sol = solve_at(&m, &m.info().param_defaults, &opts).expect("runs");
+            assert_eq!(sol.stats.mode, mode);
+            assert_near(sol.cost, want, 1e-9, format!("C of {cost}, {mode:?}"));
+            let kinks: Vec<f64> = sol
+                .diagnostics
+                .iter()
+                .filter(|d| d.kind == mvad::runtime::solution::DiagnosticKind::Kink)
+                .map(|d| d.t)
+                .collect();
+            assert_eq!(
+                kinks,
+                vec![0.3 + 9.0 * 0.3],
+                "{cost}, {mode:?}: {:?}",
+                sol.diagnostics
+            );
+        }
+    }
+}

@@ -92,6 +92,10 @@ use verner::VERNER9;
 /// growth limit) the seed stands.
 const SEED_RATE_JUMP: f64 = 10.0;
 
+/// A seed of at most this many ulps of t is no seed ([`Integrator::set_step_size`]): 100, ten
+/// times the shortest step the controller takes before it reports an underflow.
+const SEED_FLOOR_ULPS: f64 = 100.0;
+
 /// An adaptive one-step integrator of the system `Sys` (see the module doc); for the forward
 /// augmented flow of a model, `Integrator<Forward<'_, M>>` built by [`Integrator::new`].
 ///
@@ -333,7 +337,11 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// Seeds the magnitude of the next step attempt, e.g. with the step size in use before an
     /// event (call it after a restart, which otherwise starts from Hairer's heuristic; the
     /// error control still rejects and shrinks a seed that is too large). A value that is not
-    /// finite and positive restores the heuristic.
+    /// finite and positive restores the heuristic, and so does one too short to be a step
+    /// here (at most `SEED_FLOOR_ULPS` ulps of t): the step before the jump was then a landing
+    /// cut short by its stop (a time event one ulp before an end, the adjoint's sweep starting
+    /// on the sliver between such an event and T), which says nothing of the flow's time scale
+    /// and would be refused as a step-size underflow.
     ///
     /// The seed belongs to the rate before the restart: when the rate after it, ‖F(t, y)‖ in
     /// the error norm's scaling, is more than `SEED_RATE_JUMP` times the rate at the start
@@ -346,7 +354,12 @@ impl<Sys: ImplicitSystem> Integrator<Sys> {
     /// 6e6 at rtol 1e-3 in adjoint mode). Without a step before it (a rate below 1e-5) the
     /// seed stands.
     pub fn set_step_size(&mut self, h: f64) {
-        self.h = if h.is_finite() && h > 0.0 { h } else { 0.0 };
+        let floor = SEED_FLOOR_ULPS * f64::EPSILON * self.t.abs();
+        self.h = if h.is_finite() && h > 0.0 && h > floor {
+            h
+        } else {
+            0.0
+        };
         // An exact segment takes no seed (and its k[0] is already the new F).
         let adaptive = self.h > 0.0 && self.scheme != Scheme::Exact;
         self.seed_rate = adaptive.then(|| self.scaled_norm(&self.k[0], &self.y));

@@ -2,7 +2,7 @@
 //! terms it moves, the Zeno and stuck-state checks, the event handed to the sink) and a
 //! switch crossing of a kink (identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t', ℓ jump).
 
-use super::Driver;
+use super::{time_resolution, Driver};
 use crate::adjoint::record::JumpKind;
 use crate::error::{SolveError, Time};
 use crate::integrate::zero_rows;
@@ -65,7 +65,10 @@ where
         let j = self.schedule.occurrence(k);
         let approach = self.event_approach(k, j, t)?;
         // (τ' is computed in a primal run too: adjoint mode reports it as forward mode does.)
-        if timed && (t == 0.0 || t == self.t_end) && self.moves_off_an_end(t) {
+        // At T means within the resolution of t: `every 0.3 from 0.3` with T = 3 has its last
+        // occurrence at 2.9999999999999996, which any larger period moves past T.
+        let at_an_end = t == 0.0 || self.t_end - t <= time_resolution(self.t_end);
+        if timed && at_an_end && self.moves_off_an_end(t) {
             self.report_time_event_at_an_end(k, t);
         }
         let mode_before = self.mode;
