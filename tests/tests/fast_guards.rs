@@ -169,3 +169,53 @@ fn a_tie_of_max_or_abs_at_the_start_is_reported_as_a_kink() {
         );
     });
 }
+
+/// A state event whose guard is exactly on zero at t = 0 fires there (the state is carried
+/// into the firing side); if the guard's value at t = 0 moves with θ, on one side the run
+/// starts past the guard and the event never fires, so C jumps (probe4 3: by 3 between
+/// x0 = c and x0 = c + 1 ulp). A `kink` diagnostic at t = 0 says so, in both modes (before, a
+/// clean bill); a guard on zero that does not move with θ is no kink.
+#[test]
+fn a_state_event_on_its_guard_at_the_start_is_a_kink_when_the_guard_moves() {
+    let model = |start: &str| {
+        InterpretedModel::from_source(&format!(
+            "model StartOnGuard {{
+                param a = 1.0; param c = 1.0; param x0 = 1.0;
+                state x = {start}; state y = 1;
+                flow {{ der(x) = a * (2 - x); der(y) = 0; }}
+                event s when x >= c {{ y = 2 * y; }}
+                cost = final(y) + integral(y) + integral(x);
+                horizon 2;
+            }}"
+        ))
+        .expect("valid")
+    };
+    // x(t) = 2 − (2 − x0) e^{−a t}; y = 2 from t = 0: C = 2 + 2·2 + ∫x = 6 + 4 − (1 − e^{−2}).
+    let want = 6.0 + 4.0 - (1.0 - (-2.0f64).exp());
+    for (start, kink) in [("x0", true), ("1.0", true), ("c", false)] {
+        let m = model(start);
+        for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+            let opts = Options {
+                gradient_mode: mode,
+                rtol: 1e-10,
+                atol: 1e-12,
+                ..Options::default()
+            };
+            let sol = mvad_tests::solve_at_defaults(&m, &opts);
+            assert_eq!(sol.events.len(), 1, "{start}");
+            assert!((sol.cost - want).abs() < 1e-8, "{start}: C = {}", sol.cost);
+            let kinks: Vec<f64> = sol
+                .diagnostics
+                .iter()
+                .filter(|d| d.kind == DiagnosticKind::Kink)
+                .map(|d| d.t)
+                .collect();
+            let expected = if kink { vec![0.0] } else { vec![] };
+            assert_eq!(
+                kinks, expected,
+                "x = {start}, {mode:?}: {:?}",
+                sol.diagnostics
+            );
+        }
+    }
+}

@@ -10,7 +10,7 @@ use crate::model::{At, HybridModel, ModelAlloc, Occurrence, Point};
 use crate::sens;
 use crate::sink::{EventSink, EventView};
 use crate::solution::{Diagnostic, DiagnosticKind};
-use nalgebra::DefaultAllocator;
+use nalgebra::{DefaultAllocator, OMatrix};
 
 /// Step attempts each scheduled occurrence (a table row, a sample of an `every` event, an `at`
 /// event) adds to `Options::max_steps`, which is there to stop an explicit method crawling
@@ -70,6 +70,9 @@ where
         let at_an_end = t == 0.0 || self.t_end - t <= time_resolution(self.t_end);
         if timed && at_an_end && self.moves_off_an_end(t) {
             self.report_time_event_at_an_end(k, t);
+        }
+        if !timed && t == 0.0 && self.guard_moves_at_start() {
+            self.report_state_event_at_start(k);
         }
         let mode_before = self.mode;
         self.event_reset(k, j, t, approach.flows)?;
@@ -152,6 +155,40 @@ where
         } else {
             self.dt.iter().zip(self.dt_end.iter()).any(|(a, b)| a != b)
         }
+    }
+
+    /// Whether the guard value g(0, x₀(θ), θ) of the state event just approached at t = 0
+    /// (its ∇g and ∂g/∂θ in `gx`, `gp`) moves with θ: ∇g·∂x₀/∂θ + ∂g/∂θ ≠ 0. Only an event
+    /// whose guard is exactly on zero at t = 0 fires there (see [`crate::event`]), so this runs
+    /// at most once per event and run, and may allocate.
+    #[cold]
+    #[inline(never)]
+    fn guard_moves_at_start(&self) -> bool {
+        let (model, p) = (self.model, self.p);
+        let mut dx0 = OMatrix::<f64, M::N, M::P>::zeros_generic(model.nstates(), model.nparams());
+        model.initial_state_jac(p, &mut dx0);
+        let rate = dx0.tr_mul(&self.gx) + &self.gp;
+        rate.iter().any(|&v| v != 0.0)
+    }
+
+    /// The `kink` diagnostic for state event k firing at t = 0 from a guard exactly on zero
+    /// whose value there moves with θ: on one side the run starts past the guard and the event
+    /// never fires (a guard is crossed, not found satisfied), so C jumps there and dC/dθ is
+    /// its one-sided value (the side on which the event fires).
+    #[cold]
+    #[inline(never)]
+    fn report_state_event_at_start(&mut self, k: usize) {
+        self.diagnostics.push(Diagnostic {
+            kind: DiagnosticKind::Kink,
+            t: 0.0,
+            message: format!(
+                "event `{}` fires at t = 0 from a guard exactly on zero, and the guard's value \
+                 there moves with the params: on one side the run starts past the guard and the \
+                 event does not fire, so C is not differentiable here and the gradient is the \
+                 one-sided value with the event",
+                self.event_name(k),
+            ),
+        });
     }
 
     /// The `kink` diagnostic for time event k firing at an end of the run (t = 0 or t = T)
