@@ -23,7 +23,7 @@
 //! scanned whole), and the step is scanned piece by piece on its dense output
 //! (nothing is integrated again, and the state is cut from the dense output only at a
 //! crossing, as always); each piece starts at twice the length of the last one that passed
-//! after a cut (one that passed uncut leaves that length as it is, or doubles it).
+//! (not of a sliver a step's end cut short).
 
 use super::{time_resolution, Driver};
 use crate::integrate::zero_rows;
@@ -36,6 +36,10 @@ const RESOLUTION: f64 = 0.1;
 
 /// Cuts a piece may take before it is scanned as it is (each cuts it to a quarter).
 const MAX_CUTS: usize = 40;
+
+/// A passing piece ended by its step's end and shorter than this many resolutions of t
+/// (2²⁰ · 16 ulp) is a sliver: it leaves the next piece's length as it was.
+const SLIVER: f64 = 1_048_576.0;
 
 /// Interior points of the check (at the quarters of the step).
 const POINTS: usize = 3;
@@ -132,11 +136,12 @@ where
         for _ in 0..MAX_CUTS {
             if self.resolved_on(t0, t1, t_step) {
                 self.resolution.end = t1;
-                // A piece that passed uncut does not shrink the next: it may be a sliver the
-                // step's end cut short (10⁻¹⁷ left of a step, whose successors would crawl on
-                // at twice that, each at the resolution of t).
+                // A sliver the step's end cut short (10⁻¹⁷ left of a step) does not set the
+                // next piece's length: its successors would crawl on at twice that, pieces of a
+                // few ulps of t that pass or fail by the rounding of t (a run that never ended).
                 let grown = 2.0 * (t1 - t0);
-                self.resolution.next = if t1 == whole {
+                let sliver = t1 == t_step && t1 - t0 < SLIVER * time_resolution(t1);
+                self.resolution.next = if sliver {
                     grown.max(self.resolution.next)
                 } else {
                     grown
