@@ -494,13 +494,7 @@ fn a_time_event_at_an_end_of_the_run_moving_with_the_params_is_a_kink() {
         for (a, f) in adj.gradient.iter().zip(&sol.gradient) {
             assert_near(*a, *f, 1e-9, "adjoint gradient");
         }
-        let ts: Vec<f64> = sol
-            .diagnostics
-            .iter()
-            .filter(|d| d.kind == mvad::runtime::solution::DiagnosticKind::Kink)
-            .map(|d| d.t)
-            .collect();
-        (ts, sol)
+        (kink_times(&sol), sol)
     };
     // At T = 2: C = (x0 + b) + x0 τ + (x0 + b)(T − τ) for τ ≤ T: 4 at τ = T, dC/dτ = −b from
     // the side where it fires (x0 + b + x0 T = 3 for τ > T).
@@ -559,18 +553,21 @@ fn a_sample_one_ulp_before_the_horizon_is_at_the_end() {
             let sol = solve_at(&m, &m.info().param_defaults, &opts).expect("runs");
             assert_eq!(sol.stats.mode, mode);
             assert_near(sol.cost, want, 1e-9, format!("C of {cost}, {mode:?}"));
-            let kinks: Vec<f64> = sol
-                .diagnostics
-                .iter()
-                .filter(|d| d.kind == mvad::runtime::solution::DiagnosticKind::Kink)
-                .map(|d| d.t)
-                .collect();
             assert_eq!(
-                kinks,
+                kink_times(&sol),
                 vec![0.3 + 9.0 * 0.3],
                 "{cost}, {mode:?}: {:?}",
                 sol.diagnostics
             );
         }
     }
+}
+
+/// The times of a run's `kink` diagnostics.
+fn kink_times(sol: &Solution) -> Vec<f64> {
+    sol.diagnostics
+        .iter()
+        .filter(|d| d.kind == mvad::runtime::solution::DiagnosticKind::Kink)
+        .map(|d| d.t)
+        .collect()
 }
