@@ -150,20 +150,9 @@ impl Table {
     /// same length and every value is a finite number.
     pub fn from_columns(name: &str, columns: Vec<(String, Vec<f64>)>) -> Result<Table, TableError> {
         for (i, (n, c)) in columns.iter().enumerate() {
-            if !is_identifier(n) {
-                return Err(TableError::unlocated(
-                    name,
-                    format!(
-                        "column name `{n}` is not an identifier (letters, digits and `_`, not \
-                         starting with a digit)"
-                    ),
-                ));
-            }
-            if columns[..i].iter().any(|(m, _)| m == n) {
-                return Err(TableError::unlocated(
-                    name,
-                    format!("column `{n}` appears twice"),
-                ));
+            let earlier = columns[..i].iter().map(|(m, _)| m.as_str());
+            if let Some(message) = column_name_error(n, earlier, "") {
+                return Err(TableError::unlocated(name, message));
             }
             if let Some((row, v)) = c.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(TableError::unlocated(
@@ -254,15 +243,8 @@ impl Table {
                 src.header = start;
                 for i in 0..record.len() {
                     let field = utf8_field(&src, &record, start, i)?;
-                    if !is_identifier(field) {
-                        let msg = format!(
-                            "column name `{field}` is not an identifier (letters, digits and `_`, \
-                             not starting with a digit)"
-                        );
-                        return Err(TableError::located(&src, At::Field(start, i), msg));
-                    }
-                    if names.iter().any(|n| n == field) {
-                        let msg = format!("column `{field}` appears twice in the header");
+                    let earlier = names.iter().map(String::as_str);
+                    if let Some(msg) = column_name_error(field, earlier, " in the header") {
                         return Err(TableError::located(&src, At::Field(start, i), msg));
                     }
                     names.push(field.to_string());
@@ -442,6 +424,26 @@ pub fn bind_columns(
         }
     }
     Ok((columns, tables.iter().map(|t| t.rows()).collect()))
+}
+
+/// Why `name` cannot be a column after the columns `earlier` (a CSV header's fields, or the
+/// columns given in memory; `among` ends the second message: " in the header"): not an
+/// identifier, or a name given twice.
+fn column_name_error<'a>(
+    name: &str,
+    mut earlier: impl Iterator<Item = &'a str>,
+    among: &str,
+) -> Option<String> {
+    if !is_identifier(name) {
+        Some(format!(
+            "column name `{name}` is not an identifier (letters, digits and `_`, not starting \
+             with a digit)"
+        ))
+    } else if earlier.any(|n| n == name) {
+        Some(format!("column `{name}` appears twice{among}"))
+    } else {
+        None
+    }
 }
 
 /// Whether `s` is a column name: a letter or `_`, then letters, digits and `_`.
