@@ -372,7 +372,8 @@ impl Layer {
 
     /// After a pointwise solve at a point: σᵢ and its gradient (∂/∂x, ∂/∂θ, ∂/∂t in
     /// `grad`) on the piece constraint i is on — the set of the active and weakly active
-    /// constraints frozen, and σᵢ = μᵢ if i is in it, sᵢ otherwise. `fill` writes the data
+    /// constraints frozen, and σᵢ = μᵢ if i is in it, sᵢ otherwise; a weakly active i is in
+    /// it when σᵢ ≥ 0. `fill` writes the data
     /// and their Jacobian. Leaves the solver frozen: the cache is dropped.
     pub(super) fn switch_grad(
         &mut self,
@@ -381,10 +382,19 @@ impl Layer {
         grad: &mut [f64],
     ) -> Result<f64, QpError> {
         let value = self.switch_value(i);
-        let held = self.solver.status()[i] != ConstraintStatus::Inactive;
+        // A weakly active constraint is on the piece its σᵢ's sign says: μᵢ's when σᵢ ≥ 0,
+        // sᵢ's when σᵢ < 0 (a slack of −10⁻¹³ within the tolerance), so that the rate
+        // agrees with the value it belongs to (μᵢ's rate is the Hessian's scale times sᵢ's:
+        // the other piece's would be off by that factor wherever σᵢ is not zero).
+        let held = match self.solver.status()[i] {
+            ConstraintStatus::Active => true,
+            ConstraintStatus::Inactive => false,
+            ConstraintStatus::WeaklyActive => value >= 0.0,
+        };
         for (bit, s) in self.bits.iter_mut().zip(self.solver.status()) {
             *bit = *s != ConstraintStatus::Inactive;
         }
+        self.bits[i] = held;
         self.key.valid = false;
         fill(&mut self.flat, Some(&mut self.jac[..]));
         self.solve(true)?;

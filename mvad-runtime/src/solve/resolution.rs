@@ -14,16 +14,20 @@
 //!   max_i |v(t_i) − H(t_i)| ≤ RESOLUTION · (max v − min v) + 64 ε max |v|
 //! ```
 //!
-//! (max and min over the ends and the interior points). For a smooth v the defect is
+//! (max and min over the ends and the interior points), unless it keeps off zero so plainly
+//! that its defect is rounding ([`keeps_off_zero`]: all its samples the same double while its
+//! rates cannot reach zero on the piece, or, on the piece first asked about, more than [`FAR`]
+//! times its range, defect and rates' swing from zero: a qp's slack computed from large terms
+//! has rounding far above 64 ε |v|). For a smooth v the defect is
 //! O(h⁴ v⁗), far below the range of its values over the step; for a v that oscillates within
 //! the step the end slopes, which are of the order of h⁻¹ times the range for each oscillation,
 //! drive H far outside the range of the samples (aliasing can make the samples look smooth,
 //! the slopes cannot). A piece of the step that fails is cut to a quarter until it passes or
-//! reaches the resolution of t (a piece no cut resolves is rounding, not an oscillation, and is
-//! scanned whole), and the step is scanned piece by piece on its dense output
+//! reaches the resolution of t (a piece no cut resolves is rounding or a kink, not an
+//! oscillation, and is scanned whole), and the step is scanned piece by piece on its dense output
 //! (nothing is integrated again, and the state is cut from the dense output only at a
-//! crossing, as always); each piece starts at twice the length of the last one that passed
-//! (not of a sliver a step's end cut short).
+//! crossing, as always); each piece starts at twice the length of the last one taken (not of a
+//! sliver a step's end cut short).
 
 use super::{time_resolution, Driver};
 use crate::integrate::zero_rows;
@@ -33,6 +37,10 @@ use nalgebra::DefaultAllocator;
 /// The largest Hermite defect, relative to the range of the values over the step, a resolved
 /// watched function may show.
 const RESOLUTION: f64 = 0.1;
+
+/// How far from zero, in multiples of all it varies by on a piece, a watched function is
+/// resolved whatever its Hermite defect ([`keeps_off_zero`]).
+const FAR: f64 = 1024.0;
 
 /// Cuts a piece may take before it is scanned as it is (each cuts it to a quarter).
 const MAX_CUTS: usize = 40;
@@ -48,7 +56,7 @@ const POINTS: usize = 3;
 /// function.
 #[derive(Clone, Debug)]
 pub(super) struct Resolution {
-    /// Twice the last piece that passed (∞ until one was cut).
+    /// Twice the last piece taken (∞ until one was cut).
     next: f64,
     /// v and v̇ of each function at the start of the piece being checked.
     v0: Vec<f64>,
@@ -76,10 +84,54 @@ impl Resolution {
         }
     }
 
+    /// Sets the next piece's length to twice that of [t0, t1], the piece just taken, unless
+    /// it is a sliver: a piece the step's end (`t_step`) cut short to under [`SLIVER`]
+    /// resolutions of t (10⁻¹⁷ left of a step) does not shorten the next piece, whose
+    /// successors would crawl on at twice that, pieces of a few ulps of t that pass or fail
+    /// by the rounding of t (a run that never ended).
+    fn grow(&mut self, t0: f64, t1: f64, t_step: f64) {
+        let grown = 2.0 * (t1 - t0);
+        let sliver = t1 == t_step && t1 - t0 < SLIVER * time_resolution(t1);
+        self.next = if sliver { grown.max(self.next) } else { grown };
+    }
+
     /// Forgets the values at the end of the last piece (the state, mode or bits changed).
     pub(super) fn forget(&mut self) {
         self.end = f64::NAN;
     }
+}
+
+/// Whether a function whose samples on the `whole` piece the check is first asked about
+/// (not one of its cuts) lie in [lo, hi], with Hermite `defect` and end rates that swing it
+/// by `swing` = h (|v̇₀| + |v̇₁|) over the piece, keeps to one side of zero by more than
+/// [`FAR`] times all of these together. Such a function crosses nothing on the piece (a
+/// crossing would need a swing that neither the values nor the rates show), and what fails
+/// the check there is its rounding, which comes from the terms it is computed from and can be
+/// far above 64 ε |v| (a qp's slack of 2 computed from terms of order k x = 170): cutting
+/// would only crawl. Not on a cut: there a value at the rounding of zero (10⁻¹⁶) is far from
+/// zero by the measure of a piece of 10⁻²⁰.
+fn keeps_off_zero(lo: f64, hi: f64, defect: f64, swing: f64, whole: bool) -> bool {
+    let gap = if lo > 0.0 {
+        lo
+    } else if hi < 0.0 {
+        -hi
+    } else {
+        return false;
+    };
+    whole && gap > FAR * ((hi - lo) + defect + swing)
+}
+
+/// What the check of one piece found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Check {
+    /// Every function resolved.
+    Resolved,
+    /// Some function is not: cut the piece.
+    Unresolved,
+    /// Some function is not, and stands still on the piece (every sample the same double)
+    /// while its rates move it: the piece is below the rounding of its values, and no shorter
+    /// cut can resolve it either.
+    Still,
 }
 
 /// The cubic Hermite interpolant with values v₀, v₁ and slopes s₀, s₁ on a step of length h,
@@ -133,20 +185,15 @@ where
         let whole = t_step.min(t0 + self.resolution.next);
         let mut t1 = whole;
         self.resolution.end = f64::NAN;
-        for _ in 0..MAX_CUTS {
-            if self.resolved_on(t0, t1, t_step) {
-                self.resolution.end = t1;
-                // A sliver the step's end cut short (10⁻¹⁷ left of a step) does not set the
-                // next piece's length: its successors would crawl on at twice that, pieces of a
-                // few ulps of t that pass or fail by the rounding of t (a run that never ended).
-                let grown = 2.0 * (t1 - t0);
-                let sliver = t1 == t_step && t1 - t0 < SLIVER * time_resolution(t1);
-                self.resolution.next = if sliver {
-                    grown.max(self.resolution.next)
-                } else {
-                    grown
-                };
-                return t1;
+        for cut in 0..MAX_CUTS {
+            match self.resolved_on(t0, t1, t_step, cut == 0) {
+                Check::Resolved => {
+                    self.resolution.end = t1;
+                    self.resolution.grow(t0, t1, t_step);
+                    return t1;
+                }
+                Check::Still => break,
+                Check::Unresolved => {}
             }
             let cut = t0 + 0.25 * (t1 - t0);
             if cut - t0 <= 4.0 * time_resolution(t0) {
@@ -154,18 +201,24 @@ where
             }
             t1 = cut;
         }
-        // No cut resolved it: what still fails a 4⁻⁴⁰ part of the piece, or one at the
-        // resolution of t, is the rounding of v (a qp's switch value that is zero at a weakly
-        // active start and computed from terms of order 1), not an oscillation between the
-        // samples. The piece is scanned whole and the next keeps its length: carrying the cut
-        // on would crawl on, each piece 4⁻⁴⁰ of the last or, from t = 0, at the resolution of
-        // t, which is absolute there (a run that never ended).
+        // No cut resolved it: what still fails on a piece too short for its values to move
+        // (a value at the rounding of zero, 10⁻¹⁶ from terms of order 1), a 4⁻⁴⁰ part of the
+        // piece or one at the resolution of t is the rounding of v or a kink of v, not an
+        // oscillation between the samples. The piece is scanned whole and the next grows from
+        // it as from one that passed. Carrying the cut on would crawl, each piece 4⁻⁴⁰ of the
+        // last or, from t = 0, at the resolution of t, which is absolute there; a cut that
+        // passes only at 10⁻²⁹, where 64 ε |v| of such a value exceeds its rates' swing,
+        // would set pieces that crawl at that scale (a run of minutes); and keeping the next
+        // piece's length would crawl at it for as long as the rounding lasts.
+        self.resolution.grow(t0, whole, t_step);
         whole
     }
 
     /// Whether every unresolved-class watched function passes the Hermite check on [t0, t1]
-    /// (its values and rates at t0 in `v0`, `s0`; those at t1 are left in `v1`, `s1`).
-    fn resolved_on(&mut self, t0: f64, t1: f64, t_step: f64) -> bool {
+    /// (its values and rates at t0 in `v0`, `s0`; those at t1 are left in `v1`, `s1`) or, on
+    /// the `whole` piece (not one of its cuts), [`keeps_off_zero`]; and, if one does not,
+    /// whether it stands still there ([`Check::Still`]).
+    fn resolved_on(&mut self, t0: f64, t1: f64, t_step: f64, whole: bool) -> Check {
         let mode = self.mode;
         let h = t1 - t0;
         if t1 == t_step {
@@ -199,11 +252,17 @@ where
             }
             // The rounding of v is no defect. NaN is the scanner's to report.
             let floor = 64.0 * f64::EPSILON * lo.abs().max(hi.abs());
-            if defect > RESOLUTION * (hi - lo) + floor {
-                return false;
+            if defect > RESOLUTION * (hi - lo) + floor
+                && !keeps_off_zero(lo, hi, defect, h * (s0.abs() + s1.abs()), whole)
+            {
+                return if lo == hi {
+                    Check::Still
+                } else {
+                    Check::Unresolved
+                };
             }
         }
-        true
+        Check::Resolved
     }
 
     /// The signed watched value v of function w at (t, `self.xs`) and its rate
