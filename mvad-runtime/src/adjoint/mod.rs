@@ -37,13 +37,14 @@
 //! A qp read by a flow is solved on the active set its switch bits freeze, so on a segment the
 //! flow is smooth and its products λᵀf_x, λᵀf_θ carry the qp's KKT derivative; the switch
 //! flips are transposed like any other. At a qp kink at T (a weakly active constraint, a
-//! `kink` diagnostic) `gradient` is the derivative from the right and `gradient_left` comes
-//! from a second sweep over the same record with every qp on its left side (each the sum
-//! of one-sided derivatives along the data's coordinates). A constraint weakly active
-//! *along* a flow (a persistent kink, `crate::qp::FlowPieces`) or where an event reads its
-//! qp makes each parameter's derivative follow the piece its own perturbation selects: not
-//! linear in the cotangent, so the run is handed over to forward mode
-//! (`Handover::QpKink`, said in the `kink` diagnostic).
+//! `kink` diagnostic) of a model without states or without a final cost, `gradient` is the
+//! derivative from the right and `gradient_left` comes from a second sweep over the same
+//! record with every qp on its left side (each the sum of one-sided derivatives along the
+//! data's coordinates). A constraint weakly active *along* a flow (a persistent kink,
+//! `crate::qp::FlowPieces`), where an event reads its qp, or at T under the final cost of a
+//! model with states makes each parameter's derivative follow the piece its own
+//! perturbation selects: not linear in the cotangent, so the run is handed over to forward
+//! mode (`Handover::QpKink`, said in the `kink` diagnostic).
 
 pub mod record;
 mod sweep;
@@ -101,8 +102,9 @@ pub(crate) enum Handover {
     /// The primal run ended at a Zeno accumulation (whose tail forward mode extrapolates) or
     /// with a state stuck on its guard: reported in the `zeno` diagnostic.
     Accumulation,
-    /// A qp was read at a kink inside the run — weakly active along a flow (a persistent
-    /// kink) or where an event reads it — reported in a `kink` diagnostic: each parameter's
+    /// A qp was read at a kink — weakly active along a flow (a persistent kink), where an
+    /// event reads it, or at T under a final cost — reported in a `kink` diagnostic: each
+    /// parameter's
     /// one-sided derivative follows the piece its own perturbation selects, which is not
     /// linear in a cotangent, so no sweep gives it.
     QpKink,
@@ -132,7 +134,8 @@ impl Handover {
             ),
             Handover::QpKink => (
                 DiagnosticKind::Kink,
-                "adjoint mode cannot sweep back through a qp kink inside the run (each \
+                "adjoint mode cannot sweep back through a qp kink inside the run or under the \
+                 final cost at T (each \
                  parameter's one-sided derivative follows its own side of it, which is not \
                  linear in a cotangent): the gradients were computed in forward mode"
                     .into(),
@@ -281,7 +284,16 @@ where
         let budget = opts.max_record_bytes;
         return Ok(Err(Handover::RecordBudget { t, budget }));
     }
-    if !model.qp_flow_kinks().is_empty() || sol.diagnostics.iter().any(is_event_kink) {
+    // A final cost read at a qp kink at T: each parameter's side, as for an event's cost
+    // (without states θⱼ moves the data along e_j alone, whose side the second sweep takes).
+    let final_kink = model.info().has_final_cost
+        && nalgebra::Dim::value(&model.nstates()) > 0
+        && sol
+            .diagnostics
+            .iter()
+            .any(|d| d.kind == DiagnosticKind::Kink && d.t == sol.t_end);
+    if !model.qp_flow_kinks().is_empty() || sol.diagnostics.iter().any(is_event_kink) || final_kink
+    {
         return Ok(Err(Handover::QpKink));
     }
     Ok(match tape.filter(|t| t.final_state().is_some()) {

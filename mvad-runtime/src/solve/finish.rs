@@ -58,6 +58,9 @@ where
             &mut fw,
             sens.then_some(&mut grad),
         );
+        if sens {
+            self.qp_kinks_at_end(&x_final, &s_final, &f_end, &mut grad);
+        }
         if !cost.is_finite() || (sens && !grad.iter().all(|v| v.is_finite())) {
             return Err(SolveError::NonFinite {
                 t: t_end,

@@ -8,7 +8,7 @@
 use super::Driver;
 use crate::adjoint::record::Tape;
 use crate::error::SolveError;
-use crate::model::{At, HybridModel, ModelAlloc, Occurrence};
+use crate::model::{At, AtOf, HybridModel, ModelAlloc, Occurrence};
 use crate::qp::{QpLayerInfo, Side};
 use crate::sens;
 use crate::sink::EventSink;
@@ -131,68 +131,26 @@ where
     /// not a sum of one-sided derivatives along the data's coordinates. So each column is
     /// derived again with the qps pinned to its pieces (`HybridModel::pin_qp`): S⁺_j by
     /// the saltation update with that piece's R_x, R_θ, R_t (before the costs), or the
-    /// event cost's gradient g_j by the difference between that piece's
-    /// φ_x(S⁺_j + f⁺t'_j) + φ_θⱼ + φ_t t'_j and the unpinned one (after them). A qp that
-    /// fails here fails in the event's evaluations, which report it. Allocates (at such
-    /// events only).
+    /// event cost's gradient by [`one_sided_cost`] (after them). A qp that fails here fails
+    /// in the event's evaluations, which report it. Allocates (at such events only).
     fn one_sided_columns(&mut self, k: usize, j: usize, t: f64, kinked: &[usize], after: bool) {
         let (model, p) = (self.model, self.p);
         let (n, np) = (model.nstates(), model.nparams());
-        let sizes: Vec<usize> = kinked.iter().map(|&q| model.qps()[q].kinds.len()).collect();
         let x = if after { &self.x_plus } else { &self.y.x };
         let (s, f) = match after {
             false => (&self.y.s, &self.f_minus),
             true => (&self.s_plus, &self.f_plus),
         };
-        // Per column, the pieces of the kinked qps, concatenated.
-        let mut pieces = vec![Vec::new(); np.value()];
-        let mut active = vec![false; sizes.iter().copied().max().unwrap_or(0)];
-        for (col, piece) in pieces.iter_mut().enumerate() {
-            let mut dx = s.column(col).clone_owned();
-            dx.axpy(self.dt[col], f, 1.0);
-            for (&q, &m) in kinked.iter().zip(&sizes) {
-                let dir = (&dx, col, self.dt[col]);
-                match model.qp_piece(q, At::new(t, x, p), dir, &mut active[..m]) {
-                    Some(true) => piece.extend_from_slice(&active[..m]),
-                    _ => return,
-                }
-            }
-        }
-        let occ = Occurrence::new(k, j);
-        let pin = |piece: Option<&Vec<bool>>| {
-            let mut at = 0;
-            for (&q, &m) in kinked.iter().zip(&sizes) {
-                model.pin_qp(q, piece.map(|b| &b[at..at + m]));
-                at += m;
-            }
+        let Some(pieces) = pieces_along(model, At::new(t, x, p), s, f, &self.dt, kinked) else {
+            return;
         };
-        let mut done = vec![false; np.value()];
+        let occ = Occurrence::new(k, j);
         if after {
-            let (mut cx0, mut cp0) = (
-                OVector::zeros_generic(n, Const::<1>),
-                OVector::zeros_generic(np, Const::<1>),
-            );
-            let (mut cx, mut cp) = (cx0.clone(), cp0.clone());
-            let phi_t0 = model.event_cost_grad(occ, At::new(t, x, p), &mut cx0, &mut cp0);
-            for col in 0..np.value() {
-                if done[col] {
-                    continue;
-                }
-                pin(Some(&pieces[col]));
-                let phi_t = model.event_cost_grad(occ, At::new(t, x, p), &mut cx, &mut cp);
-                pin(None);
-                cx -= &cx0;
-                for c in col..np.value() {
-                    if done[c] || pieces[c] != pieces[col] {
-                        continue;
-                    }
-                    let mut total = self.s_plus.column(c).clone_owned();
-                    total.axpy(self.dt[c], &self.f_plus, 1.0);
-                    self.g_ev[c] +=
-                        cx.dot(&total) + (cp[c] - cp0[c]) + (phi_t - phi_t0) * self.dt[c];
-                    done[c] = true;
-                }
-            }
+            let cost =
+                |at: AtOf<'_, M>, cx: &mut _, cp: &mut _| model.event_cost_grad(occ, at, cx, cp);
+            let at = At::new(t, &self.x_plus, p);
+            let dir = (&self.s_plus, &self.f_plus, &self.dt);
+            one_sided_cost(model, at, dir, kinked, &pieces, cost, &mut self.g_ev);
             return;
         }
         let mut rx = OMatrix::<f64, M::N, M::N>::zeros_generic(n, n);
@@ -200,13 +158,14 @@ where
         let mut rt = OVector::<f64, M::N>::zeros_generic(n, Const::<1>);
         let mut work = rt.clone();
         let mut s_col = rp.clone();
+        let mut done = vec![false; np.value()];
         for col in 0..np.value() {
             if done[col] {
                 continue;
             }
-            pin(Some(&pieces[col]));
+            pin(model, kinked, Some(&pieces[col]));
             model.reset_jac(occ, At::new(t, x, p), &mut rx, &mut rp, &mut rt);
-            pin(None);
+            pin(model, kinked, None);
             let (s, fm, fp) = (&self.y.s, &self.f_minus, &self.f_plus);
             sens::jump(&rx, &rp, &rt, s, fm, fp, &self.dt, &mut work, &mut s_col);
             for c in col..np.value() {
@@ -216,6 +175,131 @@ where
                 self.s_plus.column_mut(c).copy_from(&s_col.column(c));
                 done[c] = true;
             }
+        }
+    }
+
+    /// At T, where the final cost reads the qps at a kink (a weakly active constraint at
+    /// (T, x(T))): its gradient, added into `grad`, re-derived column by column along each
+    /// parameter's own direction (dx, dθ, dt) = (S_j(T) + f(T) dT/dθ_j, e_j, dT/dθ_j), as an
+    /// event's cost term is ([`one_sided_cost`]). Allocates (at such an end only).
+    pub(super) fn qp_kinks_at_end(
+        &self,
+        x: &OVector<f64, M::N>,
+        s: &OMatrix<f64, M::N, M::P>,
+        f: &OVector<f64, M::N>,
+        grad: &mut OVector<f64, M::P>,
+    ) {
+        let (model, p, t) = (self.model, self.p, self.t_end);
+        if model.qps().is_empty() || !model.info().has_final_cost {
+            return;
+        }
+        let at = At::new(t, x, p);
+        // A qp that fails here fails in the final cost's evaluation, which reports it.
+        let Ok(states) = model.qp_states(at) else {
+            return;
+        };
+        let kinked: Vec<usize> = (0..states.len())
+            .filter(|&q| !states[q].weakly_active().is_empty())
+            .collect();
+        let dt = &self.dt_end;
+        if kinked.is_empty() {
+            return;
+        }
+        if let Some(pieces) = pieces_along(model, at, s, f, dt, &kinked) {
+            let cost = |at: AtOf<'_, M>, cx: &mut _, cp: &mut _| model.final_cost_grad(at, cx, cp);
+            one_sided_cost(model, at, (s, f, dt), &kinked, &pieces, cost, grad);
+        }
+    }
+}
+
+/// Per parameter j, the pieces of the qps `kinked` (concatenated, in order) that the data at
+/// `at` select along j's direction (dx, dθ, dt) = (S_j + f t'_j, e_j, t'_j) on the qps'
+/// side (`HybridModel::qp_piece`); `None` when a qp cannot tell.
+fn pieces_along<M: HybridModel>(
+    model: &M,
+    at: AtOf<'_, M>,
+    s: &OMatrix<f64, M::N, M::P>,
+    f: &OVector<f64, M::N>,
+    dt: &OVector<f64, M::P>,
+    kinked: &[usize],
+) -> Option<Vec<Vec<bool>>>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let sizes: Vec<usize> = kinked.iter().map(|&q| model.qps()[q].kinds.len()).collect();
+    let mut active = vec![false; sizes.iter().copied().max().unwrap_or(0)];
+    let mut pieces = vec![Vec::new(); model.nparams().value()];
+    for (col, piece) in pieces.iter_mut().enumerate() {
+        let mut dx = s.column(col).clone_owned();
+        dx.axpy(dt[col], f, 1.0);
+        for (&q, &m) in kinked.iter().zip(&sizes) {
+            match model.qp_piece(q, at, (&dx, col, dt[col]), &mut active[..m]) {
+                Some(true) => piece.extend_from_slice(&active[..m]),
+                _ => return None,
+            }
+        }
+    }
+    Some(pieces)
+}
+
+/// Pins the qps `kinked` to the concatenated active sets `pieces` (`None` unpins them).
+fn pin<M: HybridModel>(model: &M, kinked: &[usize], pieces: Option<&Vec<bool>>)
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let mut from = 0;
+    for &q in kinked {
+        let m = model.qps()[q].kinds.len();
+        model.pin_qp(q, pieces.map(|b| &b[from..from + m]));
+        from += m;
+    }
+}
+
+/// A cost term c(t, x, θ) read at a kink of the qps `kinked`, whose gradient (∂c/∂x, ∂c/∂θ,
+/// ∂c/∂t from `cost_grad`) is the sum of one-sided derivatives along the data's coordinates:
+/// adds to `grad[j]`, per parameter, the difference between the piece j selects (`pieces`,
+/// pinned) and the unpinned one of c_x·(S_j + f t'_j) + c_θj + c_t t'_j, so that `grad[j]`
+/// holds the one-sided derivative along j's own direction; `dir` = (S, f, t').
+fn one_sided_cost<M: HybridModel>(
+    model: &M,
+    at: AtOf<'_, M>,
+    dir: (
+        &OMatrix<f64, M::N, M::P>,
+        &OVector<f64, M::N>,
+        &OVector<f64, M::P>,
+    ),
+    kinked: &[usize],
+    pieces: &[Vec<bool>],
+    cost_grad: impl Fn(AtOf<'_, M>, &mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64,
+    grad: &mut OVector<f64, M::P>,
+) where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    let (s, f, dt) = dir;
+    let (n, np) = (model.nstates(), model.nparams());
+    let (mut cx0, mut cp0) = (
+        OVector::zeros_generic(n, Const::<1>),
+        OVector::zeros_generic(np, Const::<1>),
+    );
+    let (mut cx, mut cp) = (cx0.clone(), cp0.clone());
+    let c_t0 = cost_grad(at, &mut cx0, &mut cp0);
+    let mut done = vec![false; np.value()];
+    for col in 0..np.value() {
+        if done[col] {
+            continue;
+        }
+        pin(model, kinked, Some(&pieces[col]));
+        let c_t = cost_grad(at, &mut cx, &mut cp);
+        pin(model, kinked, None);
+        cx -= &cx0;
+        for c in col..np.value() {
+            if done[c] || pieces[c] != pieces[col] {
+                continue;
+            }
+            let mut total = s.column(c).clone_owned();
+            total.axpy(dt[c], f, 1.0);
+            grad[c] += cx.dot(&total) + (cp[c] - cp0[c]) + (c_t - c_t0) * dt[c];
+            done[c] = true;
         }
     }
 }
