@@ -108,8 +108,8 @@ impl HybridModel for Ball {
         dt.fill(0.0);
     }
     fn rhs(&self, pt: PointOf<'_, Self>, f: &mut X) {
-        f[0] = pt.at.x[1];
-        f[1] = -pt.at.p[1];
+        f[0] = pt.x[1];
+        f[1] = -pt.p[1];
     }
     fn rhs_jac_x(&self, _pt: PointOf<'_, Self>, fx: &mut OMatrix<f64, N, N>) {
         fx.fill(0.0);

@@ -361,7 +361,7 @@ impl Gen<'_> {
         let sens_methods = quote! {
             #[inline]
             fn rhs_sens(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, f: &mut #xv, ds: &mut #mnp) {
-        let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #sens }
+        let #pr::Point { mode, sw, t, x, p } = pt; #sens }
         };
         let core = quote! {
             #[inline]
@@ -374,13 +374,13 @@ impl Gen<'_> {
             fn horizon_grad(&self, p: &#pv, dt: &mut #pv) { #hzg }
             #[inline]
             fn rhs(&self, pt: #pr::Point<'_, Self::N, Self::P>, f: &mut #xv) {
-        let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #rhs }
+        let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
             fn rhs_jac_x(&self, pt: #pr::Point<'_, Self::N, Self::P>, fx: &mut #mnn) {
-        let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #jx }
+        let #pr::Point { mode, sw, t, x, p } = pt; #jx }
             fn rhs_jac_p(&self, pt: #pr::Point<'_, Self::N, Self::P>, fp: &mut #mnp) {
-        let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #jp }
+        let #pr::Point { mode, sw, t, x, p } = pt; #jp }
             fn rhs_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, ft: &mut #xv) {
-        let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #dt }
+        let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn rhs_depends_on_t(&self, mode: usize) -> bool { #dep_t }
             #[inline]
             fn flow_is_constant(&self, mode: usize) -> bool { #constant }

@@ -311,11 +311,11 @@ impl Gen<'_> {
 
         quote! {
             fn rhs_vjp(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, vx: &mut #xv, vp: &mut #pv) {
-                let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #rhs }
+                let #pr::Point { mode, sw, t, x, p } = pt; #rhs }
             fn adjoint_rate(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, out: &mut #xv) {
-                let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; { #rate } out.neg_mut(); #rc_rate }
+                let #pr::Point { mode, sw, t, x, p } = pt; { #rate } out.neg_mut(); #rc_rate }
             fn adjoint_quadrature_add(&self, pt: #pr::Point<'_, Self::N, Self::P>, lambda: &#xv, w: f64, a: f64, g: &mut #pv) {
-                let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; { #quad } #rc_quad }
+                let #pr::Point { mode, sw, t, x, p } = pt; { #quad } #rc_quad }
             fn running_cost_grad_x(&self, sw: &#pr::Switches, #at, lx: &mut #xv) {
                 #let_at lx.fill(0.0); #rc_x }
             fn gradient_support(&self, mode: usize) -> Option<&[usize]> { #support }
@@ -447,9 +447,9 @@ impl Gen<'_> {
         self.frozen.set(false);
         quote! {
             fn rhs_sens_dir_x(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, v: &#xv, out: &mut #mnp) {
-                let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #dir }
+                let #pr::Point { mode, sw, t, x, p } = pt; #dir }
             fn rhs_sens_dt(&self, pt: #pr::Point<'_, Self::N, Self::P>, s: &#mnp, out: &mut #mnp) {
-                let #pr::Point { mode, sw, at: #pr::At { t, x, p } } = pt; #dt }
+                let #pr::Point { mode, sw, t, x, p } = pt; #dt }
             fn running_cost_sens_dir_x(&self, sw: &#sw_t, #at, s: &#mnp, v: &#xv, out: &mut #pv) { #let_at #rc_dir }
             fn running_cost_sens_dt(&self, sw: &#sw_t, #at, s: &#mnp, out: &mut #pv) -> f64 { #let_at #rc_dt }
         }

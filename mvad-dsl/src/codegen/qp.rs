@@ -176,7 +176,7 @@ impl Gen<'_> {
                     s: ::core::option::Option<&#pr::OMatrix<f64, Self::N, Self::P>>,
                     pieces: &mut [#pr::Switches],
                 ) -> ::core::option::Option<bool> {
-                    let (t, x, p) = (pt.at.t, pt.at.x.as_slice(), pt.at.p.as_slice());
+                    let (t, x, p) = (pt.t, pt.x.as_slice(), pt.p.as_slice());
                     self.qp.borrow_mut().flow_pieces(
                         t, x, p, pt.sw, f.as_slice(), s.map(|s| s.as_slice()), pieces,
                         |q, data, jac| self.__qp_fill(q, t, x, p, data, jac),

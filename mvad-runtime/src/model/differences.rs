@@ -80,14 +80,16 @@ pub fn rhs_vjp_dir<M: HybridModel + ?Sized>(
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let (eps, xu, xd) = flow_points(pt.at.t, pt.at.x, v);
+    let (eps, xu, xd) = flow_points(pt.t, pt.x, v);
     let (mut vx_dn, mut vp_dn) = (vx.clone_owned(), vp.clone_owned());
     let up = Point {
-        at: At::new(pt.at.t + eps, &xu, pt.at.p),
+        t: pt.t + eps,
+        x: &xu,
         ..pt
     };
     let dn = Point {
-        at: At::new(pt.at.t - eps, &xd, pt.at.p),
+        t: pt.t - eps,
+        x: &xd,
         ..pt
     };
     m.rhs_vjp(up, lambda, vx, vp);
@@ -134,20 +136,14 @@ pub fn rhs_sens_dir_x<M: HybridModel + ?Sized>(
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let Some((h, xu, xd)) = dir_points(pt.at.x, v) else {
+    let Some((h, xu, xd)) = dir_points(pt.x, v) else {
         out.fill(0.0);
         return;
     };
     rhs_sens_difference(
         m,
-        Point {
-            at: At { x: &xu, ..pt.at },
-            ..pt
-        },
-        Point {
-            at: At { x: &xd, ..pt.at },
-            ..pt
-        },
+        Point { x: &xu, ..pt },
+        Point { x: &xd, ..pt },
         s,
         2.0 * h,
         out,
@@ -164,12 +160,8 @@ pub fn rhs_sens_dt<M: HybridModel + ?Sized>(
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let h = time_step(pt.at.t);
-    let shifted = |t| Point {
-        at: At { t, ..pt.at },
-        ..pt
-    };
-    let (up, dn) = (shifted(pt.at.t + h), shifted(pt.at.t - h));
+    let h = time_step(pt.t);
+    let (up, dn) = (Point { t: pt.t + h, ..pt }, Point { t: pt.t - h, ..pt });
     rhs_sens_difference(m, up, dn, s, 2.0 * h, out);
 }
 
@@ -221,7 +213,7 @@ fn rhs_sens_difference<M: HybridModel + ?Sized>(
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let mut f = up.at.x.clone_owned();
+    let mut f = up.x.clone_owned();
     let mut minus = out.clone_owned();
     m.rhs_sens(up, s, &mut f, out);
     m.rhs_sens(dn, s, &mut f, &mut minus);

@@ -118,9 +118,8 @@ impl Switches {
 ///
 /// The flow-side methods ([`HybridModel::rhs`](crate::HybridModel::rhs) and its derivatives, and the capability
 /// products) take one `Point` instead of five arguments, so every source of flow
-/// evaluations (steps, events, an adjoint pass) shares one signature. It is its pointwise
-/// part [`At`] (t, x, θ) with the mode and branches beside it. It is `Copy`: five words,
-/// passed by value.
+/// evaluations (steps, events, an adjoint pass) shares one signature. It is `Copy`: five
+/// words, passed by value.
 #[derive(Clone, Copy)]
 pub struct Point<'a, N: Dim, P: Dim>
 where
@@ -130,8 +129,12 @@ where
     pub mode: usize,
     /// The frozen branches of the switching functions.
     pub sw: &'a Switches,
-    /// The pointwise part (t, x, θ).
-    pub at: At<'a, N, P>,
+    /// Time t.
+    pub t: f64,
+    /// State x.
+    pub x: &'a OVector<f64, N>,
+    /// Parameters θ.
+    pub p: &'a OVector<f64, P>,
 }
 
 impl<'a, N: Dim, P: Dim> Point<'a, N, P>
@@ -147,17 +150,13 @@ where
         x: &'a OVector<f64, N>,
         p: &'a OVector<f64, P>,
     ) -> Self {
-        Point {
-            mode,
-            sw,
-            at: At::new(t, x, p),
-        }
+        Point { mode, sw, t, x, p }
     }
 
     /// The pointwise part (t, x, θ), without the mode and branches.
     #[inline(always)]
     pub fn at(self) -> At<'a, N, P> {
-        self.at
+        At::new(self.t, self.x, self.p)
     }
 }
 

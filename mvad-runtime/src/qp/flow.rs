@@ -15,7 +15,7 @@
 //! model's own f_x S + f_θ (and ℓ_x S + ℓ_θ) evaluated under that piece's bits: one more
 //! evaluation per distinct piece, no new kernel.
 
-use crate::model::{HybridModel, ModelAlloc, Point, Switches};
+use crate::model::{At, HybridModel, ModelAlloc, Point, Switches};
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector};
 
 /// Buffers of the piecewise sensitivity rate of one run (allocated once, for a model whose
@@ -92,9 +92,15 @@ where
                 continue;
             }
             let piece = &self.pieces[j];
-            model.rhs_sens(Point { sw: piece, ..pt }, s, &mut self.f, &mut self.ds);
+            model.rhs_sens(
+                Point::new(pt.mode, piece, pt.t, pt.x, pt.p),
+                s,
+                &mut self.f,
+                &mut self.ds,
+            );
             if dq.is_some() {
-                model.running_cost_value_grad(piece, pt.at, &mut self.lx, &mut self.lp);
+                let at = At::new(pt.t, pt.x, pt.p);
+                model.running_cost_value_grad(piece, at, &mut self.lx, &mut self.lp);
             }
             for k in j..np {
                 if self.done[k] || self.pieces[k] != self.pieces[j] {
