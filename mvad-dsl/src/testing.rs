@@ -64,8 +64,11 @@ pub fn cases(text: &str, section: &str) -> Vec<(String, Vec<Located>)> {
                 Some((l.parse().ok()?, c.parse().ok()?, msg.to_string()))
             });
             want.push(parsed.unwrap_or_else(|| panic!("`{line}`: not `! LINE:COLUMN MESSAGE`")));
-        } else if !line.starts_with('#') && !(line.is_empty() && src.is_empty()) {
-            src.push(line);
+        } else {
+            let comment = line.starts_with('#') || (line.is_empty() && src.is_empty());
+            if !comment {
+                src.push(line);
+            }
         }
     }
     assert!(
