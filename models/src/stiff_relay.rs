@@ -30,63 +30,24 @@ pub fn switch_times(tau: f64, rate: f64, lo: f64, hi: f64, t_end: f64) -> Vec<f6
 /// dropped: below rounding for L ≫ τ). The first segment is y = rate·t up to hi/rate, full
 /// segments last (hi − lo)/rate + 2τ (see [`switch_times`]), the last one ends at T = 3.
 /// Summed and expanded (by sympy), with the gradient differentiated the same way.
+#[rustfmt::skip]
 pub fn cost_closed(tau: f64, rate: f64, lo: f64, hi: f64) -> (f64, [f64; 4]) {
     let (t, r, l, h) = (tau, rate, lo, hi);
-    let (r2, r3, t2, t3) = (r * r, r * r * r, t * t, t * t * t);
-    let c = -(20.0 * h * h * h - 32.0 * h * h * l + 92.0 * h * h * r * t - 48.0 * h * h * r
-        + 16.0 * h * l * l
-        - 96.0 * h * l * r * t
-        + 48.0 * h * l * r
-        + 144.0 * h * r2 * t2
-        - 144.0 * h * r2 * t
-        + 36.0 * h * r2
-        - 2.0 * l * l * l
-        + 22.0 * l * l * r * t
-        - 12.0 * l * l * r
-        - 72.0 * l * r2 * t2
-        + 72.0 * l * r2 * t
-        - 18.0 * l * r2
-        + 70.0 * r3 * t3
-        - 108.0 * r3 * t2
-        + 54.0 * r3 * t
-        - 9.0 * r3)
-        / r;
-    let d_tau = -2.0
-        * (46.0 * h * h - 48.0 * h * l + 144.0 * h * r * t - 72.0 * h * r + 11.0 * l * l
-            - 72.0 * l * r * t
-            + 36.0 * l * r
-            + 105.0 * r2 * t2
-            - 108.0 * r2 * t
-            + 27.0 * r2);
-    let d_rate = 2.0
-        * (10.0 * h * h * h - 16.0 * h * h * l + 8.0 * h * l * l - 72.0 * h * r2 * t2
-            + 72.0 * h * r2 * t
-            - 18.0 * h * r2
-            - l * l * l
-            + 36.0 * l * r2 * t2
-            - 36.0 * l * r2 * t
-            + 9.0 * l * r2
-            - 70.0 * r3 * t3
-            + 108.0 * r3 * t2
-            - 54.0 * r3 * t
-            + 9.0 * r3)
-        / r2;
-    let d_lo = 2.0
-        * (16.0 * h * h - 16.0 * h * l + 48.0 * h * r * t - 24.0 * h * r + 3.0 * l * l
-            - 22.0 * l * r * t
-            + 12.0 * l * r
-            + 36.0 * r2 * t2
-            - 36.0 * r2 * t
-            + 9.0 * r2)
-        / r;
-    let d_hi = -4.0
-        * (15.0 * h * h - 16.0 * h * l + 46.0 * h * r * t - 24.0 * h * r + 4.0 * l * l
-            - 24.0 * l * r * t
-            + 12.0 * l * r
-            + 36.0 * r2 * t2
-            - 36.0 * r2 * t
-            + 9.0 * r2)
-        / r;
+    let (r2, r3) = (r * r, r * r * r);
+    // Every numerator is Σ a_k m_k over these quadratic monomials (times h or l for its
+    // cubic terms), plus a multiple of the pure-r cubic r³(70t³ − 108t² + 54t − 9).
+    let m = [h * h, h * l, h * r * t, h * r, l * l, l * r * t, l * r, r2 * t * t, r2 * t, r2];
+    let dot = |a: [f64; 10]| a.iter().zip(&m).map(|(a, m)| a * m).sum::<f64>();
+    let cubic = r3 * (((70.0 * t - 108.0) * t + 54.0) * t - 9.0);
+    let c = -(h * dot([20.0, -32.0, 92.0, -48.0, 16.0, -96.0, 48.0, 144.0, -144.0, 36.0])
+        + l * dot([0.0, 0.0, 0.0, 0.0, -2.0, 22.0, -12.0, -72.0, 72.0, -18.0])
+        + cubic) / r;
+    let d_tau = -2.0 * dot([46.0, -48.0, 144.0, -72.0, 11.0, -72.0, 36.0, 105.0, -108.0, 27.0]);
+    let d_rate = 2.0 * (h * dot([10.0, -16.0, 0.0, 0.0, 8.0, 0.0, 0.0, -72.0, 72.0, -18.0])
+        + l * dot([0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 36.0, -36.0, 9.0])
+        - cubic) / r2;
+    let d_lo = 2.0 * dot([16.0, -16.0, 48.0, -24.0, 3.0, -22.0, 12.0, 36.0, -36.0, 9.0]) / r;
+    let d_hi = -4.0 * dot([15.0, -16.0, 46.0, -24.0, 4.0, -24.0, 12.0, 36.0, -36.0, 9.0]) / r;
     (c, [d_tau, d_rate, d_lo, d_hi])
 }
 

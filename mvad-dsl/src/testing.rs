@@ -42,16 +42,58 @@ pub fn assert_errors(src: &str, got: Vec<Located>, want: &[Expected]) {
     assert_eq!(got, want, "{src}");
 }
 
+/// The cases of section `section` of an expectation file, as (model, expected errors).
+///
+/// A section opens with a line `=== NAME` and runs to the next one; each case is the
+/// model's lines, then one line `! LINE:COLUMN MESSAGE` per expected error, in order, then
+/// a line `---`. Lines that start with `#`, blank lines before a case and everything before
+/// the first section are comments.
+pub fn cases(text: &str, section: &str) -> Vec<(String, Vec<Located>)> {
+    let mut lines = text
+        .lines()
+        .skip_while(|l| l.strip_prefix("=== ") != Some(section));
+    assert!(lines.next().is_some(), "no section `{section}`");
+    let (mut out, mut src, mut want) = (Vec::new(), Vec::<&str>::new(), Vec::new());
+    for line in lines.take_while(|l| !l.starts_with("=== ")) {
+        if line == "---" {
+            out.push((src.join("\n"), std::mem::take(&mut want)));
+            src.clear();
+        } else if let Some(e) = line.strip_prefix("! ") {
+            let parsed = e.split_once(' ').and_then(|(at, msg)| {
+                let (l, c) = at.split_once(':')?;
+                Some((l.parse().ok()?, c.parse().ok()?, msg.to_string()))
+            });
+            want.push(parsed.unwrap_or_else(|| panic!("`{line}`: not `! LINE:COLUMN MESSAGE`")));
+        } else {
+            let comment = line.starts_with('#') || (line.is_empty() && src.is_empty());
+            if !comment {
+                src.push(line);
+            }
+        }
+    }
+    assert!(
+        src.is_empty() && want.is_empty(),
+        "section `{section}` ends without `---`"
+    );
+    out
+}
+
 /// Asserts that the checker gives exactly `want` for a model that parses.
 #[track_caller]
 pub fn expect_check(src: &str, want: &[Expected]) {
     assert_errors(src, located(src, check_errors(src)), want);
 }
 
-/// [`expect_check`] for each (model, expected errors) case of a table.
+/// [`expect_check`] with the expected errors as [`cases`] gives them.
 #[track_caller]
-pub fn expect_check_each(cases: &[(&str, &[Expected])]) {
-    for (src, want) in cases {
-        expect_check(src, want);
+pub fn expect_check_located(src: &str, want: &[Located]) {
+    assert_eq!(located(src, check_errors(src)), want, "{src}");
+}
+
+/// [`expect_check_located`] for each case of section `section` of an expectation file.
+#[track_caller]
+pub fn expect_check_section(text: &str, section: &str) {
+    for (src, want) in cases(text, section) {
+        expect_check_located(&src, &want);
     }
 }

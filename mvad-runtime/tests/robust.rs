@@ -25,13 +25,8 @@ impl Spec for Lag {
             0,
         )
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-        x[1] = S::cst(1.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
+    const X0: &'static [f64] = &[0.0, 1.0];
+    const T_END: Option<f64> = Some(1.0);
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = (x[1] - x[0]) / p[0];
         f[1] = -x[1];
@@ -108,12 +103,8 @@ impl Spec for Undefined {
             0,
         )
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
+    const X0: &'static [f64] = &[0.0];
+    const T_END: Option<f64> = Some(1.0);
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, t: S, _x: &[S], p: &[S], f: &mut [S]) {
         let d = p[0] - t;
         f[0] = match self.kind {
@@ -181,12 +172,8 @@ impl Spec for Decay {
     fn info(&self) -> ModelInfo {
         info("Decay", &["x"], &[("a", 1.3)], &["main"], vec![], &[], 0)
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(1.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
+    const X0: &'static [f64] = &[1.0];
+    const T_END: Option<f64> = Some(1.0);
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = -p[0] * x[0];
     }
@@ -239,11 +226,9 @@ impl Spec for BlowUp {
     fn info(&self) -> ModelInfo {
         info("BlowUp", &["x"], &[("a", 1.0)], &["main"], vec![], &[], 0)
     }
+    const T_END: Option<f64> = Some(2.0);
     fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
         x[0] = p[0];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(2.0))
     }
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = x[0] * x[0];

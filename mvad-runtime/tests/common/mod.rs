@@ -204,11 +204,24 @@ impl Div<f64> for D {
     }
 }
 
-/// A hybrid model as plain generic formulas. Defaults: no switches, identity reset, no costs.
+/// A hybrid model as plain generic formulas. Defaults: x₀ = `X0` and T = `T_END` (constants),
+/// no switches, identity reset, no costs.
 pub trait Spec {
+    /// A constant initial state, what the default `x0` writes (a model whose x₀ reads θ
+    /// overrides `x0` instead).
+    const X0: &'static [f64] = &[];
+    /// A constant horizon, what the default `horizon` returns.
+    const T_END: Option<f64> = None;
     fn info(&self) -> ModelInfo;
-    fn x0<S: Sc>(&self, p: &[S], x: &mut [S]);
-    fn horizon<S: Sc>(&self, p: &[S]) -> Option<S>;
+    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
+        assert_eq!(x.len(), Self::X0.len(), "Spec::X0 gives every state");
+        for (xi, &v) in x.iter_mut().zip(Self::X0) {
+            *xi = S::cst(v);
+        }
+    }
+    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
+        Self::T_END.map(S::cst)
+    }
     fn rhs<S: Sc>(&self, mode: usize, sw: u64, t: S, x: &[S], p: &[S], f: &mut [S]);
     fn guard<S: Sc>(&self, _k: usize, _t: S, _x: &[S], _p: &[S]) -> S {
         S::cst(1.0)

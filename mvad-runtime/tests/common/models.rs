@@ -3,7 +3,26 @@
 //! on one guard and a decay without parameters.
 
 use super::{ev, info, Sc, Spec};
-use mvad_runtime::model::{Direction, ModelInfo};
+use mvad_runtime::model::{Direction, EventInfo, ModelInfo};
+
+/// The two events of a relay with hysteresis between modes 0 and 1: `up` fires when the
+/// watched value rises through the upper threshold in mode 0 (→ mode 1), `down` when it
+/// falls through the lower one in mode 1 (→ mode 0).
+fn hysteresis_events(up: &str, down: &str) -> Vec<EventInfo> {
+    vec![
+        ev(up, Direction::Up, Some(0), Some(1), false),
+        ev(down, Direction::Down, Some(1), Some(0), false),
+    ]
+}
+
+/// The guards of [`hysteresis_events`] on the watched value v: g₀ = v − hi, g₁ = v − lo.
+fn hysteresis_guard<S: Sc>(k: usize, v: S, lo: S, hi: S) -> S {
+    if k == 0 {
+        v - hi
+    } else {
+        v - lo
+    }
+}
 
 /// Two-mode thermostat with thresholds lo, hi as parameters (θ = k, lo, hi, p), ambient 10,
 /// temp(0) = 19, horizon 10.
@@ -20,20 +39,13 @@ impl Spec for Thermostat {
             &["temp"],
             &[("k", 0.5), ("lo", 18.0), ("hi", 22.0), ("p", 10.0)],
             &["heating", "cooling"],
-            vec![
-                ev("switch_off", Direction::Up, Some(0), Some(1), false),
-                ev("switch_on", Direction::Down, Some(1), Some(0), false),
-            ],
+            hysteresis_events("switch_off", "switch_on"),
             &["temp"],
             0,
         )
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(19.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(10.0))
-    }
+    const X0: &'static [f64] = &[19.0];
+    const T_END: Option<f64> = Some(10.0);
     fn rhs<S: Sc>(&self, m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         f[0] = -(p[0] * (x[0] - 10.0));
         if m == 0 {
@@ -41,11 +53,7 @@ impl Spec for Thermostat {
         }
     }
     fn guard<S: Sc>(&self, k: usize, _t: S, x: &[S], p: &[S]) -> S {
-        if k == 0 {
-            x[0] - p[2]
-        } else {
-            x[0] - p[1]
-        }
+        hysteresis_guard(k, x[0], p[1], p[2])
     }
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[0];
@@ -101,32 +109,20 @@ impl Spec for Relay {
             &["u", "x"],
             &[("a", 1.0), ("lo", 0.2), ("hi", 1.0)],
             &["up", "down"],
-            vec![
-                ev("top", Direction::Up, Some(0), Some(1), false),
-                ev("bottom", Direction::Down, Some(1), Some(0), false),
-            ],
+            hysteresis_events("top", "bottom"),
             &["x"],
             0,
         )
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-        x[1] = S::cst(0.5);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(3.0))
-    }
+    const X0: &'static [f64] = &[0.0, 0.5];
+    const T_END: Option<f64> = Some(3.0);
     fn rhs<S: Sc>(&self, m: usize, _sw: u64, _t: S, x: &[S], p: &[S], f: &mut [S]) {
         let w = if m == 0 { p[0] } else { -p[0] };
         f[0] = (w - x[0]) / TAU;
         f[1] = x[0];
     }
     fn guard<S: Sc>(&self, k: usize, _t: S, x: &[S], p: &[S]) -> S {
-        if k == 0 {
-            x[1] - p[2]
-        } else {
-            x[1] - p[1]
-        }
+        hysteresis_guard(k, x[1], p[1], p[2])
     }
     fn observe<S: Sc>(&self, _t: S, x: &[S], _p: &[S], y: &mut [S]) {
         y[0] = x[1];
@@ -181,11 +177,9 @@ impl Spec for Kink {
             1,
         )
     }
+    const T_END: Option<f64> = Some(2.0);
     fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
         x[0] = p[0];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(2.0))
     }
     fn switch<S: Sc>(&self, _j: usize, _t: S, x: &[S], p: &[S]) -> S {
         x[0] - p[1]
@@ -225,12 +219,8 @@ impl Spec for Dip {
             0,
         )
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(0.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
-    }
+    const X0: &'static [f64] = &[0.0];
+    const T_END: Option<f64> = Some(1.0);
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = S::cst(1.0);
     }
@@ -265,12 +255,10 @@ impl Spec for Twin {
         i.has_final_cost = true;
         i
     }
+    const T_END: Option<f64> = Some(1.0);
     fn x0<S: Sc>(&self, p: &[S], x: &mut [S]) {
         x[0] = S::cst(0.0);
         x[1] = p[1];
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(1.0))
     }
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, _x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = S::cst(1.0);
@@ -310,12 +298,8 @@ impl Spec for Decay {
             0,
         )
     }
-    fn x0<S: Sc>(&self, _p: &[S], x: &mut [S]) {
-        x[0] = S::cst(1.0);
-    }
-    fn horizon<S: Sc>(&self, _p: &[S]) -> Option<S> {
-        Some(S::cst(2.0))
-    }
+    const X0: &'static [f64] = &[1.0];
+    const T_END: Option<f64> = Some(2.0);
     fn rhs<S: Sc>(&self, _m: usize, _sw: u64, _t: S, x: &[S], _p: &[S], f: &mut [S]) {
         f[0] = -x[0];
     }

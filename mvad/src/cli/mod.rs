@@ -519,6 +519,11 @@ pub mod test_support {
         extra.iter().copied().chain(TIGHT).collect()
     }
 
+    /// How many lines of a command's output contain `needle`.
+    pub fn lines_with(out: &str, needle: &str) -> usize {
+        out.lines().filter(|l| l.contains(needle)).count()
+    }
+
     /// The JSON object a command printed.
     pub fn json(out: &str) -> Value {
         serde_json::from_str(out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))

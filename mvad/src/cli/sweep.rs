@@ -224,7 +224,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::test_support::{json, on_ball, tight};
+    use crate::cli::test_support::{json, lines_with, on_ball, tight};
     use approx::assert_relative_eq;
 
     #[test]
@@ -293,10 +293,6 @@ mod tests {
     fn text_table() {
         let out = on_ball(run, &["--over", "e=0.5:0.9:3"]).expect("runs");
         assert!(out.contains("guard slope |∇g·f|"), "{out}");
-        assert_eq!(
-            out.lines().filter(|l| l.contains("True")).count(),
-            3,
-            "{out}"
-        );
+        assert_eq!(lines_with(&out, "True"), 3, "{out}");
     }
 }
