@@ -537,7 +537,7 @@ where
                 return Ok(());
             }
             let t_stop = self.t_end.min(t_next);
-            if self.lines.on && self.line_segment(t_stop, sink)? {
+            if self.lines.on && self.line_segment(t_stop, t_next, sink)? {
                 continue;
             }
             self.integ.step(t_stop)?;
