@@ -368,10 +368,11 @@ where
     /// of σ̇_j under the other bits decides.
     fn switch_bits(&mut self, t: f64, x_is_plus: bool, keep: bool) {
         let nsw = self.model.info().switches;
-        self.sw_next.clear();
         if nsw == 0 {
+            // No bits: `sw_next` is empty, as it was made.
             return;
         }
+        self.sw_next.clear();
         self.sw_undecided.clear();
         let mut undecided = false;
         for j in 0..nsw {
@@ -448,7 +449,10 @@ where
         self.affine_watch = watch.affine;
         // (Asked once: the loop below runs at every restart.)
         let (holding, released) = (self.zeno.holding(), self.zeno.released_any());
-        if self.watching != Some(self.mode) || holding {
+        // The same mode as at the last restart, outside a hold: the same functions are
+        // watched and the segment is again one of lines iff it was (see `begin_lines`).
+        let same = self.watching == Some(self.mode) && !holding;
+        if !same {
             self.scanner.begin_restart();
         }
         self.watching = (!holding).then_some(self.mode);
@@ -486,7 +490,9 @@ where
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
         }
-        self.begin_lines(t);
+        if !(same && self.lines.on) {
+            self.begin_lines(t);
+        }
         Ok(())
     }
 
