@@ -54,7 +54,6 @@ where
     /// Applies user event k at time t to `self.y` (the state at t⁻) and hands it to `sink`.
     /// Sets `self.zeno_stop` when the run must restart from a limit: a Zeno accumulation has
     /// been reached or the reset left the state stuck on its guard.
-    #[inline(never)]
     pub(super) fn apply_event(
         &mut self,
         k: usize,

@@ -368,11 +368,10 @@ where
     /// of σ̇_j under the other bits decides.
     fn switch_bits(&mut self, t: f64, x_is_plus: bool, keep: bool) {
         let nsw = self.model.info().switches;
+        self.sw_next.clear();
         if nsw == 0 {
-            // No bits: `sw_next` is empty, as it was made.
             return;
         }
-        self.sw_next.clear();
         self.sw_undecided.clear();
         let mut undecided = false;
         for j in 0..nsw {
