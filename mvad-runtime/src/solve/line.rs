@@ -104,10 +104,14 @@ where
 
     /// Takes the segment of lines from the integrator's t to `t_stop` (see the module doc):
     /// one exact step to the first root or to `t_stop`, the guards at its end, and the events
-    /// there applied. Returns false, having changed nothing, when the segment must be scanned.
+    /// there applied. `t_next` is the time of the next time event armed in the mode: a step
+    /// that lands on it with no crossing applies it at once (what the loop's next round would
+    /// do: the schedule's next time at the stop is `t_next` again, and nothing else is read in
+    /// between). Returns false, having changed nothing, when the segment must be scanned.
     pub(super) fn line_segment(
         &mut self,
         t_stop: f64,
+        t_next: f64,
         sink: &mut impl EventSink,
     ) -> Result<bool, SolveError> {
         let t0 = self.integ.t();
@@ -133,7 +137,7 @@ where
         };
         let closed = self.scanner.close_lines(t0, t1, sample);
         closed.map_err(|(w, t)| self.guard_nonfinite(w, t))?;
-        if !self.scanner.found.is_empty() {
+        if !self.scanner.found.is_empty() || t1 == t_stop && t_next <= t1 + time_resolution(t1) {
             self.y.copy_from(self.integ.y());
             self.fire_at(t1, sink)?;
         }

@@ -448,7 +448,10 @@ where
         self.affine_watch = watch.affine;
         // (Asked once: the loop below runs at every restart.)
         let (holding, released) = (self.zeno.holding(), self.zeno.released_any());
-        if self.watching != Some(self.mode) || holding {
+        // The same mode as at the last restart, outside a hold: the same functions are
+        // watched and the segment is again one of lines iff it was (see `begin_lines`).
+        let same = self.watching == Some(self.mode) && !holding;
+        if !same {
             self.scanner.begin_restart();
         }
         self.watching = (!holding).then_some(self.mode);
@@ -486,7 +489,9 @@ where
         if let Some(rec) = &mut self.rec {
             rec.open_segment(t);
         }
-        self.begin_lines(t);
+        if !(same && self.lines.on) {
+            self.begin_lines(t);
+        }
         Ok(())
     }
 
@@ -537,7 +542,7 @@ where
                 return Ok(());
             }
             let t_stop = self.t_end.min(t_next);
-            if self.lines.on && self.line_segment(t_stop, sink)? {
+            if self.lines.on && self.line_segment(t_stop, t_next, sink)? {
                 continue;
             }
             self.integ.step(t_stop)?;

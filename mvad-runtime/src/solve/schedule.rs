@@ -210,6 +210,9 @@ impl Schedule {
     where
         DefaultAllocator: ModelAlloc<M::N, M::P>,
     {
+        if self.partial[to].is_empty() {
+            return Ok(());
+        }
         let after = (t + super::time_resolution(t)).next_up();
         for i in 0..self.partial[to].len() {
             let k = self.partial[to][i];
