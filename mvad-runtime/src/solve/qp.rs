@@ -141,7 +141,8 @@ where
             false => (&self.y.s, &self.f_minus),
             true => (&self.s_plus, &self.f_plus),
         };
-        let Some(pieces) = pieces_along(model, At::new(t, x, p), s, f, &self.dt, kinked) else {
+        let dir = Directions { s, f, dt: &self.dt };
+        let Some(pieces) = pieces_along(model, At::new(t, x, p), &dir, kinked) else {
             return;
         };
         let occ = Occurrence::new(k, j);
@@ -149,8 +150,7 @@ where
             let cost =
                 |at: AtOf<'_, M>, cx: &mut _, cp: &mut _| model.event_cost_grad(occ, at, cx, cp);
             let at = At::new(t, &self.x_plus, p);
-            let dir = (&self.s_plus, &self.f_plus, &self.dt);
-            one_sided_cost(model, at, dir, kinked, &pieces, cost, &mut self.g_ev);
+            one_sided_cost(model, at, &dir, kinked, &pieces, cost, &mut self.g_ev);
             return;
         }
         let mut rx = OMatrix::<f64, M::N, M::N>::zeros_generic(n, n);
@@ -205,11 +205,26 @@ where
         if kinked.is_empty() {
             return;
         }
-        if let Some(pieces) = pieces_along(model, at, s, f, dt, &kinked) {
+        let dir = Directions { s, f, dt };
+        if let Some(pieces) = pieces_along(model, at, &dir, &kinked) {
             let cost = |at: AtOf<'_, M>, cx: &mut _, cp: &mut _| model.final_cost_grad(at, cx, cp);
-            one_sided_cost(model, at, (s, f, dt), &kinked, &pieces, cost, grad);
+            one_sided_cost(model, at, &dir, &kinked, &pieces, cost, grad);
         }
     }
+}
+
+/// Each parameter's direction through the data of a point: (dx, dθ, dt) = (S_j + f t'_j,
+/// e_j, t'_j).
+struct Directions<'a, M: HybridModel>
+where
+    DefaultAllocator: ModelAlloc<M::N, M::P>,
+{
+    /// S, the state's sensitivities.
+    s: &'a OMatrix<f64, M::N, M::P>,
+    /// f, the state's rate.
+    f: &'a OVector<f64, M::N>,
+    /// t', the time's sensitivities.
+    dt: &'a OVector<f64, M::P>,
 }
 
 /// Per parameter j, the pieces of the qps `kinked` (concatenated, in order) that the data at
@@ -218,14 +233,13 @@ where
 fn pieces_along<M: HybridModel>(
     model: &M,
     at: AtOf<'_, M>,
-    s: &OMatrix<f64, M::N, M::P>,
-    f: &OVector<f64, M::N>,
-    dt: &OVector<f64, M::P>,
+    dir: &Directions<'_, M>,
     kinked: &[usize],
 ) -> Option<Vec<Vec<bool>>>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
+    let (s, f, dt) = (dir.s, dir.f, dir.dt);
     let sizes: Vec<usize> = kinked.iter().map(|&q| model.qps()[q].kinds.len()).collect();
     let mut active = vec![false; sizes.iter().copied().max().unwrap_or(0)];
     let mut pieces = vec![Vec::new(); model.nparams().value()];
@@ -259,15 +273,11 @@ where
 /// ∂c/∂t from `cost_grad`) is the sum of one-sided derivatives along the data's coordinates:
 /// adds to `grad[j]`, per parameter, the difference between the piece j selects (`pieces`,
 /// pinned) and the unpinned one of c_x·(S_j + f t'_j) + c_θj + c_t t'_j, so that `grad[j]`
-/// holds the one-sided derivative along j's own direction; `dir` = (S, f, t').
+/// holds the one-sided derivative along j's own direction `dir`.
 fn one_sided_cost<M: HybridModel>(
     model: &M,
     at: AtOf<'_, M>,
-    dir: (
-        &OMatrix<f64, M::N, M::P>,
-        &OVector<f64, M::N>,
-        &OVector<f64, M::P>,
-    ),
+    dir: &Directions<'_, M>,
     kinked: &[usize],
     pieces: &[Vec<bool>],
     cost_grad: impl Fn(AtOf<'_, M>, &mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64,
@@ -275,7 +285,7 @@ fn one_sided_cost<M: HybridModel>(
 ) where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    let (s, f, dt) = dir;
+    let (s, f, dt) = (dir.s, dir.f, dir.dt);
     let (n, np) = (model.nstates(), model.nparams());
     let (mut cx0, mut cp0) = (
         OVector::zeros_generic(n, Const::<1>),
