@@ -288,10 +288,7 @@ where
     // (without states θⱼ moves the data along e_j alone, whose side the second sweep takes).
     let final_kink = model.info().has_final_cost
         && nalgebra::Dim::value(&model.nstates()) > 0
-        && sol
-            .diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::Kink && d.t == sol.t_end);
+        && sol.qp.iter().any(|q| !q.weakly_active().is_empty());
     if !model.qp_flow_kinks().is_empty() || sol.diagnostics.iter().any(is_event_kink) || final_kink
     {
         return Ok(Err(Handover::QpKink));
