@@ -111,6 +111,7 @@ where
     }
 
     /// All parts zero (x ∈ Rⁿ, S ∈ Rⁿˣᵖ, q, q_θ ∈ Rᵖ).
+    #[inline]
     pub fn zeros(n: N, p: P) -> Self {
         AugState {
             x: OVector::zeros_generic(n, Const::<1>),
