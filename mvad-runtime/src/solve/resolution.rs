@@ -14,20 +14,20 @@
 //!   max_i |v(t_i) − H(t_i)| ≤ RESOLUTION · (max v − min v) + 64 ε max |v|
 //! ```
 //!
-//! (max and min over the ends and the interior points), unless it keeps off zero so plainly
-//! that its defect is rounding ([`keeps_off_zero`]: all its samples the same double while its
-//! rates cannot reach zero on the piece, or, on the piece first asked about, more than [`FAR`]
-//! times its range, defect and rates' swing from zero: a qp's slack computed from large terms
-//! has rounding far above 64 ε |v|). For a smooth v the defect is
-//! O(h⁴ v⁗), far below the range of its values over the step; for a v that oscillates within
-//! the step the end slopes, which are of the order of h⁻¹ times the range for each oscillation,
-//! drive H far outside the range of the samples (aliasing can make the samples look smooth,
-//! the slopes cannot). A piece of the step that fails is cut to a quarter until it passes or
-//! reaches the resolution of t (a piece no cut resolves is rounding or a kink, not an
-//! oscillation, and is scanned whole), and the step is scanned piece by piece on its dense output
-//! (nothing is integrated again, and the state is cut from the dense output only at a
-//! crossing, as always); each piece starts at twice the length of the last one taken (not of a
-//! sliver a step's end cut short).
+//! (max and min over the ends and the interior points), unless, on the piece first asked
+//! about, it keeps to one side of zero by more than [`FAR`] times its range, defect and rates'
+//! swing together ([`keeps_off_zero`]: its defect is then rounding, which for a qp's slack
+//! computed from large terms is far above 64 ε |v|). For a smooth v the defect is O(h⁴ v⁗), far
+//! below the range of its values over the step; for a v that oscillates within the step the
+//! end slopes, which are of the order of h⁻¹ times the range for each oscillation, drive H far
+//! outside the range of the samples (aliasing can make the samples look smooth, the slopes
+//! cannot). A piece of the step that fails is cut to a quarter until it passes, until a failing
+//! function stands still on the cut (every sample the same double: [`Check::Still`]) or until
+//! the cut reaches the resolution of t. A piece no cut resolves is rounding or a kink, not an
+//! oscillation, and is scanned whole. The step is scanned piece by piece on its dense output
+//! (nothing is integrated again, and the state is cut from the dense output only at a crossing,
+//! as always); each piece starts at twice the length of the last one taken (not of a sliver a
+//! step's end cut short).
 
 use super::{time_resolution, Driver};
 use crate::integrate::zero_rows;
