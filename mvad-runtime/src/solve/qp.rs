@@ -141,7 +141,7 @@ where
             false => (&self.y.s, &self.f_minus),
             true => (&self.s_plus, &self.f_plus),
         };
-        let dir = Directions { s, f, dt: &self.dt };
+        let dir = ParamDirections { s, f, dt: &self.dt };
         let Some(pieces) = pieces_along(model, At::new(t, x, p), &dir, kinked) else {
             return;
         };
@@ -201,11 +201,14 @@ where
         let kinked: Vec<usize> = (0..states.len())
             .filter(|&q| !states[q].weakly_active().is_empty())
             .collect();
-        let dt = &self.dt_end;
         if kinked.is_empty() {
             return;
         }
-        let dir = Directions { s, f, dt };
+        let dir = ParamDirections {
+            s,
+            f,
+            dt: &self.dt_end,
+        };
         if let Some(pieces) = pieces_along(model, at, &dir, &kinked) {
             let cost = |at: AtOf<'_, M>, cx: &mut _, cp: &mut _| model.final_cost_grad(at, cx, cp);
             one_sided_cost(model, at, &dir, &kinked, &pieces, cost, grad);
@@ -215,7 +218,7 @@ where
 
 /// Each parameter's direction through the data of a point: (dx, dθ, dt) = (S_j + f t'_j,
 /// e_j, t'_j).
-struct Directions<'a, M: HybridModel>
+struct ParamDirections<'a, M: HybridModel>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
@@ -233,7 +236,7 @@ where
 fn pieces_along<M: HybridModel>(
     model: &M,
     at: AtOf<'_, M>,
-    dir: &Directions<'_, M>,
+    dir: &ParamDirections<'_, M>,
     kinked: &[usize],
 ) -> Option<Vec<Vec<bool>>>
 where
@@ -277,7 +280,7 @@ where
 fn one_sided_cost<M: HybridModel>(
     model: &M,
     at: AtOf<'_, M>,
-    dir: &Directions<'_, M>,
+    dir: &ParamDirections<'_, M>,
     kinked: &[usize],
     pieces: &[Vec<bool>],
     cost_grad: impl Fn(AtOf<'_, M>, &mut OVector<f64, M::N>, &mut OVector<f64, M::P>) -> f64,
