@@ -416,7 +416,18 @@ impl<'a> Lowerer<'a> {
                     CmpOp::Le | CmpOp::Lt => Direction::Down,
                     CmpOp::Ge | CmpOp::Gt => Direction::Up,
                 };
-                return Some((self.ar.sub(l, r), direction, None));
+                let g = self.ar.sub(l, r);
+                let Some(g) = guard::continuous(&mut self.ar, g, direction) else {
+                    self.error(
+                        cond.span(),
+                        format!(
+                            "more than {} jumps (`if` or `sign` of a value that moves along the flow) in one guard",
+                            guard::MAX_JUMPS
+                        ),
+                    );
+                    return None;
+                };
+                return Some((g, direction, None));
             }
             ast::Trigger::At(e) => Schedule::At(time(self, e)),
             ast::Trigger::Every { period, start } => {
@@ -723,6 +734,7 @@ impl<'a> Lowerer<'a> {
     }
 }
 
+pub(crate) mod guard;
 mod qp;
 
 #[cfg(test)]

@@ -197,7 +197,7 @@ pub struct EventMeta {
 
 /// Whether a leaf can change along a segment at fixed θ (a state, t, a switch bit, a qp
 /// solution or its derivative, a table row).
-fn varies_in_time(nd: &Node) -> bool {
+pub(crate) fn varies_in_time(nd: &Node) -> bool {
     matches!(
         nd,
         Node::State(_)
@@ -210,9 +210,13 @@ fn varies_in_time(nd: &Node) -> bool {
 }
 
 /// Whether `e` is affine in (x, t): its derivatives in every state and in t are functions of
-/// θ alone ([`varies_in_time`] reads none of them).
+/// θ alone ([`varies_in_time`] reads none of them), and it has no jump point (a choice whose
+/// sides differ where its moving condition is zero: its derivatives can be constant on both
+/// sides while its value jumps; see `lower::guard`).
 fn affine_in_state_and_time(ar: &mut ExprArena, e: ExprId, n: usize) -> bool {
-    if ar.depends_on(e, |nd| matches!(nd, Node::Switch(..) | Node::Column(_))) {
+    if ar.depends_on(e, |nd| matches!(nd, Node::Switch(..) | Node::Column(_)))
+        || crate::lower::guard::jumps(ar, e)
+    {
         return false;
     }
     (0..n).map(Var::State).chain([Var::Time]).all(|v| {

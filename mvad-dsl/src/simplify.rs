@@ -9,6 +9,15 @@
 
 use crate::ir::{Cmp, ExprArena, ExprId, Func, Node};
 
+/// What [`ExprArena::replace`] puts in place of a node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Replacement {
+    /// The constant.
+    Const(f64),
+    /// An expression of the same arena, taken as it is (not rebuilt).
+    Expr(ExprId),
+}
+
 impl ExprArena {
     /// The constant `v` (−0.0 is stored as 0.0).
     pub fn constant(&mut self, v: f64) -> ExprId {
@@ -232,6 +241,17 @@ impl ExprArena {
         roots: &[ExprId],
         value: impl Fn(&Node) -> Option<f64>,
     ) -> Vec<ExprId> {
+        self.replace(roots, |_, node| value(node).map(Replacement::Const))
+    }
+
+    /// Rebuilds `roots` with every node (id, node) for which `with` gives a
+    /// [`Replacement`] replaced by it, through the smart constructors (so the result is
+    /// simplified): e.g. one pointwise choice of a guard replaced by one of its sides.
+    pub fn replace(
+        &mut self,
+        roots: &[ExprId],
+        with: impl Fn(ExprId, &Node) -> Option<Replacement>,
+    ) -> Vec<ExprId> {
         let top = roots.iter().max().map_or(0, |m| m.index() + 1);
         let live = self.live(roots);
         let mut map: Vec<ExprId> = (0..top).map(|i| ExprId(i as u32)).collect();
@@ -239,9 +259,11 @@ impl ExprArena {
             if !live[i] {
                 continue;
             }
-            let node = self.node(ExprId(i as u32));
-            map[i] = match value(&node) {
-                Some(v) => self.constant(v),
+            let id = ExprId(i as u32);
+            let node = self.node(id);
+            map[i] = match with(id, &node) {
+                Some(Replacement::Const(v)) => self.constant(v),
+                Some(Replacement::Expr(e)) => e,
                 None => self.rebuild(node.map_children(|c| map[c.index()])),
             };
         }

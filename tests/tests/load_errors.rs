@@ -67,6 +67,7 @@ fn every_semantic_error_class_is_located_at_its_token() {
         ("no-states.hyb", "model M {\n    param a = 1;\n    horizon 1;\n}\n", 1, 7, "no states", "M"),
         ("reserved.hyb", "model M {\n    param sin = 1;\n    state x = 1;\n    flow { der(x) = -x; }\n}\n", 2, 11, "reserved name `sin`", "sin"),
         ("syntax.hyb", "model M {\n    state x = 1\n    flow { der(x) = -x; }\n}\n", 3, 5, "expected `;`", "flow"),
+        ("guard-jumps.hyb", "model M {\n    state x = 0;\n    flow { der(x) = 1; }\n    event e when sign(x-1)+sign(x-2)+sign(x-3)+sign(x-4)+sign(x-5)+sign(x-6)+sign(x-7) >= 0 { x = 0; }\n}\n", 4, 18, "more than 6 jumps", "sign(x-1)"),
     ];
     for &(name, src, line, col, fragment, token) in cases {
         assert_at(name, src, line, col, fragment, token);
