@@ -107,6 +107,10 @@ struct Lowerer<'a> {
     qp_deps: Vec<(bool, bool)>,
     /// Per qp: whether a flow or the running cost reads its solution.
     qp_in_flow: Vec<bool>,
+    /// Per qp: whether a guard reads its solution.
+    qp_in_guard: Vec<bool>,
+    /// A guard is being lowered.
+    in_guard: bool,
 }
 
 impl<'a> Lowerer<'a> {
@@ -150,6 +154,8 @@ impl<'a> Lowerer<'a> {
             qp_scope: None,
             qp_deps: Vec::new(),
             qp_in_flow: vec![false; model.qps().count()],
+            qp_in_guard: vec![false; model.qps().count()],
+            in_guard: false,
         }
     }
 
@@ -362,6 +368,7 @@ impl<'a> Lowerer<'a> {
         }
 
         self.assign_qp_switches(&mut qps);
+        self.no_jumping_qp_read_along_the_flow(model, &qps);
 
         let horizon = model.horizon().map(|h| {
             let id = self.expr(&h.value, Ctx::Pointwise);
@@ -410,8 +417,10 @@ impl<'a> Lowerer<'a> {
                     self.internal(cond.span(), "the guard of an event must be a comparison");
                     return None;
                 };
+                self.in_guard = true;
                 let l = self.expr(&cmp.lhs, Ctx::Pointwise);
                 let r = self.expr(&cmp.rhs, Ctx::Pointwise);
+                self.in_guard = false;
                 let direction = match cmp.op {
                     CmpOp::Le | CmpOp::Lt => Direction::Down,
                     CmpOp::Ge | CmpOp::Gt => Direction::Up,

@@ -147,3 +147,36 @@ fn valid_models_load() {
         load_str(name, src).unwrap_or_else(|e| panic!("{e}"));
     }
 }
+
+/// A qp whose data jump along the flow (`if`/`sign` of a state or t) is refused where a flow,
+/// ℓ, an observable or a guard reads it (the jump would be a jump of the flow or guard that no
+/// switching function marks); read only by a reset or a cost it is evaluated there, like
+/// their own choices, and a continuous kink (`max`) in its data is fine anywhere.
+#[test]
+fn a_qp_whose_data_jump_is_refused_where_the_jump_would_go_unmarked() {
+    let model = |data: &str, reader: &str| {
+        format!(
+            "model M {{\n    param c = 0.5;\n    state x = 0;\n    state y = 0;\n    qp q(u) {{\n        minimize 0.5 * u^2 - ({data}) * u;\n    }}\n    flow {{ der(x) = 1; der(y) = {flow}; }}\n    event e when {guard} >= 2 {{ y = y + {reset}; }}\n    cost = final(y);\n    horizon 1;\n}}\n",
+            flow = if reader == "flow" { "q.u" } else { "0" },
+            guard = if reader == "guard" { "q.u + x" } else { "x" },
+            reset = if reader == "reset" { "q.u" } else { "1" },
+        )
+    };
+    let jump = "if x >= c then 2 else 1";
+    for reader in ["flow", "guard"] {
+        let text = error_text("qp-jump.hyb", model(jump, reader).as_bytes());
+        assert!(
+            text.starts_with("qp-jump.hyb:5:8: error: the data of qp `q` jump along the flow"),
+            "{reader}: {text}"
+        );
+    }
+    for (data, reader) in [
+        (jump, "reset"),
+        ("max(x, c)", "flow"),
+        ("max(x, c)", "guard"),
+    ] {
+        if let Err(e) = load_str("qp-ok.hyb", &model(data, reader)) {
+            panic!("{data} read by a {reader}: {e}");
+        }
+    }
+}

@@ -104,6 +104,7 @@ impl<'a> Lowerer<'a> {
         let found = match self.names.get(table.name.as_str()) {
             Some(&Sym::Qp(q)) => {
                 self.qp_in_flow[q] |= ctx == Ctx::Frozen;
+                self.qp_in_guard[q] |= self.in_guard;
                 let (off, vars) = &self.qp_vars[q];
                 vars.iter().position(|v| *v == column.name).map(|k| off + k)
             }
@@ -132,6 +133,40 @@ impl<'a> Lowerer<'a> {
             if self.qp_in_flow[q] && qp.dynamic && le > 0 {
                 qp.switches = Some(next);
                 next += le;
+            }
+        }
+    }
+
+    /// The error for a qp whose data jump along the flow (an `if` or `sign` of a state or t
+    /// whose sides differ at its zero: see `lower/guard.rs`) and whose solution a flow, ℓ,
+    /// an observable or a guard reads. A qp's data are evaluated pointwise, so such a jump
+    /// would be a jump of the flow (or of the guard) that no switching function marks: the
+    /// steps would cross it without its saltation term, the event time without the jump's
+    /// sensitivity, and dC/dθ would be silently wrong. (Read only by resets and costs, the
+    /// qp is evaluated where it is read, as their own choices are.)
+    pub(super) fn no_jumping_qp_read_along_the_flow(&mut self, model: &ast::Model, qps: &[Qp]) {
+        for (q, (qp, decl)) in qps.iter().zip(model.qps()).enumerate() {
+            if !(self.qp_in_flow[q] || self.qp_in_guard[q]) {
+                continue;
+            }
+            let jumps = qp
+                .data()
+                .into_iter()
+                .any(|e| super::guard::jumps(&mut self.ar, e));
+            if jumps {
+                let reader = if self.qp_in_flow[q] {
+                    "a flow, the running cost or an observable"
+                } else {
+                    "a guard"
+                };
+                self.error_with_help(
+                    decl.name.span,
+                    format!(
+                        "the data of qp `{}` jump along the flow (an `if` or `sign` of a state or `t`), and {reader} reads its solution",
+                        decl.name.name
+                    ),
+                    "write the choice outside the qp (one qp per side, chosen by an `if` in the flow or guard), where its crossing is located",
+                );
             }
         }
     }
