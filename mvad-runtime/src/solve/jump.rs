@@ -17,6 +17,16 @@ use nalgebra::{DefaultAllocator, OMatrix};
 /// through a stiff segment, not a run over a long schedule.
 const STEPS_PER_SCHEDULED_EVENT: usize = 100;
 
+/// A switching function crossed with a cosine |σ̇| / (|∇σ||f⁻| + |∂σ/∂t|) at most this (64 ε)
+/// has a rate that is zero within the rounding of its terms: it does not cross zero but stays
+/// on it along the flow (σ = x − z/3 with z = 3x, or a qp's data that cancel only to rounding),
+/// and its sign changes, one every few steps, are noise. The crossing time is undefined there
+/// and t' = −(∇σ·S + ∂σ/∂θ)/σ̇ is rounding divided by rounding: the run stops with an error
+/// in either gradient mode (before, forward mode stopped only at σ̇ = 0 exactly, and a run
+/// without sensitivities flipped the bit at every sign change until `max_events`, for
+/// minutes).
+const TANGENT_WITHIN_ROUNDING: f64 = 64.0 * f64::EPSILON;
+
 /// How the trajectory met the guard of the event being applied.
 #[derive(Clone, Copy, Debug)]
 struct Approach {
@@ -554,6 +564,23 @@ where
         });
     }
 
+    /// The error for switching function j "crossed" at t with a rate σ̇ = ∇σ·f⁻ + ∂σ/∂t
+    /// that is zero within rounding (see [`TANGENT_WITHIN_ROUNDING`]).
+    #[cold]
+    #[inline(never)]
+    fn switch_on_zero(&self, j: usize, t: f64, rate: f64, scale: f64) -> SolveError {
+        SolveError::NonFinite {
+            t,
+            what: format!(
+                "crossing-time sensitivity of switching function {j} (a kink of abs/min/max/sign/if \
+                 or a qp constraint): its rate ∇σ·f + ∂σ/∂t = {rate:e} is zero within rounding \
+                 against its scale {scale:e}, so σ stays on zero along the flow up to rounding and \
+                 its sign changes are rounding noise, not crossings (data that cancel only to \
+                 rounding; where they cancel exactly the kink is held on zero and reported)"
+            ),
+        }
+    }
+
     /// Flips switch j at time t: identity reset, S⁺ = S⁻ + (f⁻ − f⁺) t' (the masked flows
     /// during a hold), ℓ jump.
     pub(super) fn apply_switch(&mut self, j: usize, t: f64) -> Result<(), SolveError> {
@@ -574,8 +601,13 @@ where
         self.nonfinite_x(t, &self.f_plus, || {
             format!("flow of mode `{}`", info.modes[self.mode])
         })?;
+        let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
+        let rate = self.gx.dot(&self.f_minus) + gt;
+        let scale = self.gx.norm() * self.f_minus.norm() + gt.abs();
+        if sens::cosine_of(rate, scale) <= TANGENT_WITHIN_ROUNDING {
+            return Err(self.switch_on_zero(j, t, rate, scale));
+        }
         if self.sens {
-            let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
             self.crossing_time_sensitivity(gt);
             if !self.dt.iter().all(|v| v.is_finite()) {
                 return Err(SolveError::NonFinite {
