@@ -550,14 +550,10 @@ impl ExprArena {
     }
 }
 
-/// Direction in which a guard fires.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Direction {
-    /// `<=`, `<`: g goes from + to −.
-    Down,
-    /// `>=`, `>`: g goes from − to +.
-    Up,
-}
+/// A model's static description, as the runtime reads it (crate `mvad-info`): the lowered
+/// events carry their [`EventInfo`], the qps their [`ConstraintKind`]s, and the kernels
+/// build the [`ModelInfo`] and [`QpLayerInfo`]s both back ends hand over.
+pub use mvad_info::{ConstraintKind, Direction, EventInfo, ModelInfo, QpLayerInfo, Trigger};
 
 /// One mode: its name and flow ẋ = f_m(t, x, θ) (one expression per state, frozen branches).
 #[derive(Clone, Debug)]
@@ -589,27 +585,13 @@ pub enum Schedule {
     },
 }
 
-/// What the declaration of an event says about it besides its expressions: carried
-/// unchanged from the lowered [`Event`] into the kernels' `EventMeta`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct EventDecl {
-    /// Declared name or `event_K`.
-    pub name: String,
-    /// Firing direction.
-    pub direction: Direction,
-    /// `None`: armed in every mode; `Some(m)`: only in mode m.
-    pub mode: Option<usize>,
-    /// Mode switched to after the reset.
-    pub target: Option<usize>,
-    /// Whether the event has a reset block.
-    pub has_reset: bool,
-}
-
 /// One event: its declaration, guard (or schedule), reset and event cost.
 #[derive(Clone, Debug)]
 pub struct Event {
-    /// Name, direction, modes and whether it has a reset block.
-    pub decl: EventDecl,
+    /// What the model says of it besides its expressions: name, direction, modes, whether
+    /// it has a reset block and an event cost, what fires it (`Trigger::Each { rows: 0 }`
+    /// until a back end binds the table).
+    pub info: EventInfo,
     /// g = LHS − RHS of a state event; NaN for a time event (which has no guard).
     pub guard: ExprId,
     /// `Some` for a time event: when it fires.
@@ -618,15 +600,6 @@ pub struct Event {
     pub reset: Vec<ExprId>,
     /// φ_k = Σ factor · `sum(EVENT, expr)` terms, evaluated after the reset, if any.
     pub cost: Option<ExprId>,
-}
-
-/// The kind of a lowered qp constraint aᵀu (op) b.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum QpKind {
-    /// aᵀu = b.
-    Eq,
-    /// aᵀu ≤ b (a `>=` constraint is stored negated).
-    Le,
 }
 
 /// A lowered qp: min ½uᵀHu + cᵀu s.t. a_iᵀu (= or ≤) b_i, its data expressions of (t, x, θ).
@@ -639,7 +612,7 @@ pub struct Qp {
     /// The [`Node::QpSol`] index of its first variable.
     pub offset: usize,
     /// Each constraint's kind, in declaration order.
-    pub kinds: Vec<QpKind>,
+    pub kinds: Vec<ConstraintKind>,
     /// H = ∂²F/∂u², row-major (n_u × n_u).
     pub h: Vec<ExprId>,
     /// c = ∂F/∂u at u = 0.
@@ -746,8 +719,10 @@ impl Program {
 }
 
 /// The number of qp switch bits: one per inequality constraint of each qp that has them.
-pub fn qp_switch_bits<'a>(qps: impl Iterator<Item = (Option<usize>, &'a Vec<QpKind>)>) -> usize {
+pub fn qp_switch_bits<'a>(
+    qps: impl Iterator<Item = (Option<usize>, &'a Vec<ConstraintKind>)>,
+) -> usize {
     qps.filter(|(s, _)| s.is_some())
-        .map(|(_, kinds)| kinds.iter().filter(|&&k| k == QpKind::Le).count())
+        .map(|(_, kinds)| kinds.iter().filter(|&&k| k == ConstraintKind::Le).count())
         .sum()
 }

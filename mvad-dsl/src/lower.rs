@@ -33,8 +33,8 @@ use std::collections::HashMap;
 use crate::ast::{self, BinOp, CmpOp, CostKind, ExprKind};
 use crate::diag::Diagnostic;
 use crate::ir::{
-    Cmp, Direction, Event, EventDecl, ExprArena, ExprId, Func, Mode, ModelNames, Node, Program,
-    Schedule,
+    Cmp, Direction, Event, EventInfo, ExprArena, ExprId, Func, Mode, ModelNames, Node, Program,
+    Schedule, Trigger,
 };
 use crate::span::Span;
 
@@ -304,13 +304,21 @@ impl<'a> Lowerer<'a> {
                     }
                 }
             }
+            let trigger = match schedule {
+                None => Trigger::Guard,
+                Some(Schedule::At(_)) => Trigger::At,
+                Some(Schedule::Every { .. }) => Trigger::Every,
+                Some(Schedule::Each { .. }) => Trigger::Each { rows: 0 },
+            };
             events.push(Event {
-                decl: EventDecl {
+                info: EventInfo {
                     name,
                     direction,
                     mode,
                     target,
                     has_reset: ev.resets.is_some(),
+                    has_cost: false,
+                    trigger,
                 },
                 guard,
                 schedule,
@@ -365,6 +373,7 @@ impl<'a> Lowerer<'a> {
         }
         for (ev, c) in events.iter_mut().zip(per_event.iter()) {
             ev.cost = *c;
+            ev.info.has_cost = c.is_some();
         }
 
         self.assign_qp_switches(&mut qps);

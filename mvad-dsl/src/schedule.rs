@@ -14,7 +14,9 @@
 //! method's ∂ₓ(G_x S + G_θ)·v and ∂ₜ(G_x S + G_θ)), all taken in the same arena.
 
 use crate::diff::{diff, Var};
-use crate::ir::{EventDecl, ExprArena, ExprId, ModelNames, Node, Program, QpKind, Schedule, Wrt};
+use crate::ir::{
+    EventInfo, ExprArena, ExprId, ModelInfo, ModelNames, Node, Program, QpLayerInfo, Schedule, Wrt,
+};
 
 /// A straight-line function: live nodes in topological order and its non-zero outputs.
 #[derive(Clone, Debug, PartialEq)]
@@ -167,29 +169,14 @@ pub struct TimeKernels {
     pub period: Option<(Kernel, Kernel)>,
 }
 
-/// What kind of time event an event is (mirrors the runtime's `Trigger`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TimeKind {
-    /// `at EXPR`.
-    At,
-    /// `every PERIOD from START`.
-    Every,
-    /// `at each EXPR` over the rows of table `table` (index into `ModelKernels::tables`).
-    Each {
-        /// The table.
-        table: usize,
-    },
-}
-
-/// Static description of an event (mirrors the runtime's `EventInfo`).
+/// An event as the back ends see it: its static description and what the kernels add.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventMeta {
-    /// Name, direction, modes and whether it has a reset block, as lowered.
-    pub decl: EventDecl,
-    /// Whether the cost has `sum` terms for it.
-    pub has_cost: bool,
-    /// `Some` for a time event.
-    pub time: Option<TimeKind>,
+    /// As lowered ([`crate::ir::Event::info`]); `Trigger::Each { rows: 0 }` until the table
+    /// is bound.
+    pub info: EventInfo,
+    /// The table whose rows an `at each` event runs over (index into `ModelNames::tables`).
+    pub table: Option<usize>,
     /// Whether the guard is affine in (x, t) (its derivatives in x and t are functions of θ
     /// alone): along a segment of a constant flow it is then affine in t.
     pub affine_guard: bool,
@@ -229,24 +216,12 @@ fn affine_in_state_and_time(ar: &mut ExprArena, e: ExprId, n: usize) -> bool {
 /// runtime's qp solver.
 #[derive(Clone, Debug, PartialEq)]
 pub struct QpKernels {
-    /// The qp's name.
-    pub name: String,
-    /// Its variables' names.
-    pub vars: Vec<String>,
-    /// Each constraint's kind.
-    pub kinds: Vec<QpKind>,
+    /// Its static description, as the runtime's qp bank takes it.
+    pub info: QpLayerInfo,
     /// The [`Node::QpSol`] index of its first variable.
     pub offset: usize,
-    /// Whether the data read states or t.
-    pub dynamic: bool,
-    /// The switch index of its first switch bit, if a flow reads it ([`crate::ir::Qp::switches`]).
-    pub switches: Option<usize>,
     /// Whether a flow or ℓ reads its solution.
     pub in_flow: bool,
-    /// The events whose guard or reset reads its solution (at the state before the jump).
-    pub events_before: Vec<usize>,
-    /// The events whose cost term reads its solution (at the state after the jump).
-    pub events_after: Vec<usize>,
     /// The data: slots `[0, v²)` H (row-major), then c (v), A (m×v, row-major), b (m).
     pub data: Kernel,
     /// ∂data/∂(x, θ, t): slot d·(n + p + 1) + w for data slot d and column w
@@ -304,12 +279,34 @@ impl ModelKernels {
     pub fn nparams(&self) -> usize {
         self.names.nparams()
     }
+    /// The model's static description, the one value both back ends give the runtime: the
+    /// names, modes, events and observables as lowered, the switch bits
+    /// ([`ModelKernels::nswitches`]), which costs and horizon exist, and per mode the
+    /// non-zero entries of ∂f/∂x. An `at each` event's `rows` is 0 until its table is bound.
+    pub fn info(&self) -> ModelInfo {
+        ModelInfo {
+            name: self.names.name.clone(),
+            states: self.names.states.clone(),
+            params: self.names.params.clone(),
+            param_defaults: self.names.param_defaults.clone(),
+            modes: self.mode_names.clone(),
+            initial_mode: self.initial_mode,
+            events: self.event_meta.iter().map(|e| e.info.clone()).collect(),
+            observables: self.observables.clone(),
+            switches: self.nswitches(),
+            has_running_cost: self.running_cost.is_some(),
+            has_final_cost: self.final_cost.is_some(),
+            has_horizon: self.horizon.is_some(),
+            jacobian_sparsity: self.modes.iter().map(|m| m.sparsity.clone()).collect(),
+        }
+    }
+
     /// The `at each` events whose times are a bare column `TABLE.COL` (so the column itself
     /// must not decrease, which can be checked where the table is read): (column, event).
     pub fn bare_time_columns(&self) -> Vec<(usize, usize)> {
         let mut out = Vec::new();
         for (e, (ev, meta)) in self.events.iter().zip(&self.event_meta).enumerate() {
-            let (Some(tk), Some(TimeKind::Each { .. })) = (&ev.time, meta.time) else {
+            let (Some(tk), Some(_)) = (&ev.time, meta.table) else {
                 continue;
             };
             if let [(_, id)] = tk.time.outputs[..] {
@@ -363,14 +360,14 @@ impl ModelKernels {
     /// Number of switch bits: the kinks' switching functions, then the qps' constraints.
     pub fn nswitches(&self) -> usize {
         self.switches.len()
-            + crate::ir::qp_switch_bits(self.qps.iter().map(|q| (q.switches, &q.kinds)))
+            + crate::ir::qp_switch_bits(self.qps.iter().map(|q| (q.info.switches, &q.info.kinds)))
     }
 
     /// Whether the second-order products must be difference quotients: a flow or ℓ reads
     /// the solution of a qp of the state, whose second derivatives the kernels do not have
     /// (the `QpDeriv` leaves are first derivatives; see `ir::Node::QpDeriv`).
     pub fn second_order_by_differences(&self) -> bool {
-        self.qps.iter().any(|q| q.dynamic && q.in_flow)
+        self.qps.iter().any(|q| q.info.dynamic && q.in_flow)
     }
 
     /// The support of the adjoint's gradient quadrature G = −(λᵀf_θ + w ℓ_θ) in `mode`: the
@@ -395,7 +392,7 @@ impl ModelKernels {
 
     /// Number of qp solution variables (all qps).
     pub fn nqp_vars(&self) -> usize {
-        self.qps.iter().map(|q| q.vars.len()).sum()
+        self.qps.iter().map(|q| q.info.vars.len()).sum()
     }
 }
 
@@ -661,15 +658,17 @@ pub fn kernels(program: &Program) -> ModelKernels {
                 .map(|(k, _)| k)
                 .collect();
             QpKernels {
-                name: q.name.clone(),
-                vars: q.vars.clone(),
-                kinds: q.kinds.clone(),
+                info: QpLayerInfo {
+                    name: q.name.clone(),
+                    vars: q.vars.clone(),
+                    kinds: q.kinds.clone(),
+                    dynamic: q.dynamic,
+                    switches: q.switches,
+                    events_before,
+                    events_after,
+                },
                 offset: q.offset,
-                dynamic: q.dynamic,
-                switches: q.switches,
                 in_flow: q.in_flow,
-                events_before,
-                events_after,
                 data: Kernel::new(&ar, &data),
                 data_jac: Kernel::new(&ar, &dj),
             }
@@ -682,13 +681,11 @@ pub fn kernels(program: &Program) -> ModelKernels {
         initial_mode: program.initial_mode,
         event_meta: (program.events.iter().zip(affine_guards))
             .map(|(e, affine_guard)| EventMeta {
-                decl: e.decl.clone(),
-                has_cost: e.cost.is_some(),
-                time: e.schedule.map(|s| match s {
-                    Schedule::At(_) => TimeKind::At,
-                    Schedule::Every { .. } => TimeKind::Every,
-                    Schedule::Each { table, .. } => TimeKind::Each { table },
-                }),
+                info: e.info.clone(),
+                table: match e.schedule {
+                    Some(Schedule::Each { table, .. }) => Some(table),
+                    _ => None,
+                },
                 affine_guard,
             })
             .collect(),

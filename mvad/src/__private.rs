@@ -12,8 +12,3 @@ pub use mvad_runtime::{
     ModelSens, Occurrence, Point, Switches, Trigger,
 };
 pub use nalgebra::{Const, OMatrix, OVector};
-
-/// Owned names from string literals (builds `ModelInfo` lists).
-pub fn names(list: &[&str]) -> Vec<String> {
-    list.iter().map(|s| (*s).to_owned()).collect()
-}

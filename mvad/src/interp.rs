@@ -17,10 +17,9 @@ use std::cell::RefCell;
 
 use mvad_dsl::diag::Diagnostic;
 use mvad_dsl::eval::Tape;
-use mvad_dsl::ir;
-use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
-use mvad_runtime::qp::{ConstraintKind, QpBank, QpLayerInfo, QpOptions};
-use mvad_runtime::{EventInfo, ModelInfo, Trigger};
+use mvad_dsl::schedule::{GradKernels, Kernel, ModelKernels};
+use mvad_runtime::qp::{QpBank, QpLayerInfo, QpOptions};
+use mvad_runtime::ModelInfo;
 use nalgebra::{DMatrix, DVector};
 
 use products::SecondTapes;
@@ -116,41 +115,7 @@ impl InterpretedModel {
             value: tape(&g.value),
             grad: tape(&g.grad),
         };
-        let info = ModelInfo {
-            name: k.names.name.clone(),
-            states: k.names.states.clone(),
-            params: k.names.params.clone(),
-            param_defaults: k.names.param_defaults.clone(),
-            modes: k.mode_names.clone(),
-            initial_mode: k.initial_mode,
-            events: k
-                .event_meta
-                .iter()
-                .map(|e| EventInfo {
-                    name: e.decl.name.clone(),
-                    direction: match e.decl.direction {
-                        ir::Direction::Down => mvad_runtime::Direction::Down,
-                        ir::Direction::Up => mvad_runtime::Direction::Up,
-                    },
-                    mode: e.decl.mode,
-                    target: e.decl.target,
-                    has_reset: e.decl.has_reset,
-                    has_cost: e.has_cost,
-                    trigger: match e.time {
-                        None => Trigger::Guard,
-                        Some(TimeKind::At) => Trigger::At,
-                        Some(TimeKind::Every) => Trigger::Every,
-                        Some(TimeKind::Each { .. }) => Trigger::Each { rows: 0 },
-                    },
-                })
-                .collect(),
-            observables: k.observables.clone(),
-            switches: k.nswitches(),
-            has_running_cost: k.running_cost.is_some(),
-            has_final_cost: k.final_cost.is_some(),
-            has_horizon: k.horizon.is_some(),
-            jacobian_sparsity: k.modes.iter().map(|m| m.sparsity.clone()).collect(),
-        };
+        let info = k.info();
         let all = k.all_kernels();
         let nregs = all.iter().map(|k| k.nodes.len()).max().unwrap_or(0);
         let nout = all.iter().map(|k| k.len).max().unwrap_or(0);
@@ -160,26 +125,7 @@ impl InterpretedModel {
             .map(|so| so.x_entries.len())
             .max()
             .unwrap_or(0);
-        let qp_info: Vec<QpLayerInfo> = k
-            .qps
-            .iter()
-            .map(|q| QpLayerInfo {
-                name: q.name.clone(),
-                vars: q.vars.clone(),
-                kinds: q
-                    .kinds
-                    .iter()
-                    .map(|kind| match kind {
-                        ir::QpKind::Eq => ConstraintKind::Eq,
-                        ir::QpKind::Le => ConstraintKind::Le,
-                    })
-                    .collect(),
-                dynamic: q.dynamic,
-                switches: q.switches,
-                events_before: q.events_before.clone(),
-                events_after: q.events_after.clone(),
-            })
-            .collect();
+        let qp_info: Vec<QpLayerInfo> = k.qps.iter().map(|q| q.info.clone()).collect();
         InterpretedModel {
             qp_tapes: k
                 .qps

@@ -55,6 +55,43 @@ where
     sol
 }
 
+/// Both doors (the loaded model, then the compiled one) in both modes, forward then adjoint,
+/// at θ = `p`, each checked by [`check`]: the four (options, solution) pairs.
+#[track_caller]
+fn both_doors<A: HybridModel, B: HybridModel>(
+    loaded: &A,
+    compiled: &B,
+    p: &[f64],
+    right: &[f64],
+    left: &[f64],
+    tol: f64,
+) -> Vec<(Options, Solution)>
+where
+    DefaultAllocator: ModelAlloc<A::N, A::P> + ModelAlloc<B::N, B::P>,
+{
+    let mut out = Vec::with_capacity(4);
+    for opts in [tight(), adjoint()] {
+        let a = check(loaded, p, &opts, right, left, tol);
+        let b = check(compiled, p, &opts, right, left, tol);
+        out.extend([(opts.clone(), a), (opts, b)]);
+    }
+    out
+}
+
+/// Whether the run reported a `kink` diagnostic.
+fn has_kink(sol: &Solution) -> bool {
+    sol.diagnostics
+        .iter()
+        .any(|d| d.kind == DiagnosticKind::Kink)
+}
+
+/// A smooth run: no `kink` diagnostic, and the gradient mode asked for kept.
+#[track_caller]
+fn assert_smooth(sol: &Solution, opts: &Options) {
+    assert!(!has_kink(sol));
+    assert_eq!(sol.stats.mode, opts.gradient_mode);
+}
+
 /// The `kink` diagnostic of a qp kink along the flow, with the constraint and the time.
 fn flow_kink(sol: &Solution) -> &mvad::Diagnostic {
     sol.diagnostics
@@ -69,19 +106,21 @@ fn a_constraint_weakly_active_along_the_whole_run_has_both_one_sided_gradients()
     let (right, left) = ([E - 1.0, 0.0], [E - 1.0, E - 2.0]);
     let loaded = loaded_test_model("qp_weak_flow.hyb");
     let compiled = QpWeakFlow::new();
-    for opts in [tight(), adjoint()] {
-        let a = check(&loaded, &[2.0, 0.0], &opts, &right, &left, 1e-9);
-        assert!(a.gradient_left.is_some());
-        let b = check(&compiled, &[2.0, 0.0], &opts, &right, &left, 1e-9);
-        for sol in [&a, &b] {
-            let d = flow_kink(sol);
-            assert!(d.message.contains("qp `q`, constraint 0"), "{}", d.message);
-            assert_eq!(d.t, 0.0);
-            // The adjoint cannot sweep a persistent kink: forward mode computed it, and says so.
-            assert_eq!(sol.stats.mode, GradientMode::Forward);
-            if opts.gradient_mode == GradientMode::Adjoint {
-                assert!(d.message.contains("forward mode"), "{}", d.message);
-            }
+    let runs = both_doors(&loaded, &compiled, &[2.0, 0.0], &right, &left, 1e-9);
+    for (i, (opts, sol)) in runs.iter().enumerate() {
+        if i % 2 == 0 {
+            assert!(
+                sol.gradient_left.is_some(),
+                "the loaded door's left gradient"
+            );
+        }
+        let d = flow_kink(sol);
+        assert!(d.message.contains("qp `q`, constraint 0"), "{}", d.message);
+        assert_eq!(d.t, 0.0);
+        // The adjoint cannot sweep a persistent kink: forward mode computed it, and says so.
+        assert_eq!(sol.stats.mode, GradientMode::Forward);
+        if opts.gradient_mode == GradientMode::Adjoint {
+            assert!(d.message.contains("forward mode"), "{}", d.message);
         }
     }
 }
@@ -118,15 +157,10 @@ fn a_kink_on_part_of_the_run_ending_at_a_crossing_or_not() {
     // a = −1: it turns inactive at t = 1/2.
     let right2 = [E - 1.0, 0.0, 0.0];
     let left2 = [E - 1.0, h - 1.5 + (h - 1.0).powi(2), 0.0];
-    for opts in [tight(), adjoint()] {
-        for (a, r, l) in [(1.0, &right, &left), (-1.0, &right2, &left2)] {
-            for sol in [
-                check(&loaded, &[2.0, 0.0, a], &opts, r, l, 1e-9),
-                check(&compiled, &[2.0, 0.0, a], &opts, r, l, 1e-9),
-            ] {
-                assert_eq!(flow_kink(&sol).t, 0.0);
-                assert_eq!(sol.stats.switch_crossings, if a > 0.0 { 2 } else { 1 });
-            }
+    for (a, r, l) in [(1.0, &right, &left), (-1.0, &right2, &left2)] {
+        for (_, sol) in both_doors(&loaded, &compiled, &[2.0, 0.0, a], r, l, 1e-9) {
+            assert_eq!(flow_kink(&sol).t, 0.0);
+            assert_eq!(sol.stats.switch_crossings, if a > 0.0 { 2 } else { 1 });
         }
     }
 }
@@ -139,11 +173,7 @@ fn a_transversal_qp_crossing_is_not_a_kink() {
     for opts in [tight(), adjoint()] {
         let sol = solve_at(&m, &m.info().param_defaults, &opts).expect("solves");
         assert_eq!(sol.stats.switch_crossings, 3);
-        assert!(!sol
-            .diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::Kink));
-        assert_eq!(sol.stats.mode, opts.gradient_mode);
+        assert_smooth(&sol, &opts);
     }
 }
 
@@ -164,16 +194,11 @@ fn a_qp_read_by_a_reset_at_its_kink_mid_run() {
     let (right, left) = ([3.5, 3.5, 0.0], [0.0, 0.0, -3.5]);
     let loaded = loaded_test_model("qp_reset_kink.hyb");
     let compiled = QpResetKink::new();
-    for opts in [tight(), adjoint()] {
-        for sol in [
-            check(&loaded, &[1.0, 0.5, 1.5], &opts, &right, &left, 1e-12),
-            check(&compiled, &[1.0, 0.5, 1.5], &opts, &right, &left, 1e-12),
-        ] {
-            let d = event_kink(&sol, "hit");
-            assert!(d.message.contains("qp `q2`, constraint 0"), "{}", d.message);
-            assert_near(d.t, 1.5, 1e-14, "the kink's time");
-            assert_eq!(sol.stats.mode, GradientMode::Forward);
-        }
+    for (_, sol) in both_doors(&loaded, &compiled, &[1.0, 0.5, 1.5], &right, &left, 1e-12) {
+        let d = event_kink(&sol, "hit");
+        assert!(d.message.contains("qp `q2`, constraint 0"), "{}", d.message);
+        assert_near(d.t, 1.5, 1e-14, "the kink's time");
+        assert_eq!(sol.stats.mode, GradientMode::Forward);
     }
 }
 
@@ -184,17 +209,12 @@ fn each_parameter_crosses_an_event_kink_on_its_own_side() {
     let (right, left) = ([4.5, 0.0, 0.0], [0.0, -3.0, -3.0]);
     let loaded = loaded_test_model("qp_event_kink.hyb");
     let compiled = QpEventKink::new();
-    for opts in [tight(), adjoint()] {
-        for sol in [
-            check(&loaded, &[-1.0, 1.5, -1.5], &opts, &right, &left, 1e-12),
-            check(&compiled, &[-1.0, 1.5, -1.5], &opts, &right, &left, 1e-12),
-        ] {
-            assert_eq!(event_kink(&sol, "hit").t, 1.5);
-            assert_eq!(sol.stats.mode, GradientMode::Forward);
-            if opts.gradient_mode == GradientMode::Adjoint {
-                let d = event_kink(&sol, "hit");
-                assert!(d.message.contains("forward mode"), "{}", d.message);
-            }
+    for (opts, sol) in both_doors(&loaded, &compiled, &[-1.0, 1.5, -1.5], &right, &left, 1e-12) {
+        assert_eq!(event_kink(&sol, "hit").t, 1.5);
+        assert_eq!(sol.stats.mode, GradientMode::Forward);
+        if opts.gradient_mode == GradientMode::Adjoint {
+            let d = event_kink(&sol, "hit");
+            assert!(d.message.contains("forward mode"), "{}", d.message);
         }
     }
     // Off the kink (e = −1.6: the argument is 0.1): ∇C = 3·(tau, v, −1).
@@ -207,11 +227,7 @@ fn each_parameter_crosses_an_event_kink_on_its_own_side() {
 fn smooth_in_both_modes(m: &InterpretedModel, p: &[f64], grad: &[f64]) {
     for opts in [tight(), adjoint()] {
         let sol = check(m, p, &opts, grad, grad, 1e-12);
-        assert!(!sol
-            .diagnostics
-            .iter()
-            .any(|d| d.kind == DiagnosticKind::Kink));
-        assert_eq!(sol.stats.mode, opts.gradient_mode);
+        assert_smooth(&sol, &opts);
     }
 }
 
@@ -225,17 +241,9 @@ fn a_final_cost_kink_at_t_follows_each_parameters_side() {
     let (right, left) = ([4.5, 0.0, 0.0], [0.0, -3.0, -3.0]);
     let loaded = loaded_test_model("qp_final_kink.hyb");
     let compiled = TKink::new();
-    for opts in [tight(), adjoint()] {
-        for sol in [
-            check(&loaded, &[-1.0, 1.5, -1.5], &opts, &right, &left, 1e-12),
-            check(&compiled, &[-1.0, 1.5, -1.5], &opts, &right, &left, 1e-12),
-        ] {
-            assert_eq!(sol.stats.mode, GradientMode::Forward);
-            assert!(sol
-                .diagnostics
-                .iter()
-                .any(|d| d.kind == DiagnosticKind::Kink));
-        }
+    for (_, sol) in both_doors(&loaded, &compiled, &[-1.0, 1.5, -1.5], &right, &left, 1e-12) {
+        assert_eq!(sol.stats.mode, GradientMode::Forward);
+        assert!(has_kink(&sol));
     }
     // Off the kink (e = −1.6: the argument is 0.1): ∇C = 3·(T, v, −1).
     smooth_in_both_modes(&loaded, &[-1.0, 1.5, -1.6], &[4.5, -3.0, -3.0]);

@@ -1,89 +1,32 @@
 //! The model trait's methods, each cut from its kernel by [`Gen`]: the static description
-//! (`ModelInfo`), the `HybridModel` core and the fused sparse `ModelSens::rhs_sens`.
+//! (`ModelInfo`, `info.rs`), the `HybridModel` core and the fused sparse `ModelSens::rhs_sens`.
 
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
 use super::emit::Body;
+use super::info::Build;
 use super::products::{a_s_plus_b, Coef};
-use super::{lit, usize_lit, Gen};
-use crate::ir::Direction;
-use crate::schedule::{GradKernels, Kernel, ModelKernels, TimeKind};
+use super::{usize_lit, Gen};
+use crate::schedule::{GradKernels, Kernel, ModelKernels};
 
 impl Gen<'_> {
+    /// The model's [`ModelKernels::info`], rebuilt; the row count of each `at each` event's
+    /// table is `rows[t]`, bound by the constructor of a model with tables.
     pub(super) fn info(&self, k: &ModelKernels) -> TokenStream {
-        let pr = quote!(::mvad::__private);
-        let strs = |v: &[String]| quote!(#pr::names(&[#(#v),*]));
-        let name = &k.names.name;
-        let states = strs(&k.names.states);
-        let params = strs(&k.names.params);
-        let defaults: Vec<TokenStream> = k.names.param_defaults.iter().map(|&v| lit(v)).collect();
-        let modes = strs(&k.mode_names);
-        let init = usize_lit(k.initial_mode);
-        let opt = |o: Option<usize>| match o {
-            Some(i) => {
-                let i = usize_lit(i);
-                quote!(::core::option::Option::Some(#i))
-            }
-            None => quote!(::core::option::Option::None),
-        };
-        let events = k.event_meta.iter().map(|e| {
-            let d = &e.decl;
-            let name = &d.name;
-            let dir = match d.direction {
-                Direction::Down => quote!(#pr::Direction::Down),
-                Direction::Up => quote!(#pr::Direction::Up),
-            };
-            let (mode, target) = (opt(d.mode), opt(d.target));
-            let (hr, hc) = (d.has_reset, e.has_cost);
-            // `rows` is bound by the constructor of a model with tables.
-            let trigger = match e.time {
-                None => quote!(#pr::Trigger::Guard),
-                Some(TimeKind::At) => quote!(#pr::Trigger::At),
-                Some(TimeKind::Every) => quote!(#pr::Trigger::Every),
-                Some(TimeKind::Each { table }) => {
-                    let t = usize_lit(table);
-                    quote!(#pr::Trigger::Each { rows: rows[#t] })
-                }
-            };
-            quote!(#pr::EventInfo {
-                name: ::core::convert::From::from(#name),
-                direction: #dir,
-                mode: #mode,
-                target: #target,
-                has_reset: #hr,
-                has_cost: #hc,
-                trigger: #trigger,
-            })
+        let info = k.info().build();
+        let rows = k.event_meta.iter().enumerate().filter_map(|(e, m)| {
+            let (e, t) = (usize_lit(e), usize_lit(m.table?));
+            Some(quote!(info.events[#e].trigger = ::mvad::__private::Trigger::Each { rows: rows[#t] };))
         });
-        let obs = strs(&k.observables);
-        let nsw = usize_lit(k.nswitches());
-        let (hrc, hfc, hh) = (
-            k.running_cost.is_some(),
-            k.final_cost.is_some(),
-            k.horizon.is_some(),
-        );
-        let sparsity = k.modes.iter().map(|m| {
-            let e = m.sparsity.iter().map(|&(r, c)| {
-                let (r, c) = (usize_lit(r), usize_lit(c));
-                quote!((#r, #c))
-            });
-            quote!(::core::convert::From::from([#(#e),*]))
-        });
-        quote!(#pr::ModelInfo {
-            name: ::core::convert::From::from(#name),
-            states: #states,
-            params: #params,
-            param_defaults: ::core::convert::From::from([#(#defaults),*]),
-            modes: #modes,
-            initial_mode: #init,
-            events: ::core::convert::From::from([#(#events),*]),
-            observables: #obs,
-            switches: #nsw,
-            has_running_cost: #hrc,
-            has_final_cost: #hfc,
-            has_horizon: #hh,
-            jacobian_sparsity: ::core::convert::From::from([#(#sparsity),*]),
+        let rows: Vec<TokenStream> = rows.collect();
+        if rows.is_empty() {
+            return info;
+        }
+        quote!({
+            let mut info = #info;
+            #(#rows)*
+            info
         })
     }
 

@@ -201,7 +201,7 @@ fn constructors(
         quote!((#t, #c))
     });
     let times = k.bare_time_columns().into_iter().map(|(c, e)| {
-        let (c, e) = (usize_lit(c), &k.event_meta[e].decl.name);
+        let (c, e) = (usize_lit(c), &k.event_meta[e].info.name);
         quote!((#c, #e))
     });
     let nc = usize_lit(k.names.columns.len());
@@ -303,6 +303,7 @@ fn usize_lit(i: usize) -> Literal {
 }
 
 mod emit;
+mod info;
 mod methods;
 mod products;
 mod qp;

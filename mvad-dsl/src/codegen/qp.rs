@@ -9,8 +9,9 @@
 use proc_macro2::TokenStream;
 use quote::quote;
 
+use super::info::Build;
 use super::{usize_lit, Gen};
-use crate::ir::{Node, QpKind};
+use crate::ir::Node;
 use crate::schedule::{Kernel, ModelKernels};
 
 /// Tokens of the qp part of a model (all empty for a model without qps).
@@ -60,37 +61,7 @@ impl Gen<'_> {
         }
         let pr = quote!(::mvad::__private);
         let (n, p) = (usize_lit(k.nstates()), usize_lit(k.nparams()));
-        let infos: Vec<TokenStream> = k
-            .qps
-            .iter()
-            .map(|q| {
-                let name = &q.name;
-                let vars = &q.vars;
-                let kinds = q.kinds.iter().map(|kind| match kind {
-                    QpKind::Eq => quote!(#pr::ConstraintKind::Eq),
-                    QpKind::Le => quote!(#pr::ConstraintKind::Le),
-                });
-                let dynamic = q.dynamic;
-                let switches = match q.switches {
-                    Some(j) => {
-                        let j = usize_lit(j);
-                        quote!(::core::option::Option::Some(#j))
-                    }
-                    None => quote!(::core::option::Option::None),
-                };
-                let before = q.events_before.iter().map(|&k| usize_lit(k));
-                let after = q.events_after.iter().map(|&k| usize_lit(k));
-                quote!(#pr::QpLayerInfo {
-                    name: ::core::convert::From::from(#name),
-                    vars: #pr::names(&[#(#vars),*]),
-                    kinds: ::core::convert::From::from([#(#kinds),*]),
-                    dynamic: #dynamic,
-                    switches: #switches,
-                    events_before: ::std::vec![#(#before),*],
-                    events_after: ::std::vec![#(#after),*],
-                })
-            })
-            .collect();
+        let infos = k.qps.iter().map(|q| q.info.build());
         let arms = k.qps.iter().enumerate().map(|(i, q)| {
             let i = usize_lit(i);
             let data = self.fill_body(&q.data, quote!(data), |s| {

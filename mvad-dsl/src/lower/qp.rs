@@ -20,7 +20,7 @@
 use super::{Ctx, Lowerer, Sym};
 use crate::ast::{self, ConstraintOp};
 use crate::diff::{diff, Var};
-use crate::ir::{ExprArena, ExprId, Node, Qp, QpKind};
+use crate::ir::{ConstraintKind, ExprArena, ExprId, Node, Qp};
 use crate::span::Span;
 
 /// The degree of a non-polynomial expression.
@@ -129,7 +129,11 @@ impl<'a> Lowerer<'a> {
         let mut next = self.switches.len();
         for (q, qp) in qps.iter_mut().enumerate() {
             qp.in_flow = self.qp_in_flow[q];
-            let le = qp.kinds.iter().filter(|&&k| k == QpKind::Le).count();
+            let le = qp
+                .kinds
+                .iter()
+                .filter(|&&k| k == ConstraintKind::Le)
+                .count();
             if self.qp_in_flow[q] && qp.dynamic && le > 0 {
                 qp.switches = Some(next);
                 next += le;
@@ -176,7 +180,7 @@ impl<'a> Lowerer<'a> {
         let (off, nv) = (self.qp_vars[index].0, q.vars.len());
         self.qp_scope = Some(index);
         let f = self.expr(&q.objective, Ctx::Pointwise);
-        let gs: Vec<(QpKind, ExprId, Span)> = q
+        let gs: Vec<(ConstraintKind, ExprId, Span)> = q
             .constraints
             .iter()
             .map(|c| {
@@ -185,9 +189,9 @@ impl<'a> Lowerer<'a> {
                     self.expr(&c.rhs, Ctx::Pointwise),
                 );
                 let (kind, g) = match c.op {
-                    ConstraintOp::Le | ConstraintOp::Lt => (QpKind::Le, self.ar.sub(l, r)),
-                    ConstraintOp::Ge | ConstraintOp::Gt => (QpKind::Le, self.ar.sub(r, l)),
-                    ConstraintOp::Eq => (QpKind::Eq, self.ar.sub(l, r)),
+                    ConstraintOp::Le | ConstraintOp::Lt => (ConstraintKind::Le, self.ar.sub(l, r)),
+                    ConstraintOp::Ge | ConstraintOp::Gt => (ConstraintKind::Le, self.ar.sub(r, l)),
+                    ConstraintOp::Eq => (ConstraintKind::Eq, self.ar.sub(l, r)),
                 };
                 (kind, g, c.span)
             })

@@ -26,11 +26,11 @@ fn events_directions_names_and_resets() {
     );
     assert_eq!(p.modes.len(), 1);
     assert_eq!(p.modes[0].name, "main");
-    let names: Vec<&str> = p.events.iter().map(|e| e.decl.name.as_str()).collect();
+    let names: Vec<&str> = p.events.iter().map(|e| e.info.name.as_str()).collect();
     assert_eq!(names, ["impact", "event_1", "event_2"]);
-    let dirs: Vec<Direction> = p.events.iter().map(|e| e.decl.direction).collect();
+    let dirs: Vec<Direction> = p.events.iter().map(|e| e.info.direction).collect();
     assert_eq!(dirs, [Direction::Down, Direction::Up, Direction::Up]);
-    assert!(!p.events[1].decl.has_reset);
+    assert!(!p.events[1].info.has_reset);
     // Identity for unassigned states; right-hand sides read the pre-event state.
     assert_eq!(p.events[0].reset[0], p.arena.clone().state(0));
     let x = [0.3, 1.7];

@@ -21,31 +21,8 @@
 use super::layer::Layer;
 #[cfg(doc)]
 use super::QpSolver;
-use super::{ConstraintKind, ConstraintStatus, QpError, QpOptions, Side};
+use super::{ConstraintKind, ConstraintStatus, QpError, QpLayerInfo, QpOptions, Side};
 use crate::model::Switches;
-
-/// Static description of one qp layer.
-#[derive(Clone, Debug, PartialEq)]
-pub struct QpLayerInfo {
-    /// The qp's name.
-    pub name: String,
-    /// Its variables' names (the order of u).
-    pub vars: Vec<String>,
-    /// Its constraints' kinds, in declaration order.
-    pub kinds: Vec<ConstraintKind>,
-    /// Whether its data depend on states or t (solved along the trajectory) rather than only
-    /// on θ.
-    pub dynamic: bool,
-    /// The model's switch index of the first of its switch bits, one per inequality
-    /// constraint in order, when a flow reads its solution (its active set is then frozen
-    /// along the steps); `None` otherwise.
-    pub switches: Option<usize>,
-    /// The events whose guard or reset reads its solution (at the state before the jump):
-    /// a weakly active constraint there is a kink of the cost in θ at the event.
-    pub events_before: Vec<usize>,
-    /// The events whose cost term reads its solution (at the state after the jump).
-    pub events_after: Vec<usize>,
-}
 
 /// A qp's solution at one point: what `grad --json` reports under `"qp"`.
 #[derive(Clone, Debug, PartialEq)]

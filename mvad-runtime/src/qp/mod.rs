@@ -46,21 +46,17 @@ mod flow;
 mod layer;
 mod solver;
 
-pub use bank::{QpBank, QpFlowKink, QpLayerInfo, QpState};
+pub use bank::{QpBank, QpFlowKink, QpState};
 pub use error::QpError;
 pub use flow::FlowPieces;
+/// Static description of one qp layer (crate `mvad-info`, shared with the front end).
+pub use mvad_info::QpLayerInfo;
 pub use solver::QpSolver;
 
 use nalgebra::{DMatrix, DVector};
 
-/// The kind of a constraint aᵢᵀu (op) bᵢ.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ConstraintKind {
-    /// aᵢᵀu = bᵢ (multiplier of either sign).
-    Eq,
-    /// aᵢᵀu ≤ bᵢ (multiplier ≥ 0). A `≥` constraint is written with −aᵢ, −bᵢ.
-    Le,
-}
+/// The kind of a constraint aᵢᵀu (op) bᵢ (crate `mvad-info`, shared with the front end).
+pub use mvad_info::ConstraintKind;
 
 /// A constraint's role at the solution.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

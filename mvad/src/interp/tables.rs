@@ -6,7 +6,7 @@
 use std::cell::{Cell, Ref, RefCell};
 
 use mvad_dsl::eval::Tape;
-use mvad_dsl::schedule::{ModelKernels, TimeKind};
+use mvad_dsl::schedule::ModelKernels;
 use mvad_runtime::Trigger;
 
 use super::run::{pt_theta, TapeAt};
@@ -43,16 +43,9 @@ impl Tables {
             times: k
                 .bare_time_columns()
                 .into_iter()
-                .map(|(c, e)| (c, k.event_meta[e].decl.name.clone()))
+                .map(|(c, e)| (c, k.event_meta[e].info.name.clone()))
                 .collect(),
-            each: k
-                .event_meta
-                .iter()
-                .map(|m| match m.time {
-                    Some(TimeKind::Each { table }) => Some(table),
-                    _ => None,
-                })
-                .collect(),
+            each: k.event_meta.iter().map(|m| m.table).collect(),
             values: Vec::new(),
             row: RefCell::new(vec![f64::NAN; k.names.columns.len()]),
             filled: Cell::new(None),

@@ -1,7 +1,7 @@
 //! Lowering of qps: the data H, c, A, b against hand-derived values, and the symbolic
 //! checks (degree, convexity, constraints that involve the variables), each located.
 
-use crate::ir::{Point, Program, QpKind};
+use crate::ir::{ConstraintKind, Point, Program};
 use crate::testing::located;
 
 fn program(src: &str) -> Program {
@@ -27,7 +27,10 @@ fn data_of_a_two_variable_qp() {
     );
     let q = &p.qps[0];
     assert_eq!(q.vars, ["u", "v"]);
-    assert_eq!(q.kinds, [QpKind::Le, QpKind::Le, QpKind::Eq]);
+    assert_eq!(
+        q.kinds,
+        [ConstraintKind::Le, ConstraintKind::Le, ConstraintKind::Eq]
+    );
     assert!(q.dynamic);
     let theta = [3.0, 0.5, 2.0, 1.0, -1.0, 4.0];
     let at = Point {
