@@ -488,17 +488,8 @@ impl Scanner {
         sample(t1, true, &self.watched, &mut self.tmp);
         let mut first_right = f64::INFINITY;
         for i in 0..self.watched.len() {
-            let w = self.watched[i];
-            let strict = self.strict(w);
-            let b = self.tmp[w];
+            let (w, strict, a, b) = self.line_ends(i, t0, t1)?;
             let tr = &mut self.tracks[w];
-            tr.bracket = None;
-            tr.peak = None;
-            let a = tr.start_val;
-            if let Some(t) = line_nan_at(t0, t1, a, b) {
-                return Err((w, t));
-            }
-            tr.fresh = false;
             if !(tr.armed && triggered(b, strict)) {
                 tr.commit_line(a, b, t1 - t0);
                 continue;
@@ -520,6 +511,30 @@ impl Scanner {
             }
         }
         Ok(first_right)
+    }
+
+    /// The i-th watched function w of a step of lines [t₀, t₁], its value just sampled at t₁
+    /// in `tmp`: its bracket, peak and freshness cleared (a line has no dip, and the step
+    /// has begun), and (w, strict, v(t₀), v(t₁)); `Err((w, t))` where the line is NaN.
+    #[inline(always)]
+    fn line_ends(
+        &mut self,
+        i: usize,
+        t0: f64,
+        t1: f64,
+    ) -> Result<(usize, bool, f64, f64), (usize, f64)> {
+        let w = self.watched[i];
+        let strict = self.strict(w);
+        let b = self.tmp[w];
+        let tr = &mut self.tracks[w];
+        tr.bracket = None;
+        tr.peak = None;
+        tr.fresh = false;
+        let a = tr.start_val;
+        if let Some(t) = line_nan_at(t0, t1, a, b) {
+            return Err((w, t));
+        }
+        Ok((w, strict, a, b))
     }
 
     /// On a segment on which every watched value is a line, v_w(t) = v_w(t₀) + v̇_w (t − t₀)
@@ -575,17 +590,8 @@ impl Scanner {
         self.peaked = false;
         sample(t1, true, &self.watched, &mut self.tmp);
         for i in 0..self.watched.len() {
-            let w = self.watched[i];
-            let strict = self.strict(w);
-            let b = self.tmp[w];
+            let (w, strict, a, b) = self.line_ends(i, t0, t1)?;
             let tr = &mut self.tracks[w];
-            tr.bracket = None;
-            tr.peak = None;
-            tr.fresh = false;
-            let a = tr.start_val;
-            if let Some(t) = line_nan_at(t0, t1, a, b) {
-                return Err((w, t));
-            }
             if tr.armed && triggered(b, strict) {
                 self.found.push(Crossing { w, t: t1 });
             } else {
