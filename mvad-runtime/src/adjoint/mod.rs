@@ -64,38 +64,6 @@ use std::time::Instant;
 use sweep::{sweep, Sample};
 use transpose::JumpWork;
 
-/// [`crate::solve::solve_with`] in adjoint mode: [`pull_back`] with w_C = 1 and no samples,
-/// or forward mode where the adjoint does not apply (see the module doc).
-pub(crate) fn solve_with<M: HybridModel, K: EventSink>(
-    model: &M,
-    params: &OVector<f64, M::P>,
-    opts: &Options,
-    sink: &mut K,
-) -> Result<Solution, SolveError>
-where
-    DefaultAllocator: ModelAlloc<M::N, M::P>,
-{
-    let start = Instant::now();
-    let cost_only = Cotangents {
-        cost: 1.0,
-        times: &[],
-        observables: &[],
-    };
-    match pull_back(model, params, opts, sink, &cost_only)? {
-        Ok((sol, _)) => Ok(sol),
-        Err(handover) => {
-            let fwd = Options {
-                gradient_mode: GradientMode::Forward,
-                ..opts.clone()
-            };
-            let (mut sol, _) = run_loop(model, params, &fwd, sink, false)?;
-            note_fallback(&mut sol, handover);
-            sol.stats.wall_seconds = start.elapsed().as_secs_f64();
-            Ok(sol)
-        }
-    }
-}
-
 /// Why the adjoint hands a run over to forward mode.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Handover {

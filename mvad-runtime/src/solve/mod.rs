@@ -98,10 +98,30 @@ where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
     let adjoint = opts.gradient_mode.resolve(model.nparams().value()) == GradientMode::Adjoint;
-    if opts.sensitivities && adjoint {
-        return crate::adjoint::solve_with(model, params, opts, sink);
+    if !(opts.sensitivities && adjoint) {
+        return Ok(run_loop(model, params, opts, sink, false)?.0);
     }
-    Ok(run_loop(model, params, opts, sink, false)?.0)
+    // Adjoint mode: the pull-back of w_C = 1 with no samples, or forward mode where the
+    // adjoint does not apply (see `crate::adjoint`).
+    let start = std::time::Instant::now();
+    let cost_only = crate::vjp::Cotangents {
+        cost: 1.0,
+        times: &[],
+        observables: &[],
+    };
+    match crate::adjoint::pull_back(model, params, opts, sink, &cost_only)? {
+        Ok((sol, _)) => Ok(sol),
+        Err(handover) => {
+            let fwd = Options {
+                gradient_mode: GradientMode::Forward,
+                ..opts.clone()
+            };
+            let (mut sol, _) = run_loop(model, params, &fwd, sink, false)?;
+            crate::adjoint::note_fallback(&mut sol, handover);
+            sol.stats.wall_seconds = start.elapsed().as_secs_f64();
+            Ok(sol)
+        }
+    }
 }
 
 /// One run of the event loop, with forward sensitivities or primal only as
