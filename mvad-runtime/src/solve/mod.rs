@@ -33,6 +33,7 @@ mod conditioning;
 mod finish;
 mod jump;
 mod line;
+mod order;
 mod qp;
 pub(crate) use qp::is_event_kink;
 mod record;
@@ -234,6 +235,9 @@ where
     /// The states held at the limit of an accumulation (ascending; empty but during a hold,
     /// see `zeno`): the rows of the flow the integrator and every jump hold at zero.
     held: Vec<usize>,
+    /// The order of time events and state events within the latter's location error (see
+    /// `order`).
+    order: order::Order,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
     zeno_stop: Option<(f64, f64)>,
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
@@ -327,6 +331,7 @@ where
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
             held: Vec::new(),
+            order: order::Order::new(info.events.iter().any(|e| e.is_time_event())),
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| {
@@ -645,6 +650,7 @@ where
         if !scanned && !self.scanner.found.is_empty() {
             self.join_state_events_due(t);
         }
+        self.check_order(t, scanned);
         if self.scanner.found.len() > 1 {
             self.scanner.found.sort_unstable_by_key(|c| c.w);
         }
