@@ -236,3 +236,50 @@ fn a_sampler_at_a_thermostat_switch_is_reported() {
         );
     }
 }
+
+/// A sampler armed only in the mode the switch-off enters (`cooling`): 1e-8 after the
+/// located switch it fires there, but had the switch come after it (within the location
+/// error) its occurrence would have passed in `heating`, which does not arm it. Reported
+/// from the switch's instant (check (b) over the target mode's time events); 1e-3 after it,
+/// not, with z = h = 0 held from the sample: C = temp(T).
+#[test]
+fn a_sampler_armed_only_in_the_target_mode_is_reported() {
+    let src = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/thermo_sampled.hyb"
+    ))
+    .expect("reads")
+    .replace("    event samp every per from off { z = h; }\n", "")
+    .replace(
+        "event switch_on when temp <= lo -> heating { h = 1; }",
+        "event switch_on when temp <= lo -> heating { h = 1; }\n        \
+         event samp every per from off { z = h + 2; }",
+    );
+    assert!(src.contains("z = h + 2"), "{src}");
+    let m = InterpretedModel::from_source(&src).expect("valid");
+    let t1 = 2.0 * (11.0f64 / 8.0).ln();
+    for mode in [GradientMode::Forward, GradientMode::Adjoint] {
+        let opts = Options {
+            rtol: 1e-6,
+            atol: 1e-8,
+            gradient_mode: mode,
+            ..Options::default()
+        };
+        let near = run_loaded(&m, &[0.5, 18.0, 22.0, 10.0, 1.0, t1 + 1e-8], &opts);
+        assert!(simultaneous(&near), "{mode:?}: {:?}", near.diagnostics);
+        let off = t1 + 1e-3;
+        let far = run_loaded(&m, &[0.5, 18.0, 22.0, 10.0, 1.0, off], &opts);
+        assert!(
+            far.diagnostics.is_empty(),
+            "{mode:?}: {:?}",
+            far.diagnostics
+        );
+        let (temp_t, _, _) = thermo_closed_form(t1 + 1.0);
+        close(
+            far.cost,
+            2.0 * (1.2 - off) + temp_t,
+            1e-6,
+            &format!("{mode:?}: C"),
+        );
+    }
+}

@@ -23,6 +23,8 @@
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
 //! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
+//! `order` a time event and a state event whose order the state event's location error
+//! leaves undecided;
 //! `record` the trajectory record; `finish` the end of the run; `validate` the checks of
 //! the parameters, options and model before a run; `watch` what each mode
 //! watches; `line` the exact segments whose watched guards are lines, taken to their first
@@ -235,9 +237,6 @@ where
     /// The states held at the limit of an accumulation (ascending; empty but during a hold,
     /// see `zeno`): the rows of the flow the integrator and every jump hold at zero.
     held: Vec<usize>,
-    /// The order of time events and state events within the latter's location error (see
-    /// `order`).
-    order: order::Order,
     /// Set when the run stopped at a Zeno accumulation: (t*, dwell ratio).
     zeno_stop: Option<(f64, f64)>,
     /// Set when an event left the state stuck on its guard (see `stuck_after_reset`).
@@ -331,7 +330,6 @@ where
             switch_crossings: 0,
             zeno: Zeno::new(model, sw_p),
             held: Vec::new(),
-            order: order::Order::new(info.events.iter().any(|e| e.is_time_event())),
             zeno_stop: None,
             stuck: None,
             rec: (opts.record || tape).then(|| {
@@ -512,7 +510,9 @@ where
 
     /// The event loop: step towards T or the next time of a time event, scan the step's
     /// dense output for crossings, truncate at the earliest, apply what fires there (see
-    /// [`Driver::fire_at`]), restart, until T or a stop at an accumulation.
+    /// [`Driver::fire_at`]; a time event and a state event whose order lies within the state
+    /// event's location error are reported first, see `order`), restart, until T or a stop at
+    /// an accumulation.
     fn run(&mut self, sink: &mut impl EventSink) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         model.initial_state(p, &mut self.y.x);
@@ -540,6 +540,7 @@ where
                     rec.close_segment(t, self.mode, &self.sw);
                 }
                 self.scanner.found.clear();
+                self.check_order(t, false);
                 self.fire_at(t, sink)?;
                 continue;
             }
@@ -584,6 +585,7 @@ where
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(te, self.mode, &self.sw);
             }
+            self.check_order(te, true);
             self.fire_at(te, sink)?;
         }
     }
@@ -650,7 +652,6 @@ where
         if !scanned && !self.scanner.found.is_empty() {
             self.join_state_events_due(t);
         }
-        self.check_order(t, scanned);
         if self.scanner.found.len() > 1 {
             self.scanner.found.sort_unstable_by_key(|c| c.w);
         }

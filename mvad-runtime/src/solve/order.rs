@@ -14,27 +14,29 @@
 //! |τ − t_s| ≤ δt the tolerances do not decide which of the two comes first, and C jumps
 //! between the two orders by O(1) when their resets do not commute (probe4 finding 4: a
 //! doubling and a `+1` 2.7e-13 apart at rtol 1e-10, C = 9.92 for the true 7.61, silently).
-//! The check, in both directions, at the instants the loop applies (`fire_at`):
+//! The check, in both directions, just before the loop applies an instant reached by a step
+//! (`Driver::run`):
 //!
 //! - (a) a time event fires at τ (no crossing scanned there) while an armed state event's
 //!   signed guard v = d·g at τ⁻ has not triggered but is rising and −v ≤ δg at x(τ⁻): its
 //!   crossing, found after τ on the numerical trajectory, may lie before τ on the true one.
-//!   v(τ) ≈ −ġ·(t_s − τ), so this is also the state event located just after the time
-//!   event, (t_s − τ)|ġ| ≤ δg, caught before the state event is located. A guard falling at
-//!   τ is left out: had it come within δg of zero before τ it turned back there, a near miss
-//!   the dip search judges (`grazing`);
+//!   v(τ) ≈ −ġ·(t_s − τ), so this is also the state event located just after the time event,
+//!   (t_s − τ)|ġ| ≤ δg, caught before the state event is located. A guard falling at τ is
+//!   left out: had it come within δg of zero before τ it turned back there, a near miss the
+//!   dip search judges (`grazing`). A guard that joins the instant (within 16 ulp of zero,
+//!   `Scanner::join_events_due`) is already `simultaneous_events`;
 //! - (b) a state event fires at t_s (a crossing located on a stepped segment): with ġ and δg
-//!   at x(t_s⁻), every time event due in (t_s, t_s + δg/|ġ|] fires after it only by the
-//!   numerics. The time events armed in the mode before the event are compared at once (one
-//!   that the event's mode switch disarms would have fired in the other order); the window is
-//!   kept, and a time event applied within it at a later instant (armed in the new mode) is
-//!   reported there.
+//!   at x(t_s⁻), a time event due in (t_s, t_s + δg/|ġ|] fires after it only by the numerics
+//!   (one due by t_s + 16 ulp joins the instant and is reported as simultaneous already). The
+//!   candidates are the time events armed in the mode before the event (they would have
+//!   fired first in the other order) and in its target mode (they fire after it here, and
+//!   in the other order their occurrence passes in a mode that does not arm them).
 //!
 //! Both are reported as `simultaneous_events`, naming the events and the margins. An exact
 //! segment (`Scheme::Exact`) has no location error beyond rounding, which the loop's own
-//! joining of events within 16 ulp covers: it is never checked, and a run without time
-//! events never gets past one comparison, so neither the queue's nor E1's event loop pays
-//! for it.
+//! joining of events within 16 ulp covers: it is never checked, nor is an instant applied
+//! by a segment of lines (`line`, exact by definition); a run without time events never
+//! gets past one comparison, so neither the queue's nor E1's event loop pays for it.
 
 use super::{time_resolution, Driver};
 use crate::integrate::{zero_rows, Scheme};
@@ -42,40 +44,8 @@ use crate::model::{At, HybridModel, ModelAlloc, Point};
 use crate::solution::{Diagnostic, DiagnosticKind};
 use nalgebra::DefaultAllocator;
 
-/// What the order check keeps between instants (no allocation after `new`).
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Order {
-    /// The model has time events (otherwise nothing is ever checked).
-    timed: bool,
-    /// After a state event located on a stepped segment, its window (check (b)): a time event
-    /// applied at a later instant within it is reported there.
-    window: Option<Window>,
-}
-
-/// The window (t_s, t_s + δg/|ġ|] of state event `state` located at t_s.
-#[derive(Clone, Copy, Debug)]
-struct Window {
-    t_s: f64,
-    end: f64,
-    state: usize,
-    /// |ġ| at t_s⁻.
-    rate: f64,
-    /// δg at t_s⁻.
-    dg: f64,
-}
-
-impl Order {
-    /// The check for a model whose events `time_events` says whether any is a time event.
-    pub(super) fn new(time_events: bool) -> Self {
-        Order {
-            timed: time_events,
-            window: None,
-        }
-    }
-}
-
-/// The signed margin of a guard within its location error of the time event (see the module
-/// doc): `v` the signed guard (or ġ·(τ − t_s)), `dg` its uncertainty δg.
+/// A time event and a state event within the latter's location error (see the module doc):
+/// `v` the signed guard at the time event (a), or ġ·(τ − t_s) (b); `dg` its uncertainty δg.
 #[derive(Clone, Copy, Debug)]
 struct Margin {
     state: usize,
@@ -88,52 +58,23 @@ impl<M: HybridModel> Driver<'_, M>
 where
     DefaultAllocator: ModelAlloc<M::N, M::P>,
 {
-    /// The order check at an instant t about to be applied (`scanner.found` holds what fires
-    /// there, `self.y` x(t⁻), the scanner's tracks the values at the end of the last step;
-    /// `scanned`: a crossing was located there). See the module doc. O(1) unless the run has
-    /// time events and the segment just ended was stepped, or a window is open.
+    /// The order check at an instant t reached by a step and about to be applied: `scanned`,
+    /// the crossings located there are in `scanner.found`; otherwise a time event is due at t
+    /// (`scanner.found` empty). `self.y` holds x(t⁻) and the scanner's tracks the watched
+    /// values at the end of the step. See the module doc. A few comparisons unless the run
+    /// has time events and the segment just ended was stepped.
     #[inline]
     pub(super) fn check_order(&mut self, t: f64, scanned: bool) {
-        if !self.order.timed || self.order.window.is_none() && self.integ.scheme() == Scheme::Exact
+        if !self.schedule.has_time_events()
+            || self.integ.scheme() == Scheme::Exact
+            || self.zeno.holding()
         {
             return;
         }
-        self.check_order_cold(t, scanned);
-    }
-
-    #[cold]
-    #[inline(never)]
-    fn check_order_cold(&mut self, t: f64, scanned: bool) {
-        let info = self.model.info();
-        let nev = self.scanner.nevents;
-        let timed_here = self
-            .scanner
-            .found
-            .iter()
-            .find(|c| c.w < nev && info.events[c.w].is_time_event())
-            .map(|c| c.w);
-        // (b), a later instant: a time event within the window of the last located crossing.
-        if let Some(win) = self.order.window {
-            if t > win.end {
-                self.order.window = None;
-            } else if let Some(kt) = timed_here.filter(|_| t > win.t_s) {
-                self.order.window = None;
-                let margin = Margin {
-                    state: win.state,
-                    timed: kt,
-                    v: win.rate * (t - win.t_s),
-                    dg: win.dg,
-                };
-                self.report_order(t, margin, false);
-            }
-        }
-        if self.integ.scheme() == Scheme::Exact || self.zeno.holding() {
-            return;
-        }
         if scanned {
-            self.open_windows(t);
-        } else if let Some(kt) = timed_here {
-            self.guards_short_of_zero(t, kt);
+            self.time_events_after_crossings(t);
+        } else {
+            self.guards_short_of_zero(t);
         }
     }
 
@@ -152,11 +93,23 @@ where
         (dg, gt)
     }
 
-    /// Check (a): at a time event's instant τ = t, every armed state event not firing there
-    /// whose signed guard v at τ⁻ is below zero, rising, and within δg of it.
-    fn guards_short_of_zero(&mut self, t: f64, kt: usize) {
-        let info = self.model.info();
+    /// Check (a): at a time event's instant τ = t, every armed state event whose signed guard
+    /// v at τ⁻ is below zero, rising, not joining the instant, and within δg of zero.
+    #[cold]
+    #[inline(never)]
+    fn guards_short_of_zero(&mut self, t: f64) {
+        let model = self.model;
+        let info = model.info();
         let nev = self.scanner.nevents;
+        let due = t + time_resolution(t);
+        let Some(&kt) = self
+            .schedule
+            .armed_in(self.mode)
+            .iter()
+            .find(|&&k| self.schedule.time(k) <= due)
+        else {
+            return;
+        };
         for i in 0..self.scanner.watched().len() {
             let w = self.scanner.watched()[i];
             if w >= nev || info.events[w].is_time_event() {
@@ -167,35 +120,36 @@ where
             if !(tr.armed && v < 0.0 && tr.last_rise > 0.0) {
                 continue;
             }
-            if self.scanner.found.iter().any(|c| c.w == w) {
+            // Joins the instant (the test of `Scanner::join_events_due`, v + v̇·16 ulp ≥ 0):
+            // reported as simultaneous when it is applied.
+            if v * tr.last_span + tr.last_rise * time_resolution(t) >= 0.0 {
                 continue;
             }
             let (dg, _) = self.guard_uncertainty(w, t);
             if -v <= dg {
-                self.report_order(
-                    t,
-                    Margin {
-                        state: w,
-                        timed: kt,
-                        v,
-                        dg,
-                    },
-                    true,
-                );
+                let margin = Margin {
+                    state: w,
+                    timed: kt,
+                    v,
+                    dg,
+                };
+                self.report_order(t, margin, true);
             }
         }
     }
 
     /// Check (b) at a located crossing t = t_s: for each state event firing there, the window
-    /// (t_s, t_s + δg/|ġ|] with ġ = ∇g·f⁻ + ∂g/∂t at x(t_s⁻); a time event armed in the mode
-    /// in force due within it (after the 16 ulp in which it joins this instant) is reported
-    /// now, otherwise the widest window is kept for the instants that follow.
-    fn open_windows(&mut self, t: f64) {
-        let info = self.model.info();
+    /// (t_s + 16 ulp, t_s + δg/|ġ|] with ġ = ∇g·f⁻ + ∂g/∂t at x(t_s⁻); the earliest time
+    /// event armed in the mode in force or in the event's target mode due within it is
+    /// reported.
+    #[cold]
+    #[inline(never)]
+    fn time_events_after_crossings(&mut self, t: f64) {
+        let model = self.model;
+        let info = model.info();
         let nev = self.scanner.nevents;
         let due = t + time_resolution(t);
         let mut flowed = false;
-        self.order.window = None;
         for i in 0..self.scanner.found.len() {
             let w = self.scanner.found[i].w;
             if w >= nev || info.events[w].is_time_event() {
@@ -208,26 +162,22 @@ where
                 zero_rows(&mut self.work, &self.held);
                 flowed = true;
             }
+            // A tangential crossing (ġ = 0) is located to no time at all: its window is
+            // unbounded (and `grazing` reports the crossing itself).
             let rate = (self.gx.dot(&self.work) + gt).abs();
-            let width = dg / rate;
-            // (A tangential crossing, ġ = 0, is located to no time at all: its window is
-            // unbounded, and `grazing` reports the crossing itself.)
-            if width.is_nan() {
-                continue;
-            }
-            let end = t + width;
-            let first = self
-                .schedule
+            let end = t + dg / rate;
+            let schedule = &self.schedule;
+            let target = info.events[w]
+                .target
+                .map_or(&[][..], |m| schedule.armed_in(m));
+            let first = schedule
                 .armed_in(self.mode)
                 .iter()
-                .copied()
-                .filter(|&k| {
-                    let tau = self.schedule.time(k);
-                    tau > due && tau <= end
-                })
-                .min_by(|&a, &b| self.schedule.time(a).total_cmp(&self.schedule.time(b)));
-            if let Some(kt) = first {
-                let tau = self.schedule.time(kt);
+                .chain(target)
+                .map(|&k| (k, schedule.time(k)))
+                .filter(|&(_, tau)| tau > due && tau <= end)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((kt, tau)) = first {
                 let margin = Margin {
                     state: w,
                     timed: kt,
@@ -235,17 +185,6 @@ where
                     dg,
                 };
                 self.report_order(t, margin, false);
-                self.order.window = None;
-                return;
-            }
-            if self.order.window.is_none_or(|win| end > win.end) {
-                self.order.window = Some(Window {
-                    t_s: t,
-                    end,
-                    state: w,
-                    rate,
-                    dg,
-                });
             }
         }
     }
@@ -266,13 +205,13 @@ where
             )
         } else {
             format!(
-                "state event `{s}` was located {:.3e} (in guard units, |dg/dt|·Δt) before time \
-                 event `{k}`",
+                "state event `{s}` was located at t = {t}, {:.3e} in guard units (|dg/dt|·Δt) \
+                 before time event `{k}` is due",
                 m.v
             )
         };
         let message = format!(
-            "events `{k}` and `{s}`: {how}, within the {:.3e} its guard may err by at these \
+            "events `{k}` and `{s}`: {how}, within the {:.3e} the guard may err by at these \
              tolerances (Σ|∂g/∂xᵢ|(atol + rtol|xᵢ|)): their order is within the state event's \
              location error and was decided by the numerics; C may jump between the two orders",
             m.dg
