@@ -23,6 +23,8 @@
 //! The work is split by job: this module holds the loop (step, scan, truncate at the
 //! earliest crossing, apply, restart); `jump` what happens at an event or switch crossing;
 //! `zeno` accumulations; `undecided` crossings and near misses the tolerances cannot decide;
+//! `order` a time event and a state event whose order the state event's location error
+//! leaves undecided;
 //! `record` the trajectory record; `finish` the end of the run; `validate` the checks of
 //! the parameters, options and model before a run; `watch` what each mode
 //! watches; `line` the exact segments whose watched guards are lines, taken to their first
@@ -33,6 +35,7 @@ mod conditioning;
 mod finish;
 mod jump;
 mod line;
+mod order;
 mod qp;
 pub(crate) use qp::is_event_kink;
 mod record;
@@ -527,7 +530,9 @@ where
 
     /// The event loop: step towards T or the next time of a time event, scan the step's
     /// dense output for crossings, truncate at the earliest, apply what fires there (see
-    /// [`Driver::fire_at`]), restart, until T or a stop at an accumulation.
+    /// [`Driver::fire_at`]; a time event and a state event whose order lies within the state
+    /// event's location error are reported first, see `order`), restart, until T or a stop at
+    /// an accumulation.
     fn run(&mut self, sink: &mut impl EventSink) -> Result<(), SolveError> {
         let (model, p) = (self.model, self.p);
         model.initial_state(p, &mut self.y.x);
@@ -555,6 +560,7 @@ where
                     rec.close_segment(t, self.mode, &self.sw);
                 }
                 self.scanner.found.clear();
+                self.check_order(t, false);
                 self.fire_at(t, sink)?;
                 continue;
             }
@@ -599,6 +605,7 @@ where
             if let Some(rec) = &mut self.rec {
                 rec.close_segment(te, self.mode, &self.sw);
             }
+            self.check_order(te, true);
             self.fire_at(te, sink)?;
         }
     }

@@ -75,6 +75,12 @@ impl Schedule {
         &self.armed[mode]
     }
 
+    /// Whether the model has time events (each is armed or not armed in mode 0).
+    #[inline]
+    pub(super) fn has_time_events(&self) -> bool {
+        !(self.armed[0].is_empty() && self.unarmed[0].is_empty())
+    }
+
     /// Occurrence index of the next firing of event k.
     pub(super) fn occurrence(&self, k: usize) -> usize {
         self.next[k]
