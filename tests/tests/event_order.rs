@@ -110,36 +110,41 @@ fn the_coincide_closed_form_agrees_with_central_differences() {
 fn a_time_event_within_a_state_events_location_error_is_reported() {
     let tol = (1e-8, 1e-10);
     for tau in [LN_2, LN_2.next_up(), LN_2 - 5e-11, LN_2 + 5e-11] {
-        both_doors_and_modes(
-            &Coincide::new(),
-            "coincide.hyb",
-            &[1.0, 1.0, tau],
-            tol,
-            |sol, how| {
-                assert!(simultaneous(sol), "{how}: {:?}", sol.diagnostics);
-                let d = sol
-                    .diagnostics
-                    .iter()
-                    .find(|d| d.kind == DiagnosticKind::SimultaneousEvents)
-                    .expect("reported");
-                assert!(
-                    d.message.contains("`tk`") && d.message.contains("`s`"),
-                    "{how}: {}",
-                    d.message
-                );
-                assert!(d.message.contains("location error"), "{how}: {}", d.message);
-                // Either order's C (tau = t_s = ln 2 to 1e-10): tk first 12 − 3 ln 2, s first
-                // 9 − 2 ln 2; nothing in between.
-                let (c_tk, c_s) = (12.0 - 3.0 * LN_2, 9.0 - 2.0 * LN_2);
-                assert!(
-                    (sol.cost - c_tk).abs() < 1e-6 || (sol.cost - c_s).abs() < 1e-6,
-                    "{how}: C = {}",
-                    sol.cost
-                );
-            },
-        );
+        coincide_at(tau, tol, |sol, how| {
+            assert!(simultaneous(sol), "{how}: {:?}", sol.diagnostics);
+            let d = sol
+                .diagnostics
+                .iter()
+                .find(|d| d.kind == DiagnosticKind::SimultaneousEvents)
+                .expect("reported");
+            assert!(
+                d.message.contains("`tk`") && d.message.contains("`s`"),
+                "{how}: {}",
+                d.message
+            );
+            assert!(d.message.contains("location error"), "{how}: {}", d.message);
+            // Either order's C (tau = t_s = ln 2 to 1e-10): tk first 12 − 3 ln 2, s first
+            // 9 − 2 ln 2; nothing in between.
+            let (c_tk, c_s) = (12.0 - 3.0 * LN_2, 9.0 - 2.0 * LN_2);
+            assert!(
+                (sol.cost - c_tk).abs() < 1e-6 || (sol.cost - c_s).abs() < 1e-6,
+                "{how}: C = {}",
+                sol.cost
+            );
+        });
     }
     coincide_clean_away(tol, 1e-9, Some(1e-7));
+}
+
+/// `check` on `coincide.hyb` (a = c = 1) at τ = `tau`, both doors and modes, tolerances `tol`.
+fn coincide_at(tau: f64, tol: (f64, f64), check: impl Fn(&Solution, &str)) {
+    both_doors_and_modes(
+        &Coincide::new(),
+        "coincide.hyb",
+        &[1.0, 1.0, tau],
+        tol,
+        check,
+    );
 }
 
 /// `coincide.hyb` at τ = ln 2 ± 1e-3, far outside the location error at tolerances `tol`: no
@@ -147,21 +152,15 @@ fn a_time_event_within_a_state_events_location_error_is_reported() {
 fn coincide_clean_away(tol: (f64, f64), c_rel: f64, g_rel: Option<f64>) {
     for tau in [LN_2 - 1e-3, LN_2 + 1e-3] {
         let (c, g) = coincide_closed_form(1.0, 1.0, tau);
-        both_doors_and_modes(
-            &Coincide::new(),
-            "coincide.hyb",
-            &[1.0, 1.0, tau],
-            tol,
-            |sol, how| {
-                assert!(sol.diagnostics.is_empty(), "{how}: {:?}", sol.diagnostics);
-                close(sol.cost, c, c_rel, &format!("{how}: C"));
-                if let Some(rel) = g_rel {
-                    for (i, &want) in g.iter().enumerate() {
-                        close(sol.gradient[i], want, rel, &format!("{how}: dC/dθ_{i}"));
-                    }
+        coincide_at(tau, tol, |sol, how| {
+            assert!(sol.diagnostics.is_empty(), "{how}: {:?}", sol.diagnostics);
+            close(sol.cost, c, c_rel, &format!("{how}: C"));
+            if let Some(rel) = g_rel {
+                for (i, &want) in g.iter().enumerate() {
+                    close(sol.gradient[i], want, rel, &format!("{how}: dC/dθ_{i}"));
                 }
-            },
-        );
+            }
+        });
     }
 }
 
@@ -170,16 +169,23 @@ fn coincide_clean_away(tol: (f64, f64), c_rel: f64, g_rel: Option<f64>) {
 #[test]
 fn the_coincidence_is_reported_at_rtol_1e_10() {
     let tol = (1e-10, 1e-12);
-    both_doors_and_modes(
-        &Coincide::new(),
-        "coincide.hyb",
-        &[1.0, 1.0, LN_2],
-        tol,
-        |sol, how| {
-            assert!(simultaneous(sol), "{how}: {:?}", sol.diagnostics);
-        },
-    );
+    coincide_at(LN_2, tol, |sol, how| {
+        assert!(simultaneous(sol), "{how}: {:?}", sol.diagnostics);
+    });
     coincide_clean_away(tol, 1e-11, None);
+}
+
+/// `check` on `ThermoSampled` at its defaults but `off`, both doors and modes, tolerances
+/// `tol`.
+fn thermo_at(off: f64, tol: (f64, f64), check: impl Fn(&Solution, &str)) {
+    let params = [0.5, 18.0, 22.0, 10.0, 1.0, off];
+    both_doors_and_modes(
+        &ThermoSampled::new(),
+        "thermo_sampled.hyb",
+        &params,
+        tol,
+        check,
+    );
 }
 
 /// `ThermoSampled` at the defaults except off: t₁ = 2 ln(11/8) the first switch-off (temp
@@ -204,32 +210,19 @@ fn thermo_closed_form(off: f64) -> (f64, f64, f64) {
 fn a_sampler_at_a_thermostat_switch_is_reported() {
     let t1 = 2.0 * (11.0f64 / 8.0).ln();
     let tol = (1e-6, 1e-8);
-    let params = |off: f64| [0.5, 18.0, 22.0, 10.0, 1.0, off];
     for off in [t1, t1 - 1e-8, t1 + 1e-8] {
-        both_doors_and_modes(
-            &ThermoSampled::new(),
-            "thermo_sampled.hyb",
-            &params(off),
-            tol,
-            |sol, how| {
-                assert!(simultaneous(sol), "{how}: {:?}", sol.diagnostics);
-            },
-        );
+        thermo_at(off, tol, |sol, how| {
+            assert!(simultaneous(sol), "{how}: {:?}", sol.diagnostics);
+        });
     }
     for off in [t1 - 1e-3, t1 + 1e-3] {
         let (c, d_off, d_hi) = thermo_closed_form(off);
-        both_doors_and_modes(
-            &ThermoSampled::new(),
-            "thermo_sampled.hyb",
-            &params(off),
-            tol,
-            |sol, how| {
-                assert!(sol.diagnostics.is_empty(), "{how}: {:?}", sol.diagnostics);
-                close(sol.cost, c, 1e-6, &format!("{how}: C"));
-                close(sol.gradient[5], d_off, 1e-9, &format!("{how}: dC/doff"));
-                close(sol.gradient[2], d_hi, 1e-5, &format!("{how}: dC/dhi"));
-            },
-        );
+        thermo_at(off, tol, |sol, how| {
+            assert!(sol.diagnostics.is_empty(), "{how}: {:?}", sol.diagnostics);
+            close(sol.cost, c, 1e-6, &format!("{how}: C"));
+            close(sol.gradient[5], d_off, 1e-9, &format!("{how}: dC/doff"));
+            close(sol.gradient[2], d_hi, 1e-5, &format!("{how}: dC/dhi"));
+        });
     }
 }
 
