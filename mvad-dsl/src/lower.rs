@@ -752,7 +752,7 @@ impl<'a> Lowerer<'a> {
     }
 }
 
-pub(crate) mod guard;
+mod guard;
 mod qp;
 
 #[cfg(test)]

@@ -197,13 +197,11 @@ pub(crate) fn varies_in_time(nd: &Node) -> bool {
 }
 
 /// Whether `e` is affine in (x, t): its derivatives in every state and in t are functions of
-/// θ alone ([`varies_in_time`] reads none of them), and it has no jump point (a choice whose
-/// sides differ where its moving condition is zero: its derivatives can be constant on both
-/// sides while its value jumps; see `lower::guard`).
+/// θ alone ([`varies_in_time`] reads none of them). A guard is continuous (lowering rewrites
+/// one that jumps, `lower::guard`), so constant derivatives on both sides of a choice make it
+/// affine: a jump cannot hide behind equal slopes.
 fn affine_in_state_and_time(ar: &mut ExprArena, e: ExprId, n: usize) -> bool {
-    if ar.depends_on(e, |nd| matches!(nd, Node::Switch(..) | Node::Column(_)))
-        || crate::lower::guard::jumps(ar, e)
-    {
+    if ar.depends_on(e, |nd| matches!(nd, Node::Switch(..) | Node::Column(_))) {
         return false;
     }
     (0..n).map(Var::State).chain([Var::Time]).all(|v| {

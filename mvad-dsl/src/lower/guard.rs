@@ -28,7 +28,7 @@ use crate::simplify::Replacement;
 
 /// At most this many jump points per guard: the rewriting copies the guard twice per jump
 /// point (2^k copies for k of them).
-pub(crate) const MAX_JUMPS: usize = 6;
+pub(super) const MAX_JUMPS: usize = 6;
 
 /// A choice in a guard at which its value may jump: the node `at`, the switching value σ
 /// (the side `pos` is taken for σ ≥ 0, `neg` for σ < 0).
@@ -87,13 +87,13 @@ fn is_difference(ar: &mut ExprArena, c: ExprId, a: ExprId, b: ExprId) -> bool {
 }
 
 /// Whether guard `g` has a jump point (see the module doc).
-pub(crate) fn jumps(ar: &mut ExprArena, g: ExprId) -> bool {
+pub(super) fn jumps(ar: &mut ExprArena, g: ExprId) -> bool {
     first_jump(ar, g).is_some()
 }
 
 /// Guard `g` (firing in `direction`) rewritten without jump points (see the module doc);
 /// `None` when it has more than [`MAX_JUMPS`].
-pub(crate) fn continuous(ar: &mut ExprArena, g: ExprId, direction: Direction) -> Option<ExprId> {
+pub(super) fn continuous(ar: &mut ExprArena, g: ExprId, direction: Direction) -> Option<ExprId> {
     rewrite(ar, g, direction, MAX_JUMPS)
 }
 

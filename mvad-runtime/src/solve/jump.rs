@@ -295,7 +295,7 @@ where
 
     /// f⁻ = f(t, x⁻) in the current mode and bits into `self.f_minus`, checked finite: the
     /// masked flow during a hold (the held rows zero; see `zeno`).
-    fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
+    pub(super) fn flow_before(&mut self, t: f64) -> Result<(), SolveError> {
         let info = self.model.info();
         self.model.rhs(
             Point::new(self.mode, &self.sw, t, &self.y.x, self.p),
@@ -604,7 +604,8 @@ where
         let gt = model.switch_grad(j, At::new(t, &self.y.x, p), &mut self.gx, &mut self.gp);
         let rate = self.gx.dot(&self.f_minus) + gt;
         let scale = self.gx.norm() * self.f_minus.norm() + gt.abs();
-        if sens::cosine_of(rate, scale) <= TANGENT_WITHIN_ROUNDING {
+        let cosine = sens::cosine_of(rate, scale);
+        if cosine <= TANGENT_WITHIN_ROUNDING {
             return Err(self.switch_on_zero(j, t, rate, scale));
         }
         if self.sens {
@@ -617,7 +618,7 @@ where
                     ),
                 });
             }
-            if sens::is_grazing(&self.gx, &self.f_minus, gt, self.opts.grazing_tol) {
+            if sens::is_grazing_cosine(cosine, self.opts.grazing_tol) {
                 self.diagnostics.push(Diagnostic {
                     kind: DiagnosticKind::Grazing,
                     t,

@@ -38,9 +38,10 @@
 //! by a segment of lines (`line`, exact by definition); a run without time events never
 //! gets past one comparison, so neither the queue's nor E1's event loop pays for it.
 
+use super::undecided::guard_tolerance;
 use super::{time_resolution, Driver};
-use crate::integrate::{zero_rows, Scheme};
-use crate::model::{At, HybridModel, ModelAlloc, Point};
+use crate::integrate::Scheme;
+use crate::model::{At, HybridModel, ModelAlloc};
 use crate::solution::{Diagnostic, DiagnosticKind};
 use nalgebra::DefaultAllocator;
 
@@ -81,16 +82,10 @@ where
     /// δg = Σᵢ |∂g/∂xᵢ| (atol + rtol |xᵢ|) of state event k at (t, x(t⁻) = `self.y.x`), with
     /// ∇g in `self.gx`; returns (δg, ∂g/∂t).
     fn guard_uncertainty(&mut self, k: usize, t: f64) -> (f64, f64) {
-        let (atol, rtol) = (self.opts.atol, self.opts.rtol);
         let at = At::new(t, &self.y.x, self.p);
         let gt = self.model.guard_grad(k, at, &mut self.gx, &mut self.gp);
-        let dg = self
-            .gx
-            .iter()
-            .zip(self.y.x.iter())
-            .map(|(g, x)| g.abs() * (atol + rtol * x.abs()))
-            .sum();
-        (dg, gt)
+        let tols = (self.opts.atol, self.opts.rtol);
+        (guard_tolerance(&self.gx, &self.y.x, tols), gt)
     }
 
     /// Check (a): at a time event's instant τ = t, every armed state event whose signed guard
@@ -157,14 +152,16 @@ where
             }
             let (dg, gt) = self.guard_uncertainty(w, t);
             if !flowed {
-                let pt = Point::new(self.mode, &self.sw, t, &self.y.x, self.p);
-                self.model.rhs(pt, &mut self.work);
-                zero_rows(&mut self.work, &self.held);
+                // f⁻ into `self.f_minus` (applying the event evaluates it again there; a
+                // non-finite f⁻ is reported by that evaluation).
+                if self.flow_before(t).is_err() {
+                    return;
+                }
                 flowed = true;
             }
             // A tangential crossing (ġ = 0) is located to no time at all: its window is
             // unbounded (and `grazing` reports the crossing itself).
-            let rate = (self.gx.dot(&self.work) + gt).abs();
+            let rate = (self.gx.dot(&self.f_minus) + gt).abs();
             let end = t + dg / rate;
             let schedule = &self.schedule;
             let target = info.events[w]

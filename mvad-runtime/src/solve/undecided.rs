@@ -24,7 +24,23 @@ use super::Driver;
 use crate::event::Watch;
 use crate::model::{At, HybridModel, ModelAlloc};
 use crate::solution::{Diagnostic, DiagnosticKind};
-use nalgebra::DefaultAllocator;
+use nalgebra::{allocator::Allocator, DefaultAllocator, Dim, OVector};
+
+/// δg = Σᵢ |∂g/∂xᵢ| (atol + rtol |xᵢ|): what a guard with gradient `gx` may err by at the
+/// state `x` when each state is kept within its tolerance (see the module doc).
+pub(super) fn guard_tolerance<N: Dim>(
+    gx: &OVector<f64, N>,
+    x: &OVector<f64, N>,
+    (atol, rtol): (f64, f64),
+) -> f64
+where
+    DefaultAllocator: Allocator<N>,
+{
+    gx.iter()
+        .zip(x.iter())
+        .map(|(g, xi)| g.abs() * (atol + rtol * xi.abs()))
+        .sum()
+}
 
 impl<M: HybridModel> Driver<'_, M>
 where
@@ -58,12 +74,7 @@ where
             }
             self.integ.dense_x(tm, &mut self.xs);
             model.guard_grad(k, At::new(tm, &self.xs, p), &mut self.gx, &mut self.gp);
-            let dg: f64 = self
-                .gx
-                .iter()
-                .zip(self.xs.iter())
-                .map(|(g, xi)| g.abs() * (atol + rtol * xi.abs()))
-                .sum();
+            let dg = guard_tolerance(&self.gx, &self.xs, (atol, rtol));
             if vm.abs() > dg {
                 continue;
             }
